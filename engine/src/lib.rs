@@ -1,0 +1,20 @@
+//! dynaflow's core: graph files, message types, the operator contract, and the runtime.
+//!
+//! A graph file is parsed into a spanned YAML tree ([`yaml`]), turned into a
+//! [`spec::GraphSpec`], patched by a variant and `--set` overrides, validated against the
+//! operator [`op::Registry`] into a [`spec::ResolvedGraph`], and executed by [`runtime::run`],
+//! which reports per-node metrics and feeds recorded ports to [`sink::Sink`]s.
+//! [`load`] does the file-to-resolved-graph part in one call.
+
+#![warn(missing_docs)]
+
+pub mod diag;
+mod load;
+pub mod msg;
+pub mod op;
+pub mod runtime;
+pub mod sink;
+pub mod spec;
+pub mod yaml;
+
+pub use load::{LoadRequest, Loaded, load, load_str};

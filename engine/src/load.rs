@@ -1,0 +1,124 @@
+//! From a graph file on disk to a validated graph, with every diagnostic.
+
+use std::path::Path;
+
+use crate::diag::{Diagnostic, Source};
+use crate::op::Registry;
+use crate::spec::{self, GraphSpec, Override, ResolvedGraph};
+use crate::yaml;
+
+/// What to apply on top of the file.
+#[derive(Clone, Debug, Default)]
+pub struct LoadRequest {
+    /// `--variant`.
+    pub variant: Option<String>,
+    /// `--set node.param=value`.
+    pub overrides: Vec<Override>,
+    /// `--seed`.
+    pub seed: Option<u64>,
+    /// Also validate every variant (what `dynaflow validate` does).
+    pub all_variants: bool,
+}
+
+/// The outcome of loading a graph.
+#[derive(Debug)]
+pub struct Loaded {
+    /// The text, for rendering diagnostics.
+    pub source: Source,
+    /// The parsed spec, if the YAML parsed.
+    pub spec: Option<GraphSpec>,
+    /// The resolved graph, if there was no error.
+    pub graph: Option<ResolvedGraph>,
+    /// Errors and warnings, in file order.
+    pub diagnostics: Vec<Diagnostic>,
+}
+
+impl Loaded {
+    /// Whether any diagnostic is an error.
+    pub fn has_errors(&self) -> bool {
+        self.diagnostics.iter().any(Diagnostic::is_error)
+    }
+}
+
+/// Read and validate a graph file. Only an unreadable file is an `Err`; everything wrong with
+/// its content is a diagnostic.
+pub fn load(path: &Path, registry: &Registry, req: &LoadRequest) -> Result<Loaded, std::io::Error> {
+    let bytes = std::fs::read(path)?;
+    let text = String::from_utf8(bytes).map_err(|e| {
+        std::io::Error::new(
+            std::io::ErrorKind::InvalidData,
+            format!("not UTF-8 text (invalid byte at offset {})", e.utf8_error().valid_up_to()),
+        )
+    })?;
+    let base = path.parent().map(Path::to_path_buf);
+    Ok(load_str(&path.display().to_string(), &text, base, registry, req))
+}
+
+/// Validate graph text.
+pub fn load_str(
+    name: &str,
+    text: &str,
+    base_dir: Option<std::path::PathBuf>,
+    registry: &Registry,
+    req: &LoadRequest,
+) -> Loaded {
+    let source = Source::new(name, text);
+    let doc = match yaml::parse(text) {
+        Ok(doc) => doc,
+        Err(e) => {
+            let d = Diagnostic::error("yaml-syntax", e.span, format!("YAML syntax error: {}", e.message))
+                .with_hint("check indentation, `:` after keys, and matching brackets/quotes");
+            return Loaded { source, spec: None, graph: None, diagnostics: vec![d] };
+        }
+    };
+    let (base_spec, mut diags) = spec::parse_graph(&doc);
+    let cx = spec::ResolveContext {
+        source_name: name.to_owned(),
+        source_text: text.into(),
+        base_dir,
+        seed: req.seed,
+        variant: req.variant.clone(),
+    };
+    let mut graph;
+    // Validation runs even after parse errors (on what did parse), so every problem shows
+    // at once; the parser leaves out what it could not understand.
+    {
+        let mut spec = base_spec.clone();
+        if let Some(v) = &req.variant {
+            match spec::apply_variant(&base_spec, v) {
+                Ok(s) => spec = s,
+                Err(d) => diags.extend(d),
+            }
+        }
+        diags.extend(spec::apply_overrides(&mut spec, &req.overrides));
+        let (g, d) = spec::validate(&spec, registry, &cx);
+        diags.extend(d);
+        graph = g;
+        if req.all_variants {
+            for variant in &base_spec.variants {
+                if req.variant.as_deref() == Some(variant.name.as_str()) {
+                    continue;
+                }
+                let extra = match spec::apply_variant(&base_spec, &variant.name) {
+                    Ok(s) => spec::validate(&s, registry, &cx).1,
+                    Err(d) => d,
+                };
+                for mut d in extra {
+                    if diags.iter().any(|e| e.code == d.code && e.span == d.span && e.message == d.message) {
+                        continue;
+                    }
+                    let tag = format!("variant `{}`", variant.name);
+                    if !d.message.contains(&tag) {
+                        d.message = format!("{tag}: {}", d.message);
+                    }
+                    diags.push(d);
+                }
+            }
+        }
+    }
+    if diags.iter().any(Diagnostic::is_error) {
+        graph = None;
+    }
+    diags.sort_by_key(|d| (d.span.map_or(0, |s| s.offset), d.severity));
+    Loaded { source, spec: Some(base_spec), graph, diagnostics: diags }
+}

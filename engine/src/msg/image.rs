@@ -1,0 +1,107 @@
+//! Pixels and intrinsics.
+
+use super::Digest;
+
+/// Pixel layout of an [`Image`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PixelFormat {
+    /// 3 bytes per pixel, R G B.
+    Rgb8,
+    /// 1 byte per pixel.
+    Gray8,
+}
+
+impl PixelFormat {
+    /// Bytes per pixel.
+    pub fn channels(self) -> usize {
+        match self {
+            PixelFormat::Rgb8 => 3,
+            PixelFormat::Gray8 => 1,
+        }
+    }
+    /// Name for logs and schemas.
+    pub fn name(self) -> &'static str {
+        match self {
+            PixelFormat::Rgb8 => "rgb8",
+            PixelFormat::Gray8 => "gray8",
+        }
+    }
+}
+
+/// An 8-bit image, row-major, tightly packed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Pixel layout.
+    pub format: PixelFormat,
+    /// `width * height * channels` bytes.
+    pub data: Vec<u8>,
+}
+
+impl Image {
+    /// An image of zeros.
+    pub fn zeros(width: u32, height: u32, format: PixelFormat) -> Self {
+        let len = width as usize * height as usize * format.channels();
+        Self { width, height, format, data: vec![0; len] }
+    }
+    pub(super) fn digest_into(&self, d: &mut Digest) {
+        d.u64(u64::from(self.width));
+        d.u64(u64::from(self.height));
+        d.str(self.format.name());
+        d.bytes(&self.data);
+    }
+}
+
+/// A depth image in metres; `0.0` marks a missing measurement.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DepthImage {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width * height` depths in metres.
+    pub data: Vec<f32>,
+}
+
+impl DepthImage {
+    pub(super) fn digest_into(&self, d: &mut Digest) {
+        d.u64(u64::from(self.width));
+        d.u64(u64::from(self.height));
+        for v in &self.data {
+            d.f32(*v);
+        }
+    }
+}
+
+/// Pinhole intrinsics with Brown–Conrady distortion `[k1, k2, p1, p2, k3]` (OpenCV order).
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct CameraInfo {
+    /// Image width.
+    pub width: u32,
+    /// Image height.
+    pub height: u32,
+    /// Focal length x (pixels).
+    pub fx: f64,
+    /// Focal length y (pixels).
+    pub fy: f64,
+    /// Principal point x.
+    pub cx: f64,
+    /// Principal point y.
+    pub cy: f64,
+    /// Distortion coefficients, OpenCV order.
+    pub distortion: [f64; 5],
+}
+
+impl CameraInfo {
+    pub(super) fn digest_into(&self, d: &mut Digest) {
+        d.u64(u64::from(self.width));
+        d.u64(u64::from(self.height));
+        for v in [self.fx, self.fy, self.cx, self.cy].iter().chain(&self.distortion) {
+            d.f64(*v);
+        }
+    }
+}

@@ -1,0 +1,243 @@
+//! Every message type that travels on a dynaflow edge, in one place.
+//!
+//! Operators import payloads from here and never define their own wire types, so the
+//! validator, the recorders and the diff tool all agree on what a port carries.
+//! A [`Message`] is a [`Header`] plus a [`Body`]; edges carry `Arc<Message>`, so fan-out
+//! shares the payload instead of copying it.
+//!
+//! Submodules group payloads by domain: `image` (pixels and intrinsics), `features`
+//! (keypoints, tracks, per-point labels), `semantic` (detections, masks), `geometry`
+//! (poses, trajectories, clouds, octree updates) and `scalar` (metrics).
+
+mod digest;
+mod features;
+mod geometry;
+mod image;
+mod scalar;
+mod semantic;
+
+use std::fmt;
+use std::sync::Arc;
+
+pub use digest::Digest;
+pub use features::{Descriptors, Keypoint, Keypoints, LabelReason, PointLabel, PointLabels, Track, Tracks};
+pub use geometry::{Isometry3, OctreeUpdate, PointCloud, Pose, StampedPose, Trajectory};
+pub use image::{CameraInfo, DepthImage, Image, PixelFormat};
+pub use scalar::Scalars;
+pub use semantic::{Detection, Detections, SegmentationMask};
+
+/// Where and when a message's data was observed.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Header {
+    /// Frame sequence number: the index of the source frame this message derives from.
+    pub seq: u64,
+    /// Sensor timestamp in seconds (dataset time, not wall-clock).
+    pub stamp: f64,
+    /// Coordinate frame or sensor name, e.g. `camera` or `world`.
+    pub frame_id: Arc<str>,
+}
+
+/// A message: header plus typed payload.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Message {
+    /// Provenance of the payload.
+    pub header: Header,
+    /// The payload.
+    pub body: Body,
+}
+
+/// The payload of a [`Message`]; one variant per [`PortType`].
+#[derive(Clone, Debug, PartialEq)]
+#[non_exhaustive]
+pub enum Body {
+    /// An RGB8 or Gray8 image.
+    Image(Image),
+    /// A depth image in metres.
+    Depth(DepthImage),
+    /// Pinhole intrinsics and distortion.
+    CameraInfo(CameraInfo),
+    /// Keypoints with optional binary descriptors.
+    Keypoints(Keypoints),
+    /// Point correspondences between two frames (optical flow tracks or matches).
+    Tracks(Tracks),
+    /// Object detections.
+    Detections(Detections),
+    /// A per-pixel class (and instance) mask.
+    Mask(SegmentationMask),
+    /// Static/dynamic decision per point, with the reason.
+    PointLabels(PointLabels),
+    /// A camera pose.
+    Pose(Pose),
+    /// A sequence of stamped poses.
+    Trajectory(Trajectory),
+    /// A 3-D point cloud.
+    PointCloud(PointCloud),
+    /// Changed voxels of an occupancy octree.
+    OctreeUpdate(OctreeUpdate),
+    /// Named scalar metrics.
+    Scalars(Scalars),
+}
+
+/// The type of a port, checked when edges are validated.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PortType {
+    /// [`Image`].
+    Image,
+    /// [`DepthImage`].
+    Depth,
+    /// [`CameraInfo`].
+    CameraInfo,
+    /// [`Keypoints`].
+    Keypoints,
+    /// [`Tracks`].
+    Tracks,
+    /// [`Detections`].
+    Detections,
+    /// [`SegmentationMask`].
+    Mask,
+    /// [`PointLabels`].
+    PointLabels,
+    /// [`Pose`].
+    Pose,
+    /// [`Trajectory`].
+    Trajectory,
+    /// [`PointCloud`].
+    PointCloud,
+    /// [`OctreeUpdate`].
+    OctreeUpdate,
+    /// [`Scalars`].
+    Scalars,
+    /// Accepts any message (inputs of generic operators only).
+    Any,
+}
+
+impl PortType {
+    /// Every concrete type (not `Any`).
+    pub const ALL: [PortType; 13] = [
+        PortType::Image,
+        PortType::Depth,
+        PortType::CameraInfo,
+        PortType::Keypoints,
+        PortType::Tracks,
+        PortType::Detections,
+        PortType::Mask,
+        PortType::PointLabels,
+        PortType::Pose,
+        PortType::Trajectory,
+        PortType::PointCloud,
+        PortType::OctreeUpdate,
+        PortType::Scalars,
+    ];
+
+    /// The name used in graph files and docs.
+    pub fn name(self) -> &'static str {
+        match self {
+            PortType::Image => "image",
+            PortType::Depth => "depth",
+            PortType::CameraInfo => "camera_info",
+            PortType::Keypoints => "keypoints",
+            PortType::Tracks => "tracks",
+            PortType::Detections => "detections",
+            PortType::Mask => "mask",
+            PortType::PointLabels => "point_labels",
+            PortType::Pose => "pose",
+            PortType::Trajectory => "trajectory",
+            PortType::PointCloud => "point_cloud",
+            PortType::OctreeUpdate => "octree_update",
+            PortType::Scalars => "scalars",
+            PortType::Any => "any",
+        }
+    }
+
+    /// Whether an output of type `self` may feed an input of type `input`.
+    pub fn feeds(self, input: PortType) -> bool {
+        input == PortType::Any || self == input
+    }
+}
+
+impl fmt::Display for PortType {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl Body {
+    /// The port type this payload travels on.
+    pub fn port_type(&self) -> PortType {
+        match self {
+            Body::Image(_) => PortType::Image,
+            Body::Depth(_) => PortType::Depth,
+            Body::CameraInfo(_) => PortType::CameraInfo,
+            Body::Keypoints(_) => PortType::Keypoints,
+            Body::Tracks(_) => PortType::Tracks,
+            Body::Detections(_) => PortType::Detections,
+            Body::Mask(_) => PortType::Mask,
+            Body::PointLabels(_) => PortType::PointLabels,
+            Body::Pose(_) => PortType::Pose,
+            Body::Trajectory(_) => PortType::Trajectory,
+            Body::PointCloud(_) => PortType::PointCloud,
+            Body::OctreeUpdate(_) => PortType::OctreeUpdate,
+            Body::Scalars(_) => PortType::Scalars,
+        }
+    }
+}
+
+impl Message {
+    /// A new message.
+    pub fn new(header: Header, body: Body) -> Self {
+        Self { header, body }
+    }
+
+    /// A deterministic 64-bit content hash of header and payload (bit-exact floats).
+    /// Two runs are identical on a port iff the sequences of digests are.
+    pub fn digest(&self) -> u64 {
+        let mut d = Digest::new();
+        d.u64(self.header.seq);
+        d.f64(self.header.stamp);
+        d.str(&self.header.frame_id);
+        d.str(self.body.port_type().name());
+        match &self.body {
+            Body::Image(m) => m.digest_into(&mut d),
+            Body::Depth(m) => m.digest_into(&mut d),
+            Body::CameraInfo(m) => m.digest_into(&mut d),
+            Body::Keypoints(m) => m.digest_into(&mut d),
+            Body::Tracks(m) => m.digest_into(&mut d),
+            Body::Detections(m) => m.digest_into(&mut d),
+            Body::Mask(m) => m.digest_into(&mut d),
+            Body::PointLabels(m) => m.digest_into(&mut d),
+            Body::Pose(m) => m.digest_into(&mut d),
+            Body::Trajectory(m) => m.digest_into(&mut d),
+            Body::PointCloud(m) => m.digest_into(&mut d),
+            Body::OctreeUpdate(m) => m.digest_into(&mut d),
+            Body::Scalars(m) => m.digest_into(&mut d),
+        }
+        d.finish()
+    }
+
+    /// A short JSON summary for logs (sizes and small values, never pixel data).
+    pub fn summary(&self) -> serde_json::Value {
+        use serde_json::json;
+        match &self.body {
+            Body::Image(m) => json!({"width": m.width, "height": m.height, "format": m.format.name()}),
+            Body::Depth(m) => json!({"width": m.width, "height": m.height}),
+            Body::CameraInfo(m) => json!({"fx": m.fx, "fy": m.fy, "cx": m.cx, "cy": m.cy}),
+            Body::Keypoints(m) => json!({"count": m.points.len()}),
+            Body::Tracks(m) => json!({"count": m.tracks.len()}),
+            Body::Detections(m) => json!({"count": m.detections.len()}),
+            Body::Mask(m) => json!({"width": m.width, "height": m.height, "classes": m.class_names.len()}),
+            Body::PointLabels(m) => json!({"count": m.labels.len(), "dynamic": m.dynamic_count()}),
+            Body::Pose(m) => {
+                let t = m.world_from_cam.translation.vector;
+                let q = m.world_from_cam.rotation.coords;
+                json!({"t": [t.x, t.y, t.z], "q_xyzw": [q.x, q.y, q.z, q.w]})
+            }
+            Body::Trajectory(m) => json!({"poses": m.poses.len()}),
+            Body::PointCloud(m) => json!({"points": m.points.len()}),
+            Body::OctreeUpdate(m) => json!({"occupied": m.occupied.len(), "resolution": m.resolution}),
+            Body::Scalars(m) => {
+                serde_json::Value::Object(m.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect())
+            }
+        }
+    }
+}

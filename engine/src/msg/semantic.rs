@@ -1,0 +1,72 @@
+//! Semantic results: detections and segmentation masks.
+
+use std::sync::Arc;
+
+use super::Digest;
+
+/// One detected object, box in pixels `[x_min, y_min, x_max, y_max]`.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Detection {
+    /// Axis-aligned box, pixels.
+    pub bbox: [f32; 4],
+    /// Class index of the model (e.g. COCO-80).
+    pub class_id: u32,
+    /// Class name.
+    pub label: Arc<str>,
+    /// Confidence in `[0, 1]`.
+    pub score: f32,
+}
+
+/// Detections of one image.
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct Detections {
+    /// The detections, highest score first.
+    pub detections: Vec<Detection>,
+}
+
+impl Detections {
+    pub(super) fn digest_into(&self, d: &mut Digest) {
+        d.u64(self.detections.len() as u64);
+        for det in &self.detections {
+            for v in det.bbox {
+                d.f32(v);
+            }
+            d.u64(u64::from(det.class_id));
+            d.str(&det.label);
+            d.f32(det.score);
+        }
+    }
+}
+
+/// Per-pixel class ids (0 = background) and optional instance ids.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SegmentationMask {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// `width * height` class ids.
+    pub classes: Vec<u16>,
+    /// `width * height` instance ids, if known.
+    pub instances: Option<Vec<u16>>,
+    /// Name of each class id.
+    pub class_names: Vec<Arc<str>>,
+}
+
+impl SegmentationMask {
+    pub(super) fn digest_into(&self, d: &mut Digest) {
+        d.u64(u64::from(self.width));
+        d.u64(u64::from(self.height));
+        for c in &self.classes {
+            d.bytes(&c.to_le_bytes());
+        }
+        if let Some(inst) = &self.instances {
+            for c in inst {
+                d.bytes(&c.to_le_bytes());
+            }
+        }
+        for n in &self.class_names {
+            d.str(n);
+        }
+    }
+}

@@ -1,0 +1,194 @@
+//! Static declarations of operators: ports, parameters, constructor.
+
+use super::{OpError, Operator, Params, Source};
+use crate::msg::PortType;
+
+/// Whether a node produces frames or transforms them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OpKind {
+    /// No inputs; drives frames.
+    Source,
+    /// Inputs to outputs.
+    Transform,
+}
+
+/// A port declaration.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct PortSpec {
+    /// Port name (`[a-z][a-z0-9_]*`).
+    pub name: &'static str,
+    /// Message type.
+    pub ty: PortType,
+    /// Inputs only: whether the node fires without it. An absent required input skips the frame.
+    pub required: bool,
+    /// Outputs only: the output has the type of what is wired into this input (`ty` is `Any`).
+    pub same_as: Option<&'static str>,
+    /// One line for docs.
+    pub doc: &'static str,
+}
+
+impl PortSpec {
+    /// A required input.
+    pub const fn input(name: &'static str, ty: PortType, doc: &'static str) -> Self {
+        Self { name, ty, required: true, same_as: None, doc }
+    }
+    /// An optional input.
+    pub const fn optional(name: &'static str, ty: PortType, doc: &'static str) -> Self {
+        Self { name, ty, required: false, same_as: None, doc }
+    }
+    /// An output.
+    pub const fn output(name: &'static str, ty: PortType, doc: &'static str) -> Self {
+        Self { name, ty, required: false, same_as: None, doc }
+    }
+    /// An output whose type follows the input `input`.
+    pub const fn output_like(name: &'static str, input: &'static str, doc: &'static str) -> Self {
+        Self { name, ty: PortType::Any, required: false, same_as: Some(input), doc }
+    }
+}
+
+/// The type and range of a parameter. Ranges are inclusive.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+#[serde(tag = "type", rename_all = "snake_case")]
+pub enum ParamType {
+    /// `true`/`false`.
+    Bool,
+    /// An integer in `min..=max`.
+    Int {
+        /// Smallest allowed.
+        min: i64,
+        /// Largest allowed.
+        max: i64,
+    },
+    /// A finite number in `min..=max`.
+    Float {
+        /// Smallest allowed.
+        min: f64,
+        /// Largest allowed.
+        max: f64,
+    },
+    /// Any string.
+    Str,
+    /// One of a fixed set of strings.
+    Enum {
+        /// The allowed values.
+        values: &'static [&'static str],
+    },
+    /// A file or folder path (relative paths resolve against the graph file's folder).
+    Path,
+}
+
+impl ParamType {
+    /// A human description ("integer in 1..=10000").
+    pub fn describe(&self) -> String {
+        match self {
+            ParamType::Bool => "boolean".into(),
+            ParamType::Int { min, max } => format!("integer in {min}..={max}"),
+            ParamType::Float { min, max } => format!("number in {min}..={max}"),
+            ParamType::Str => "string".into(),
+            ParamType::Enum { values } => {
+                format!("one of {}", values.iter().map(|v| format!("`{v}`")).collect::<Vec<_>>().join(", "))
+            }
+            ParamType::Path => "path".into(),
+        }
+    }
+}
+
+/// A parameter's default.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+#[serde(untagged)]
+pub enum Default {
+    /// The parameter must be given.
+    Required,
+    /// Boolean default.
+    Bool(bool),
+    /// Integer default.
+    Int(i64),
+    /// Number default.
+    Float(f64),
+    /// String default.
+    Str(&'static str),
+}
+
+impl Default {
+    /// As JSON, `None` when required.
+    pub fn to_json(self) -> Option<serde_json::Value> {
+        match self {
+            Default::Required => None,
+            Default::Bool(b) => Some(b.into()),
+            Default::Int(i) => Some(i.into()),
+            Default::Float(f) => Some(f.into()),
+            Default::Str(s) => Some(s.into()),
+        }
+    }
+}
+
+/// A parameter declaration.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct ParamSpec {
+    /// Key in the node's `params`.
+    pub name: &'static str,
+    /// Type and range.
+    #[serde(flatten)]
+    pub ty: ParamType,
+    /// Default value.
+    pub default: Default,
+    /// One line for docs.
+    pub doc: &'static str,
+}
+
+/// A constructed operator.
+pub enum Instance {
+    /// A frame producer.
+    Source(Box<dyn Source>),
+    /// A frame transformer.
+    Transform(Box<dyn Operator>),
+}
+
+impl std::fmt::Debug for Instance {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Instance::Source(_) => "Instance::Source",
+            Instance::Transform(_) => "Instance::Transform",
+        })
+    }
+}
+
+/// Everything the engine knows about an operator before running it.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct OpSpec {
+    /// Name used as `op:` in graphs.
+    pub name: &'static str,
+    /// Family (module) it belongs to, for docs.
+    pub family: &'static str,
+    /// One paragraph for docs.
+    pub doc: &'static str,
+    /// Source or transform.
+    pub kind: OpKind,
+    /// Input ports.
+    pub inputs: &'static [PortSpec],
+    /// Output ports.
+    pub outputs: &'static [PortSpec],
+    /// Parameters.
+    pub params: &'static [ParamSpec],
+    /// Run `process` on the blocking pool (CPU-heavy work).
+    pub cpu_heavy: bool,
+    /// Constructor from validated parameters.
+    #[serde(skip)]
+    pub build: fn(&Params) -> Result<Instance, OpError>,
+}
+
+impl OpSpec {
+    /// The input port named `name`.
+    pub fn input(&self, name: &str) -> Option<&'static PortSpec> {
+        self.inputs.iter().find(|p| p.name == name)
+    }
+    /// The output port named `name`.
+    pub fn output(&self, name: &str) -> Option<&'static PortSpec> {
+        self.outputs.iter().find(|p| p.name == name)
+    }
+    /// The parameter named `name`.
+    pub fn param(&self, name: &str) -> Option<&'static ParamSpec> {
+        self.params.iter().find(|p| p.name == name)
+    }
+}

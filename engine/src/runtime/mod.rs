@@ -1,0 +1,361 @@
+//! Executes a [`ResolvedGraph`] on tokio: one task per node, one bounded queue per edge.
+//!
+//! # Frame semantics
+//! Sources number their frames `0, 1, 2, …`. For every frame, every node emits on every
+//! output port exactly one envelope: the message, or a watermark "nothing for frame k". A
+//! node fires frame `k` once each lockstep input has delivered its envelope for `k` (or has
+//! moved past it, when a dropping queue lost it), so gated and optional inputs never leave a
+//! join waiting and lockstep runs are exactly reproducible.
+//!
+//! - `join: lockstep`: the input's message of frame `k`, or absent.
+//! - `join: latest`: the newest message at or before `k`. In lockstep (offline) runs the node
+//!   waits until the producer's frontier reaches `k`, so the result is deterministic; with
+//!   `--realtime` it takes whatever has arrived, so a slow detector never stalls tracking.
+//! - `delay: d`: frame `k` of the producer is frame `k + d` of the consumer (feedback).
+//!
+//! A node whose required input is absent skips the frame (counted) and emits watermarks.
+//!
+//! Submodules: `edge` (the queue), `node` (the per-node task), `metrics` (the report).
+
+mod edge;
+mod metrics;
+mod node;
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Instant;
+
+use rand_core::SeedableRng;
+use tokio::sync::Notify;
+
+pub use edge::EdgeStats;
+pub use metrics::{EdgeReport, Failure, LatencyStats, NodeReport, RunReport, RunStatus};
+
+use crate::msg::Message;
+use crate::op::{Context, Instance, OpError};
+use crate::sink::{RunInfo, Sink, SinkError};
+use crate::spec::{RecordPolicy, ResolvedGraph};
+
+/// Options of one run.
+#[derive(Clone, Debug, Default)]
+pub struct RunOptions {
+    /// Pace sources at sensor rate and let `latest` joins take what has arrived.
+    pub realtime: bool,
+    /// Stop sources after this many frames.
+    pub max_frames: Option<u64>,
+    /// Output folder handed to operators.
+    pub out_dir: Option<PathBuf>,
+    /// Requests a graceful stop (Ctrl-C).
+    pub stop: StopHandle,
+    /// Frames produced so far (max over sources), for progress display.
+    pub progress: Arc<AtomicU64>,
+    /// Length of the longest source, if known, set once sources are built.
+    pub total_frames: Arc<AtomicU64>,
+}
+
+/// Shared flag to stop a run gracefully: sources stop producing, in-flight frames finish,
+/// sinks close.
+#[derive(Clone, Debug, Default)]
+pub struct StopHandle(Arc<(AtomicBool, Notify)>);
+
+impl StopHandle {
+    /// Ask the run to stop.
+    pub fn request(&self) {
+        self.0.0.store(true, Ordering::SeqCst);
+        self.0.1.notify_waiters();
+    }
+    /// Whether a stop was requested.
+    pub fn requested(&self) -> bool {
+        self.0.0.load(Ordering::SeqCst)
+    }
+    /// Resolves once a stop is requested.
+    pub async fn wait(&self) {
+        loop {
+            let notified = self.0.1.notified();
+            if self.requested() {
+                return;
+            }
+            notified.await;
+        }
+    }
+}
+
+/// Why a run could not start.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum RunError {
+    /// An operator could not be constructed (bad config, missing file, …).
+    #[error("node `{node}`: {source}")]
+    Build {
+        /// Node id.
+        node: String,
+        /// Cause.
+        #[source]
+        source: OpError,
+    },
+    /// A sink could not open its output.
+    #[error(transparent)]
+    Sink(#[from] SinkError),
+}
+
+/// Mix the graph seed and the node id into the node's RNG seed (SplitMix64 finaliser over an
+/// FNV-1a hash of the id), so adding a node never changes another node's random stream.
+pub fn node_seed(graph_seed: u64, node: &str) -> u64 {
+    let mut d = crate::msg::Digest::new();
+    d.str(node);
+    let mut z = graph_seed ^ d.finish();
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// A recorded message on its way to the sink thread.
+pub(crate) struct Tap {
+    node: Arc<str>,
+    port: &'static str,
+    msg: Arc<Message>,
+}
+
+/// Run `graph` to completion (or stop/failure). Sinks are opened first and always closed.
+pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn Sink>>) -> Result<RunReport, RunError> {
+    let started = Instant::now();
+    // Build every operator before anything runs: a missing file fails fast, naming the node.
+    let mut instances: Vec<Option<Instance>> = Vec::new();
+    for node in &graph.nodes {
+        if node.disabled {
+            instances.push(None);
+            continue;
+        }
+        let inst =
+            (node.op.build)(&node.params).map_err(|source| RunError::Build { node: node.id.to_string(), source })?;
+        if let Instance::Source(src) = &inst
+            && let Some(len) = src.len_hint()
+        {
+            let len = options.max_frames.map_or(len, |m| m.min(len));
+            options.total_frames.fetch_max(len, Ordering::Relaxed);
+        }
+        instances.push(Some(inst));
+    }
+
+    let info = RunInfo::new(graph, options.realtime);
+    let (tap_tx, sink_thread) = sink_thread(sinks, &info)?;
+    let failures: Arc<Mutex<Vec<Failure>>> = Arc::default();
+
+    // Wire edges.
+    let mut senders: Vec<Vec<Vec<edge::EdgeTx>>> =
+        graph.nodes.iter().map(|n| n.outputs.iter().map(|_| Vec::new()).collect()).collect();
+    let mut receivers: Vec<Vec<Option<edge::EdgeRx>>> =
+        graph.nodes.iter().map(|n| n.inputs.iter().map(|_| None).collect()).collect();
+    let mut probes = Vec::new();
+    for e in &graph.edges {
+        let (tx, rx, probe) = edge::edge(e.queue, e.delay);
+        if let Some(slot) = senders.get_mut(e.from_node).and_then(|s| s.get_mut(e.from_port)) {
+            slot.push(tx);
+        }
+        if let Some(slot) = receivers.get_mut(e.to_node).and_then(|r| r.get_mut(e.to_port)) {
+            *slot = Some(rx);
+        }
+        probes.push(probe);
+    }
+
+    let mut tasks = Vec::new();
+    for (i, (node, inst)) in graph.nodes.iter().zip(instances).enumerate() {
+        let seed = node_seed(graph.seed, &node.id);
+        let ctx = Context {
+            node: node.id.clone(),
+            seed,
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(seed),
+            out_dir: options.out_dir.clone(),
+            realtime: options.realtime,
+        };
+        let outputs = node::Outputs {
+            ports: node.outputs.iter().map(|o| (o.name, o.ty, o.record)).collect(),
+            senders: std::mem::take(senders.get_mut(i).unwrap_or(&mut Vec::new())),
+            tap: tap_tx.clone(),
+        };
+        let task = node::NodeTask {
+            node: node.clone(),
+            ctx,
+            outputs,
+            inputs: std::mem::take(receivers.get_mut(i).unwrap_or(&mut Vec::new())),
+            joins: node
+                .inputs
+                .iter()
+                .map(|inp| inp.edge.and_then(|e| graph.edges.get(e)).map(|e| (e.join, e.delay)))
+                .collect(),
+            failures: failures.clone(),
+            options: options.clone(),
+        };
+        tasks.push(tokio::spawn(task.run(inst)));
+    }
+    drop(tap_tx);
+
+    let mut node_metrics = Vec::new();
+    for (task, node) in tasks.into_iter().zip(&graph.nodes) {
+        match task.await {
+            Ok(m) => node_metrics.push(m),
+            Err(e) => {
+                failures
+                    .lock()
+                    .unwrap_or_else(PoisonError::into_inner)
+                    .push(Failure { node: node.id.to_string(), error: format!("task failed: {e}") });
+                node_metrics.push(metrics::NodeMetrics::default());
+            }
+        }
+    }
+    let (sink_failures, sink_dropped) = tokio::task::spawn_blocking(move || sink_thread.join())
+        .await
+        .ok()
+        .and_then(Result::ok)
+        .unwrap_or_else(|| (vec![Failure { node: "sinks".into(), error: "sink thread panicked".into() }], 0));
+
+    let mut failures = std::mem::take(&mut *failures.lock().unwrap_or_else(PoisonError::into_inner));
+    failures.extend(sink_failures);
+    let edge_reports: Vec<EdgeReport> = graph
+        .edges
+        .iter()
+        .zip(&probes)
+        .map(|(e, p)| EdgeReport { edge: graph.edge_label(e), stats: p.stats() })
+        .collect();
+    let nodes = graph
+        .nodes
+        .iter()
+        .enumerate()
+        .zip(node_metrics)
+        .map(|((i, n), m)| {
+            let inputs = graph.edges.iter().zip(&edge_reports).filter(|(e, _)| e.to_node == i);
+            let (max_queue, dropped) =
+                inputs.fold((0, 0), |(q, d), (_, r)| (q.max(r.stats.max_depth), d + r.stats.dropped));
+            NodeReport {
+                node: n.id.to_string(),
+                op: n.op.name.to_owned(),
+                frames: m.frames,
+                skipped: m.skipped,
+                latency: LatencyStats::from_us(&m.latency_us),
+                age: LatencyStats::from_us(&m.age_us),
+                busy_s: m.busy.as_secs_f64(),
+                max_queue,
+                dropped,
+            }
+        })
+        .collect();
+    let status = if !failures.is_empty() {
+        RunStatus::Failed
+    } else if options.stop.requested() {
+        RunStatus::Interrupted
+    } else {
+        RunStatus::Completed
+    };
+    Ok(RunReport {
+        graph: graph.name.clone(),
+        variant: graph.variant.clone(),
+        seed: graph.seed,
+        realtime: options.realtime,
+        status,
+        frames: options.progress.load(Ordering::Relaxed),
+        wall_s: started.elapsed().as_secs_f64(),
+        dropped: edge_reports.iter().map(|e| e.stats.dropped).sum(),
+        edges: edge_reports,
+        nodes,
+        sink_dropped,
+        failures,
+    })
+}
+
+/// Capacity of the channel to the sink thread; producers wait when it is full, so recording
+/// applies backpressure instead of losing messages.
+const TAP_CAPACITY: usize = 256;
+
+type SinkJoin = std::thread::JoinHandle<(Vec<Failure>, u64)>;
+
+fn sink_thread(
+    mut sinks: Vec<Box<dyn Sink>>,
+    info: &RunInfo,
+) -> Result<(tokio::sync::mpsc::Sender<Tap>, SinkJoin), SinkError> {
+    for i in 0..sinks.len() {
+        if let Some(Err(e)) = sinks.get_mut(i).map(|s| s.open(info)) {
+            // Close the ones already open so their files are valid.
+            for s in sinks.iter_mut().take(i) {
+                let _ = s.close();
+            }
+            return Err(e);
+        }
+    }
+    let (tx, mut rx) = tokio::sync::mpsc::channel::<Tap>(TAP_CAPACITY);
+    let handle = std::thread::Builder::new()
+        .name("dynaflow-sinks".into())
+        .spawn(move || {
+            let mut live: Vec<Option<Box<dyn Sink>>> = sinks.into_iter().map(Some).collect();
+            let mut failures = Vec::new();
+            let mut lost = 0u64;
+            while let Some(tap) = rx.blocking_recv() {
+                for slot in &mut live {
+                    let Some(sink) = slot else {
+                        lost += 1;
+                        continue;
+                    };
+                    if let Err(e) = sink.record(&tap.node, tap.port, &tap.msg) {
+                        tracing::error!("recording stopped: {e}");
+                        failures.push(Failure { node: format!("sink:{}", sink.name()), error: e.to_string() });
+                        let _ = sink.close();
+                        *slot = None;
+                    }
+                }
+            }
+            for sink in live.iter_mut().flatten() {
+                if let Err(e) = sink.close() {
+                    failures.push(Failure { node: format!("sink:{}", sink.name()), error: e.to_string() });
+                }
+            }
+            (failures, lost)
+        })
+        .map_err(|e| SinkError::new("sinks", format!("cannot start the sink thread: {e}")))?;
+    Ok((tx, handle))
+}
+
+/// Whether a message of frame `seq` is recorded under `policy`.
+pub(crate) fn records(policy: RecordPolicy, seq: u64) -> bool {
+    match policy {
+        RecordPolicy::All => true,
+        RecordPolicy::None => false,
+        RecordPolicy::Every(n) => seq % n.max(1) == 0,
+    }
+}
+
+/// Install SIGINT/SIGTERM handlers: the first signal requests a graceful stop, a second one
+/// exits immediately with status 130.
+pub fn stop_on_signals(stop: StopHandle) {
+    tokio::spawn(async move {
+        #[cfg(unix)]
+        {
+            use tokio::signal::unix::{SignalKind, signal};
+            let (Ok(mut int), Ok(mut term)) = (signal(SignalKind::interrupt()), signal(SignalKind::terminate())) else {
+                tracing::warn!("cannot install signal handlers; Ctrl-C will kill the run abruptly");
+                return;
+            };
+            for round in 0..2 {
+                tokio::select! {
+                    _ = int.recv() => {}
+                    _ = term.recv() => {}
+                }
+                if round == 0 {
+                    tracing::warn!(
+                        "interrupted: finishing in-flight frames and closing recordings (signal again to abort)"
+                    );
+                    stop.request();
+                } else {
+                    tracing::error!("aborted");
+                    std::process::exit(130);
+                }
+            }
+        }
+        #[cfg(not(unix))]
+        {
+            if tokio::signal::ctrl_c().await.is_ok() {
+                stop.request();
+            }
+        }
+    });
+}

@@ -1,0 +1,392 @@
+//! The task that runs one node: joins its inputs frame by frame, calls the operator (inline
+//! or on the blocking pool), and forwards outputs to consumers and recorders.
+
+use std::panic::AssertUnwindSafe;
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+
+use super::edge::{EdgeRx, EdgeTx, Envelope, TryRecv};
+use super::metrics::{Failure, NodeMetrics};
+use super::{RunOptions, Tap, records};
+use crate::msg::{Message, PortType};
+use crate::op::{Context, Inputs, Instance, OpError, Operator, Outputs as OpOutputs, Source};
+use crate::spec::{Join, RecordPolicy, ResolvedNode};
+
+pub(super) struct Outputs {
+    pub ports: Vec<(&'static str, PortType, RecordPolicy)>,
+    pub senders: Vec<Vec<EdgeTx>>,
+    pub tap: tokio::sync::mpsc::Sender<Tap>,
+}
+
+pub(super) struct NodeTask {
+    pub node: ResolvedNode,
+    pub ctx: Context,
+    pub outputs: Outputs,
+    pub inputs: Vec<Option<EdgeRx>>,
+    /// Join mode and delay of each input (`None` if unwired).
+    pub joins: Vec<Option<(Join, u32)>>,
+    pub failures: Arc<Mutex<Vec<Failure>>>,
+    pub options: RunOptions,
+}
+
+struct Slot {
+    rx: Option<EdgeRx>,
+    join: Join,
+    /// Lockstep without delay: these inputs decide which frames exist. Delayed feedback
+    /// inputs never end on their own (the node feeds them), so they cannot.
+    driving: bool,
+    head: Option<Envelope>,
+    /// Newest message seen (for `latest` joins).
+    held: Option<Arc<Message>>,
+    /// Highest frame consumed so far.
+    frontier: Option<u64>,
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| (*s).to_owned())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "unknown panic payload".to_owned())
+}
+
+impl NodeTask {
+    fn fail(&self, error: String) {
+        tracing::error!(node = %self.node.id, "{error}");
+        self.failures
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .push(Failure { node: self.node.id.to_string(), error });
+        self.options.stop.request();
+    }
+
+    pub async fn run(mut self, inst: Option<Instance>) -> NodeMetrics {
+        let mut metrics = NodeMetrics::default();
+        match inst {
+            Some(Instance::Source(src)) => self.run_source(src, &mut metrics).await,
+            Some(Instance::Transform(op)) => self.run_transform(Some(op), &mut metrics).await,
+            None if self.node.inputs.iter().any(|i| i.edge.is_some()) => self.run_transform(None, &mut metrics).await,
+            // A disabled source produces no frames.
+            None => {}
+        }
+        metrics
+    }
+
+    async fn call_source(
+        &mut self,
+        mut src: Box<dyn Source>,
+        seq: u64,
+    ) -> (Box<dyn Source>, Result<Option<OpOutputs>, OpError>) {
+        if self.node.op.cpu_heavy {
+            let stand_in = placeholder_ctx(&self.ctx);
+            let mut ctx = std::mem::replace(&mut self.ctx, stand_in);
+            let joined = tokio::task::spawn_blocking(move || {
+                let r = std::panic::catch_unwind(AssertUnwindSafe(|| src.next(&mut ctx, seq)));
+                (src, ctx, r)
+            })
+            .await;
+            match joined {
+                Ok((src, ctx, r)) => {
+                    self.ctx = ctx;
+                    (src, r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p))))))
+                }
+                Err(e) => return (Box::new(Ended), Err(OpError::Failed(format!("task failed: {e}")))),
+            }
+        } else {
+            let r = std::panic::catch_unwind(AssertUnwindSafe(|| src.next(&mut self.ctx, seq)));
+            (src, r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p))))))
+        }
+    }
+
+    async fn run_source(&mut self, mut src: Box<dyn Source>, metrics: &mut NodeMetrics) {
+        if let Err(e) = src.start(&mut self.ctx) {
+            self.fail(format!("start: {e}"));
+            return;
+        }
+        let mut pace: Option<(Instant, f64)> = None;
+        let mut seq = 0u64;
+        loop {
+            if self.options.stop.requested() || self.options.max_frames.is_some_and(|m| seq >= m) {
+                break;
+            }
+            let t0 = Instant::now();
+            let (back, result) = self.call_source(src, seq).await;
+            src = back;
+            let out = match result {
+                Ok(Some(out)) => out,
+                Ok(None) => break,
+                Err(e) => {
+                    self.fail(e.to_string());
+                    break;
+                }
+            };
+            let busy = t0.elapsed();
+            if self.options.realtime
+                && let Some(stamp) = out.items.first().map(|(_, m)| m.header.stamp)
+            {
+                let (wall0, stamp0) = *pace.get_or_insert((Instant::now(), stamp));
+                let due = wall0 + Duration::from_secs_f64((stamp - stamp0).max(0.0));
+                tokio::select! {
+                    _ = tokio::time::sleep_until(due.into()) => {}
+                    _ = self.options.stop.wait() => break,
+                }
+            }
+            let born = Instant::now();
+            if let Err(e) = self.emit(seq, out, born).await {
+                self.fail(e.to_string());
+                break;
+            }
+            metrics.frames += 1;
+            metrics.busy += busy;
+            metrics.latency_us.push(busy.as_secs_f32() * 1e6);
+            metrics.age_us.push(0.0);
+            self.options.progress.fetch_max(seq + 1, std::sync::atomic::Ordering::Relaxed);
+            seq += 1;
+        }
+        if let Err(e) = src.stop(&mut self.ctx) {
+            self.fail(format!("stop: {e}"));
+        }
+    }
+
+    async fn run_transform(&mut self, mut op: Option<Box<dyn Operator>>, metrics: &mut NodeMetrics) {
+        if let Some(o) = op.as_mut()
+            && let Err(e) = o.start(&mut self.ctx)
+        {
+            self.fail(format!("start: {e}"));
+            return;
+        }
+        let mut slots: Vec<Slot> = std::mem::take(&mut self.inputs)
+            .into_iter()
+            .zip(&self.joins)
+            .map(|(rx, join)| {
+                let (join, delay) = join.unwrap_or((Join::Lockstep, 0));
+                Slot { rx, join, driving: join == Join::Lockstep && delay == 0, head: None, held: None, frontier: None }
+            })
+            .collect();
+        let deterministic = !self.options.realtime;
+        loop {
+            // 1. Every open lockstep input needs a head: driving ones first, because the node
+            // ends when they all have.
+            for driving in [true, false] {
+                for s in slots.iter_mut().filter(|s| s.join == Join::Lockstep && s.driving == driving) {
+                    if s.head.is_none()
+                        && let Some(rx) = &s.rx
+                    {
+                        match rx.recv().await {
+                            Some(e) => s.head = Some(e),
+                            None => s.rx = None,
+                        }
+                    }
+                }
+                if driving && slots.iter().filter(|s| s.driving).all(|s| s.head.is_none()) {
+                    break;
+                }
+            }
+            if slots.iter().filter(|s| s.driving).all(|s| s.head.is_none()) {
+                break;
+            }
+            // 2. The frame to fire is the smallest pending one.
+            let Some(k) =
+                slots.iter().filter(|s| s.join == Join::Lockstep).filter_map(|s| s.head.as_ref().map(|h| h.seq)).min()
+            else {
+                break;
+            };
+            // 3. Bring `latest` inputs up to frame k.
+            for s in slots.iter_mut().filter(|s| s.join == Join::Latest) {
+                advance_latest(s, k, deterministic).await;
+            }
+            // 4. Assemble.
+            let mut born: Option<Instant> = None;
+            let ports: Vec<(&'static str, Option<Arc<Message>>)> = slots
+                .iter_mut()
+                .zip(&self.node.inputs)
+                .map(|(s, decl)| {
+                    let msg = match s.join {
+                        Join::Lockstep => match s.head.take() {
+                            Some(h) if h.seq == k => {
+                                born = Some(born.map_or(h.born, |b: Instant| b.min(h.born)));
+                                s.frontier = Some(k);
+                                h.msg
+                            }
+                            other => {
+                                s.head = other;
+                                None
+                            }
+                        },
+                        Join::Latest => s.held.clone(),
+                    };
+                    (decl.name, msg)
+                })
+                .collect();
+            let born = born.unwrap_or_else(Instant::now);
+            let inputs = Inputs::new(k, ports);
+            let ready = self.node.inputs.iter().zip(&inputs.ports).all(|(decl, (_, m))| !decl.required || m.is_some());
+            let t0 = Instant::now();
+            let out = match (&mut op, ready) {
+                (Some(_), true) => {
+                    let (back, r) = self.call(op.take(), inputs).await;
+                    op = back;
+                    match r {
+                        Ok(out) => out,
+                        Err(e) => {
+                            self.fail(e.to_string());
+                            break;
+                        }
+                    }
+                }
+                _ => {
+                    metrics.skipped += 1;
+                    OpOutputs::new()
+                }
+            };
+            let fired = ready && op.is_some();
+            let busy = t0.elapsed();
+            if let Err(e) = self.emit(k, out, born).await {
+                self.fail(e.to_string());
+                break;
+            }
+            if fired {
+                metrics.frames += 1;
+                metrics.busy += busy;
+                metrics.latency_us.push(t0.elapsed().as_secs_f32() * 1e6);
+                metrics.age_us.push(born.elapsed().as_secs_f32() * 1e6);
+            }
+        }
+        // Dropping the slots closes our inputs: producers stop waiting on us.
+        drop(slots);
+        if let Some(o) = op.as_mut()
+            && let Err(e) = o.stop(&mut self.ctx)
+        {
+            self.fail(format!("stop: {e}"));
+        }
+    }
+
+    async fn call(
+        &mut self,
+        op: Option<Box<dyn Operator>>,
+        inputs: Inputs,
+    ) -> (Option<Box<dyn Operator>>, Result<OpOutputs, OpError>) {
+        let Some(mut op) = op else {
+            return (None, Ok(OpOutputs::new()));
+        };
+        if self.node.op.cpu_heavy {
+            let stand_in = placeholder_ctx(&self.ctx);
+            let mut ctx = std::mem::replace(&mut self.ctx, stand_in);
+            let joined = tokio::task::spawn_blocking(move || {
+                let r = std::panic::catch_unwind(AssertUnwindSafe(|| op.process(&mut ctx, &inputs)));
+                (op, ctx, r)
+            })
+            .await;
+            match joined {
+                Ok((op, ctx, r)) => {
+                    self.ctx = ctx;
+                    (Some(op), r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p))))))
+                }
+                Err(e) => (None, Err(OpError::Failed(format!("task failed: {e}")))),
+            }
+        } else {
+            let r = std::panic::catch_unwind(AssertUnwindSafe(|| op.process(&mut self.ctx, &inputs)));
+            (Some(op), r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p))))))
+        }
+    }
+
+    /// Send frame `seq`: each output port gets its message or a watermark.
+    async fn emit(&self, seq: u64, out: OpOutputs, born: Instant) -> Result<(), OpError> {
+        let mut per_port: Vec<Option<Arc<Message>>> = vec![None; self.outputs.ports.len()];
+        for (port, mut msg) in out.items {
+            let Some(j) = self.outputs.ports.iter().position(|(p, _, _)| *p == port) else {
+                return Err(OpError::Contract(format!("emitted on undeclared port `{port}`")));
+            };
+            let ty = self.outputs.ports.get(j).map_or(PortType::Any, |p| p.1);
+            if ty != PortType::Any && msg.body.port_type() != ty {
+                return Err(OpError::Contract(format!(
+                    "port `{port}` is declared {ty} but got {}",
+                    msg.body.port_type()
+                )));
+            }
+            let Some(slot) = per_port.get_mut(j) else { continue };
+            if slot.is_some() {
+                return Err(OpError::Contract(format!("emitted twice on port `{port}` in frame {seq}")));
+            }
+            // The runtime owns frame numbering.
+            msg.header.seq = seq;
+            *slot = Some(Arc::new(msg));
+        }
+        for ((port, _, record), (senders, msg)) in
+            self.outputs.ports.iter().zip(self.outputs.senders.iter().zip(per_port))
+        {
+            if let Some(m) = &msg
+                && records(*record, seq)
+            {
+                // A closed sink thread only happens at teardown; nothing to record then.
+                let _ = self.outputs.tap.send(Tap { node: self.node.id.clone(), port, msg: m.clone() }).await;
+            }
+            for tx in senders {
+                tx.send(Envelope { seq, msg: msg.clone(), born }).await;
+            }
+        }
+        Ok(())
+    }
+}
+
+async fn advance_latest(s: &mut Slot, k: u64, deterministic: bool) {
+    loop {
+        if s.frontier.is_some_and(|f| f >= k) {
+            return;
+        }
+        if s.head.is_none() {
+            let Some(rx) = &s.rx else { return };
+            if deterministic {
+                match rx.recv().await {
+                    Some(e) => s.head = Some(e),
+                    None => {
+                        s.rx = None;
+                        return;
+                    }
+                }
+            } else {
+                match rx.try_recv() {
+                    TryRecv::Item(e) => s.head = Some(e),
+                    TryRecv::Empty => return,
+                    TryRecv::Closed => {
+                        s.rx = None;
+                        return;
+                    }
+                }
+            }
+        }
+        match s.head.take() {
+            Some(h) if h.seq <= k => {
+                s.frontier = Some(h.seq);
+                if let Some(m) = h.msg {
+                    s.held = Some(m);
+                }
+            }
+            other => {
+                s.head = other;
+                return;
+            }
+        }
+    }
+}
+
+/// Stand-in while the real context travels to the blocking pool with the operator.
+fn placeholder_ctx(ctx: &Context) -> Context {
+    use rand_core::SeedableRng;
+    Context {
+        node: ctx.node.clone(),
+        seed: ctx.seed,
+        rng: rand_chacha::ChaCha8Rng::seed_from_u64(0),
+        out_dir: None,
+        realtime: ctx.realtime,
+    }
+}
+
+/// A source that has ended (used when its task was lost).
+struct Ended;
+
+impl Source for Ended {
+    fn next(&mut self, _ctx: &mut Context, _seq: u64) -> Result<Option<OpOutputs>, OpError> {
+        Ok(None)
+    }
+}

@@ -1,0 +1,170 @@
+//! Recorders observe every recorded port without operators knowing.
+//!
+//! The runtime forwards each recorded message to a dedicated sink thread through a bounded
+//! channel; sinks (rerun, MCAP, message log, …) implement [`Sink`]. A sink that fails is
+//! reported once, closed, and the run is marked failed; the others keep recording.
+
+use std::collections::BTreeMap;
+use std::sync::{Arc, Mutex, PoisonError};
+
+use crate::msg::{Message, PortType};
+use crate::spec::ResolvedGraph;
+
+/// Why a sink failed.
+#[derive(Debug, thiserror::Error)]
+#[error("{sink}: {message}")]
+pub struct SinkError {
+    /// The sink's name.
+    pub sink: String,
+    /// What went wrong (file named where there is one).
+    pub message: String,
+}
+
+impl SinkError {
+    /// A new error.
+    pub fn new(sink: impl Into<String>, message: impl Into<String>) -> Self {
+        Self { sink: sink.into(), message: message.into() }
+    }
+}
+
+/// Provenance of a run, handed to sinks when they open.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunInfo {
+    /// Graph name.
+    pub graph: String,
+    /// Variant, if any.
+    pub variant: Option<String>,
+    /// Effective seed.
+    pub seed: u64,
+    /// The graph file text.
+    pub graph_yaml: String,
+    /// Resolved parameters per node.
+    pub params: BTreeMap<String, serde_json::Value>,
+    /// dynaflow version.
+    pub version: String,
+    /// Realtime or lockstep.
+    pub realtime: bool,
+    /// Recorded ports: `node/port` → type.
+    pub ports: BTreeMap<String, PortType>,
+}
+
+impl RunInfo {
+    /// Provenance of `graph`.
+    pub fn new(graph: &ResolvedGraph, realtime: bool) -> Self {
+        Self {
+            graph: graph.name.clone(),
+            variant: graph.variant.clone(),
+            seed: graph.seed,
+            graph_yaml: graph.source_text.to_string(),
+            params: graph
+                .nodes
+                .iter()
+                .map(|n| (n.id.to_string(), serde_json::Value::Object(n.params.as_map().clone())))
+                .collect(),
+            version: env!("CARGO_PKG_VERSION").to_owned(),
+            realtime,
+            ports: graph
+                .nodes
+                .iter()
+                .flat_map(|n| n.outputs.iter().map(move |o| (format!("{}/{}", n.id, o.name), o.ty)))
+                .collect(),
+        }
+    }
+}
+
+/// A recorder.
+pub trait Sink: Send {
+    /// Short name for messages ("jsonl", "rerun", "mcap").
+    fn name(&self) -> &str;
+    /// Called once before the first message.
+    fn open(&mut self, _info: &RunInfo) -> Result<(), SinkError> {
+        Ok(())
+    }
+    /// One recorded message of `node.port`.
+    fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError>;
+    /// Called once at the end, also after an interrupt or an operator failure. Must leave a
+    /// complete, valid file.
+    fn close(&mut self) -> Result<(), SinkError>;
+}
+
+/// Keeps every recorded message in memory (tests, in-process comparisons).
+#[derive(Clone, Debug, Default)]
+pub struct MemorySink {
+    /// `(node, port, message)` in arrival order.
+    pub messages: Arc<Mutex<Vec<(String, String, Arc<Message>)>>>,
+    /// Whether `close` was called.
+    pub closed: Arc<Mutex<bool>>,
+}
+
+impl MemorySink {
+    /// Messages of `node.port`, in order.
+    pub fn port(&self, node: &str, port: &str) -> Vec<Arc<Message>> {
+        self.messages
+            .lock()
+            .unwrap_or_else(PoisonError::into_inner)
+            .iter()
+            .filter(|(n, p, _)| n == node && p == port)
+            .map(|(_, _, m)| m.clone())
+            .collect()
+    }
+}
+
+impl Sink for MemorySink {
+    fn name(&self) -> &str {
+        "memory"
+    }
+    fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError> {
+        self.messages.lock().unwrap_or_else(PoisonError::into_inner).push((
+            node.to_owned(),
+            port.to_owned(),
+            Arc::new(msg.clone()),
+        ));
+        Ok(())
+    }
+    fn close(&mut self) -> Result<(), SinkError> {
+        *self.closed.lock().unwrap_or_else(PoisonError::into_inner) = true;
+        Ok(())
+    }
+}
+
+/// Per-port message count and order-sensitive content digest: two runs recorded the same
+/// data on a port iff both agree.
+#[derive(Clone, Debug, Default)]
+pub struct DigestSink {
+    /// `node/port` → (count, digest).
+    pub ports: Arc<Mutex<BTreeMap<String, (u64, u64)>>>,
+}
+
+impl DigestSink {
+    /// A snapshot as JSON (`{"node/port": {"count": n, "digest": "hex"}}`).
+    pub fn to_json(&self) -> serde_json::Value {
+        let ports = self.ports.lock().unwrap_or_else(PoisonError::into_inner);
+        serde_json::Value::Object(
+            ports
+                .iter()
+                .map(|(k, (count, digest))| {
+                    (k.clone(), serde_json::json!({"count": count, "digest": format!("{digest:016x}")}))
+                })
+                .collect(),
+        )
+    }
+}
+
+impl Sink for DigestSink {
+    fn name(&self) -> &str {
+        "digest"
+    }
+    fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError> {
+        let mut ports = self.ports.lock().unwrap_or_else(PoisonError::into_inner);
+        let entry = ports.entry(format!("{node}/{port}")).or_insert((0, 0xcbf2_9ce4_8422_2325));
+        entry.0 += 1;
+        let mut d = crate::msg::Digest::new();
+        d.u64(entry.1);
+        d.u64(msg.digest());
+        entry.1 = d.finish();
+        Ok(())
+    }
+    fn close(&mut self) -> Result<(), SinkError> {
+        Ok(())
+    }
+}

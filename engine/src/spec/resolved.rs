@@ -1,0 +1,107 @@
+//! The validated graph the runtime executes.
+
+use std::sync::Arc;
+
+use super::{Join, QueuePolicy, RecordPolicy};
+use crate::msg::PortType;
+use crate::op::{OpSpec, Params};
+
+/// A graph that passed validation: every op known, params typed, every input wired to an
+/// existing output of a compatible type, every cycle broken by a delay.
+#[derive(Clone, Debug)]
+pub struct ResolvedGraph {
+    /// Graph name.
+    pub name: String,
+    /// Effective seed (after `--seed`).
+    pub seed: u64,
+    /// Variant applied, if any.
+    pub variant: Option<String>,
+    /// The graph file's text, for provenance in recordings.
+    pub source_text: Arc<str>,
+    /// The graph file's path as given.
+    pub source_name: String,
+    /// Nodes in file order (disabled ones included, marked).
+    pub nodes: Vec<ResolvedNode>,
+    /// Edges, one per wired input.
+    pub edges: Vec<ResolvedEdge>,
+}
+
+/// A validated node.
+#[derive(Clone, Debug)]
+pub struct ResolvedNode {
+    /// Node id.
+    pub id: Arc<str>,
+    /// Its operator.
+    pub op: OpSpec,
+    /// Parameters with defaults filled in.
+    pub params: Params,
+    /// Inputs in the operator's declaration order (unwired optional ones included).
+    pub inputs: Vec<ResolvedInput>,
+    /// Outputs in declaration order.
+    pub outputs: Vec<ResolvedOutput>,
+    /// Whether the node is disabled (emits nothing).
+    pub disabled: bool,
+}
+
+/// An input port of a node.
+#[derive(Clone, Debug)]
+pub struct ResolvedInput {
+    /// Port name.
+    pub name: &'static str,
+    /// Declared type.
+    pub ty: PortType,
+    /// Whether the node is skipped for frames where it is absent.
+    pub required: bool,
+    /// Index into [`ResolvedGraph::edges`], if wired.
+    pub edge: Option<usize>,
+}
+
+/// An output port of a node.
+#[derive(Clone, Debug)]
+pub struct ResolvedOutput {
+    /// Port name.
+    pub name: &'static str,
+    /// Concrete type (`Any` only if fed by an untyped chain).
+    pub ty: PortType,
+    /// What the recorders get.
+    pub record: RecordPolicy,
+}
+
+/// A wired input.
+#[derive(Clone, Debug)]
+pub struct ResolvedEdge {
+    /// Producer node index.
+    pub from_node: usize,
+    /// Producer output index.
+    pub from_port: usize,
+    /// Consumer node index.
+    pub to_node: usize,
+    /// Consumer input index.
+    pub to_port: usize,
+    /// Join mode.
+    pub join: Join,
+    /// Frames of delay.
+    pub delay: u32,
+    /// Queue policy.
+    pub queue: QueuePolicy,
+}
+
+impl ResolvedGraph {
+    /// Index of a node by id.
+    pub fn node_index(&self, id: &str) -> Option<usize> {
+        self.nodes.iter().position(|n| &*n.id == id)
+    }
+
+    /// `node.port` label of an edge's producer and `node/port` of its consumer.
+    pub fn edge_label(&self, e: &ResolvedEdge) -> String {
+        let from = self.nodes.get(e.from_node);
+        let to = self.nodes.get(e.to_node);
+        format!(
+            "{}.{} -> {}/{}",
+            from.map_or("?", |n| &*n.id),
+            from.and_then(|n| n.outputs.get(e.from_port)).map_or("?", |p| p.name),
+            to.map_or("?", |n| &*n.id),
+            to.and_then(|n| n.inputs.get(e.to_port)).map_or("?", |p| p.name),
+        )
+    }
+}

@@ -1,0 +1,659 @@
+//! Semantic checks of a [`GraphSpec`] against the operator registry.
+//!
+//! Every check runs even when earlier ones failed, so a user sees all problems at once.
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use super::{
+    GraphSpec, Join, NodeSpec, RecordPolicy, ResolvedEdge, ResolvedGraph, ResolvedInput, ResolvedNode, ResolvedOutput,
+};
+use crate::diag::{Diagnostic, did_you_mean};
+use crate::msg::PortType;
+use crate::op::{OpKind, OpSpec, ParamSpec, ParamType, Params, Registry};
+use crate::yaml::{Yaml, YamlKind};
+
+/// Context that is not part of the graph text.
+#[derive(Clone, Debug, Default)]
+pub struct ResolveContext {
+    /// The graph file's name as given (for provenance).
+    pub source_name: String,
+    /// The graph file's text.
+    pub source_text: Arc<str>,
+    /// Folder that relative `path` params resolve against.
+    pub base_dir: Option<PathBuf>,
+    /// `--seed`.
+    pub seed: Option<u64>,
+    /// The variant applied to the spec, if any.
+    pub variant: Option<String>,
+}
+
+/// Validate and resolve. Returns the graph only if there is no error; warnings are returned
+/// either way.
+pub fn validate(
+    spec: &GraphSpec,
+    registry: &Registry,
+    cx: &ResolveContext,
+) -> (Option<ResolvedGraph>, Vec<Diagnostic>) {
+    let mut diags = Vec::new();
+    let ops: Vec<Option<&OpSpec>> = spec.nodes.iter().map(|n| lookup_op(n, registry, &mut diags)).collect();
+    let index: HashMap<&str, usize> = spec.nodes.iter().enumerate().map(|(i, n)| (n.id.as_str(), i)).collect();
+
+    let params: Vec<Params> = spec
+        .nodes
+        .iter()
+        .zip(&ops)
+        .map(|(n, op)| match op {
+            Some(op) => check_params(n, op, cx, &mut diags),
+            None => Params::default(),
+        })
+        .collect();
+
+    let out_types = resolve_output_types(spec, &ops, &index);
+    let edges = check_inputs(spec, &ops, &index, &out_types, &mut diags);
+    check_cycles(spec, &edges, &mut diags);
+
+    let all_ops_known = ops.iter().all(Option::is_some);
+    if all_ops_known && !ops.iter().flatten().any(|op| op.kind == OpKind::Source) && !spec.nodes.is_empty() {
+        diags.push(
+            Diagnostic::error(
+                "no-source",
+                spec.nodes_span,
+                "the graph has no source node, so no frame is ever produced",
+            )
+            .with_hint("add a source such as `synth` or `test_pattern`; `dynaflow ops` marks sources"),
+        );
+    }
+    if spec.nodes.is_empty() {
+        diags.push(
+            Diagnostic::error("no-nodes", spec.nodes_span, "the graph has no nodes")
+                .with_hint("add nodes under `nodes:`"),
+        );
+    }
+
+    let mut nodes = Vec::new();
+    for (i, (n, op)) in spec.nodes.iter().zip(&ops).enumerate() {
+        let Some(op) = op else { continue };
+        let outputs = op
+            .outputs
+            .iter()
+            .enumerate()
+            .map(|(j, p)| ResolvedOutput {
+                name: p.name,
+                ty: out_types.get(i).and_then(|t| t.get(j)).copied().unwrap_or(p.ty),
+                record: record_policy(n, p.name),
+            })
+            .collect::<Vec<_>>();
+        for (port, span, _) in &n.record.ports {
+            if op.output(port).is_none() {
+                diags.push(
+                    Diagnostic::error(
+                        "unknown-port",
+                        *span,
+                        format!("`{}/record` names unknown output `{port}`", n.id),
+                    )
+                    .with_hint(port_hint(port, op.outputs.iter().map(|p| p.name))),
+                );
+            }
+        }
+        let inputs = op
+            .inputs
+            .iter()
+            .enumerate()
+            .map(|(j, p)| ResolvedInput {
+                name: p.name,
+                ty: p.ty,
+                required: p.required,
+                edge: edges.iter().position(|e| e.edge.to_node == i && e.edge.to_port == j),
+            })
+            .collect();
+        nodes.push(ResolvedNode {
+            id: n.id.as_str().into(),
+            op: **op,
+            params: params.get(i).cloned().unwrap_or_default(),
+            inputs,
+            outputs,
+            disabled: n.disabled,
+        });
+    }
+    check_unused_outputs(spec, &nodes, &edges, &mut diags);
+
+    let errors = diags.iter().any(Diagnostic::is_error);
+    diags.sort_by_key(|d| (d.span.map_or(usize::MAX, |s| s.offset), d.severity));
+    if errors || nodes.len() != spec.nodes.len() {
+        return (None, diags);
+    }
+    let graph = ResolvedGraph {
+        name: spec.name.clone(),
+        seed: cx.seed.unwrap_or(spec.seed),
+        variant: cx.variant.clone(),
+        source_text: cx.source_text.clone(),
+        source_name: cx.source_name.clone(),
+        nodes,
+        edges: edges.into_iter().map(|e| e.edge).collect(),
+    };
+    (Some(graph), diags)
+}
+
+fn lookup_op<'r>(n: &NodeSpec, registry: &'r Registry, diags: &mut Vec<Diagnostic>) -> Option<&'r OpSpec> {
+    if n.op.is_empty() {
+        return None; // already reported by the parser
+    }
+    let op = registry.get(&n.op);
+    if op.is_none() {
+        let hint =
+            did_you_mean(&n.op, registry.names()).unwrap_or_else(|| "run `dynaflow ops` to list operators".to_owned());
+        diags.push(
+            Diagnostic::error("unknown-op", n.op_span, format!("node `{}`: unknown op `{}`", n.id, n.op))
+                .with_hint(hint),
+        );
+    }
+    op
+}
+
+fn port_hint<'a>(given: &str, names: impl Iterator<Item = &'a str> + Clone) -> String {
+    did_you_mean(given, names.clone()).unwrap_or_else(|| {
+        let all: Vec<_> = names.map(|n| format!("`{n}`")).collect();
+        if all.is_empty() { "this operator has no such ports".to_owned() } else { format!("ports: {}", all.join(", ")) }
+    })
+}
+
+fn record_policy(n: &NodeSpec, port: &str) -> RecordPolicy {
+    n.record
+        .ports
+        .iter()
+        .find(|(p, _, _)| p == port)
+        .map(|(_, _, r)| *r)
+        .or(n.record.default)
+        .unwrap_or(RecordPolicy::All)
+}
+
+fn check_params(n: &NodeSpec, op: &OpSpec, cx: &ResolveContext, diags: &mut Vec<Diagnostic>) -> Params {
+    let mut values = serde_json::Map::new();
+    for (key, value) in &n.params {
+        let Some(p) = op.param(&key.text) else {
+            let hint = did_you_mean(&key.text, op.params.iter().map(|p| p.name)).unwrap_or_else(|| {
+                if op.params.is_empty() {
+                    format!("`{}` takes no parameters", op.name)
+                } else {
+                    format!("`{}` takes: {}", op.name, op.params.iter().map(|p| p.name).collect::<Vec<_>>().join(", "))
+                }
+            });
+            diags.push(
+                Diagnostic::error(
+                    "unknown-param",
+                    key.span,
+                    format!("node `{}`: unknown param `{}` for op `{}`", n.id, key.text, op.name),
+                )
+                .with_hint(hint),
+            );
+            continue;
+        };
+        if let Some(v) = check_value(n, p, value, diags) {
+            values.insert(p.name.to_owned(), v);
+        }
+    }
+    for p in op.params {
+        if values.contains_key(p.name) || n.params.iter().any(|(k, _)| k.text == p.name) {
+            continue;
+        }
+        match p.default.to_json() {
+            Some(v) => {
+                values.insert(p.name.to_owned(), v);
+            }
+            None => diags.push(
+                Diagnostic::error(
+                    "missing-param",
+                    n.id_span,
+                    format!("node `{}`: required param `{}` is missing", n.id, p.name),
+                )
+                .with_hint(format!(
+                    "add `params: {{ {}: <{}> }}` ({})",
+                    p.name,
+                    p.ty.describe(),
+                    p.doc
+                )),
+            ),
+        }
+    }
+    Params::new(values, cx.base_dir.clone())
+}
+
+/// Check one value against its declaration. Range checks are written as containment so NaN
+/// and infinities fail.
+fn check_value(n: &NodeSpec, p: &ParamSpec, value: &Yaml, diags: &mut Vec<Diagnostic>) -> Option<serde_json::Value> {
+    let json = value.to_json();
+    let what = format!("node `{}`: param `{}`", n.id, p.name);
+    let bad_type = |diags: &mut Vec<Diagnostic>| {
+        diags.push(
+            Diagnostic::error(
+                "param-type",
+                value.span,
+                format!("{what} expects {}, found {}", p.ty.describe(), value.type_name()),
+            )
+            .with_hint(p.doc),
+        );
+        None
+    };
+    match p.ty {
+        ParamType::Bool => json.is_boolean().then_some(json).or_else(|| bad_type(diags)),
+        ParamType::Int { min, max } => match json.as_i64() {
+            Some(v) if (min..=max).contains(&v) => Some(json),
+            Some(v) => {
+                diags.push(
+                    Diagnostic::error("param-range", value.span, format!("{what} = {v} is out of range {min}..={max}"))
+                        .with_hint(p.doc),
+                );
+                None
+            }
+            None => bad_type(diags),
+        },
+        ParamType::Float { min, max } => match json.as_f64() {
+            Some(v) if (min..=max).contains(&v) => Some(json),
+            Some(v) => {
+                diags.push(
+                    Diagnostic::error("param-range", value.span, format!("{what} = {v} is out of range {min}..={max}"))
+                        .with_hint(p.doc),
+                );
+                None
+            }
+            None => match value.as_str() {
+                // `.nan`/`.inf` and friends: numbers, but never in range.
+                Some(s)
+                    if matches!(
+                        s.to_ascii_lowercase().as_str(),
+                        ".nan" | ".inf" | "-.inf" | "+.inf" | "nan" | "inf"
+                    ) =>
+                {
+                    diags.push(
+                        Diagnostic::error(
+                            "param-range",
+                            value.span,
+                            format!("{what} = {s} is out of range {min}..={max}"),
+                        )
+                        .with_hint("the value must be a finite number"),
+                    );
+                    None
+                }
+                _ => bad_type(diags),
+            },
+        },
+        ParamType::Str | ParamType::Path => match &value.kind {
+            YamlKind::Scalar { text, .. } if !value.is_null() => Some(serde_json::Value::String(text.clone())),
+            _ => bad_type(diags),
+        },
+        ParamType::Enum { values } => match value.as_str() {
+            Some(s) if values.contains(&s) => Some(json),
+            Some(s) => {
+                let hint = did_you_mean(s, values.iter().copied()).unwrap_or_else(|| p.ty.describe());
+                diags.push(
+                    Diagnostic::error("param-value", value.span, format!("{what}: `{s}` is not {}", p.ty.describe()))
+                        .with_hint(hint),
+                );
+                None
+            }
+            None => bad_type(diags),
+        },
+    }
+}
+
+/// Output types, with `same_as` outputs following what is wired into their input.
+fn resolve_output_types(spec: &GraphSpec, ops: &[Option<&OpSpec>], index: &HashMap<&str, usize>) -> Vec<Vec<PortType>> {
+    let mut types: Vec<Vec<PortType>> =
+        ops.iter().map(|op| op.map_or_else(Vec::new, |op| op.outputs.iter().map(|p| p.ty).collect())).collect();
+    // Each pass resolves at least one more link of a pass-through chain; a chain cannot be
+    // longer than the node count.
+    for _ in 0..spec.nodes.len() {
+        let mut changed = false;
+        for (i, (n, op)) in spec.nodes.iter().zip(ops).enumerate() {
+            let Some(op) = op else { continue };
+            for (j, out) in op.outputs.iter().enumerate() {
+                let Some(input) = out.same_as else { continue };
+                let upstream = n
+                    .inputs
+                    .iter()
+                    .find(|inp| inp.port == input)
+                    .and_then(|inp| inp.from.as_ref())
+                    .and_then(|r| {
+                        let k = *index.get(r.node.as_str())?;
+                        let port = ops.get(k).copied().flatten()?.outputs.iter().position(|p| p.name == r.port)?;
+                        types.get(k)?.get(port).copied()
+                    })
+                    .unwrap_or(PortType::Any);
+                if let Some(slot) = types.get_mut(i).and_then(|t| t.get_mut(j))
+                    && *slot != upstream
+                {
+                    *slot = upstream;
+                    changed = true;
+                }
+            }
+        }
+        if !changed {
+            break;
+        }
+    }
+    types
+}
+
+struct SpannedEdge {
+    edge: ResolvedEdge,
+    span: crate::yaml::Span,
+}
+
+fn check_inputs(
+    spec: &GraphSpec,
+    ops: &[Option<&OpSpec>],
+    index: &HashMap<&str, usize>,
+    out_types: &[Vec<PortType>],
+    diags: &mut Vec<Diagnostic>,
+) -> Vec<SpannedEdge> {
+    let mut edges = Vec::new();
+    for (i, (n, op)) in spec.nodes.iter().zip(ops).enumerate() {
+        let Some(op) = op else { continue };
+        if op.kind == OpKind::Source && !n.inputs.is_empty() {
+            let span = n.inputs.first().map_or(n.id_span, |i| i.port_span);
+            diags.push(
+                Diagnostic::error(
+                    "source-has-inputs",
+                    span,
+                    format!("node `{}`: `{}` is a source and takes no inputs", n.id, op.name),
+                )
+                .with_hint("remove the `in:` block"),
+            );
+            continue;
+        }
+        let mut seen_ports: Vec<&str> = Vec::new();
+        for input in &n.inputs {
+            let Some(j) = op.inputs.iter().position(|p| p.name == input.port) else {
+                diags.push(
+                    Diagnostic::error(
+                        "unknown-port",
+                        input.port_span,
+                        format!("node `{}`: op `{}` has no input `{}`", n.id, op.name, input.port),
+                    )
+                    .with_hint(port_hint(&input.port, op.inputs.iter().map(|p| p.name))),
+                );
+                continue;
+            };
+            seen_ports.push(op.inputs.get(j).map_or("", |p| p.name));
+            let Some(from) = &input.from else { continue };
+            let Some(&k) = index.get(from.node.as_str()) else {
+                let hint = did_you_mean(&from.node, spec.nodes.iter().map(|n| n.id.as_str())).unwrap_or_else(|| {
+                    format!("nodes: {}", spec.nodes.iter().map(|n| n.id.as_str()).collect::<Vec<_>>().join(", "))
+                });
+                diags.push(
+                    Diagnostic::error(
+                        "unknown-node",
+                        from.span,
+                        format!("input `{}/{}` refers to unknown node `{}`", n.id, input.port, from.node),
+                    )
+                    .with_hint(hint),
+                );
+                continue;
+            };
+            let Some(producer) = ops.get(k).copied().flatten() else { continue };
+            let Some(p) = producer.outputs.iter().position(|o| o.name == from.port) else {
+                diags.push(
+                    Diagnostic::error(
+                        "unknown-port",
+                        from.span,
+                        format!(
+                            "input `{}/{}`: node `{}` (op `{}`) has no output `{}`",
+                            n.id, input.port, from.node, producer.name, from.port
+                        ),
+                    )
+                    .with_hint(port_hint(&from.port, producer.outputs.iter().map(|o| o.name))),
+                );
+                continue;
+            };
+            let produced = out_types.get(k).and_then(|t| t.get(p)).copied().unwrap_or(PortType::Any);
+            let wanted = op.inputs.get(j).map_or(PortType::Any, |p| p.ty);
+            if produced != PortType::Any && !produced.feeds(wanted) {
+                let candidates: Vec<String> = spec
+                    .nodes
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(m, node)| {
+                        let types = out_types.get(m).cloned().unwrap_or_default();
+                        let outs = ops.get(m).copied().flatten().map(|o| o.outputs).unwrap_or_default();
+                        outs.iter()
+                            .zip(types)
+                            .filter(|(_, t)| t.feeds(wanted))
+                            .map(move |(o, _)| format!("`{}.{}`", node.id, o.name))
+                            .collect::<Vec<_>>()
+                    })
+                    .take(4)
+                    .collect();
+                let hint = if candidates.is_empty() {
+                    format!("`{}/{}` needs a {wanted} output; no node in this graph produces one", n.id, input.port)
+                } else {
+                    format!("`{}/{}` needs {wanted}; outputs of that type: {}", n.id, input.port, candidates.join(", "))
+                };
+                diags.push(
+                    Diagnostic::error(
+                        "port-type-mismatch",
+                        from.span,
+                        format!(
+                            "input `{}/{}` expects {wanted} but `{}.{}` produces {produced}",
+                            n.id, input.port, from.node, from.port
+                        ),
+                    )
+                    .with_hint(hint),
+                );
+                continue;
+            }
+            if let Some(prod_node) = spec.nodes.get(k)
+                && prod_node.disabled
+                && !n.disabled
+                && op.inputs.get(j).is_some_and(|p| p.required)
+            {
+                diags.push(
+                    Diagnostic::warning(
+                        "disabled-input",
+                        from.span,
+                        format!(
+                            "input `{}/{}` is fed by disabled node `{}`: `{}` will skip every frame",
+                            n.id, input.port, from.node, n.id
+                        ),
+                    )
+                    .with_hint("disable this node too, or rewire the input in the variant"),
+                );
+            }
+            edges.push(SpannedEdge {
+                edge: ResolvedEdge {
+                    from_node: k,
+                    from_port: p,
+                    to_node: i,
+                    to_port: j,
+                    join: input.join,
+                    delay: input.delay,
+                    queue: input.queue,
+                },
+                span: from.span,
+            });
+        }
+        if op.kind == OpKind::Transform {
+            for p in op.inputs.iter().filter(|p| p.required && !seen_ports.contains(&p.name)) {
+                let producers: Vec<String> = spec
+                    .nodes
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(m, node)| {
+                        let types = out_types.get(m).cloned().unwrap_or_default();
+                        ops.get(m)
+                            .copied()
+                            .flatten()
+                            .map(|o| o.outputs)
+                            .unwrap_or_default()
+                            .iter()
+                            .zip(types)
+                            .filter(|(_, t)| *t != PortType::Any && t.feeds(p.ty))
+                            .map(move |(o, _)| format!("{}.{}", node.id, o.name))
+                            .collect::<Vec<_>>()
+                    })
+                    .take(3)
+                    .collect();
+                let hint = match producers.first() {
+                    Some(first) => format!("wire it, e.g. `in: {{ {}: {first} }}`", p.name),
+                    None => format!("wire it to an output of type {}", p.ty),
+                };
+                diags.push(
+                    Diagnostic::error(
+                        "missing-input",
+                        n.id_span,
+                        format!("node `{}`: required input `{}` ({}) is not connected", n.id, p.name, p.ty),
+                    )
+                    .with_hint(hint),
+                );
+            }
+            let drives = n.inputs.iter().any(|inp| inp.join == Join::Lockstep && inp.delay == 0);
+            if !drives && !n.inputs.is_empty() {
+                diags.push(
+                    Diagnostic::error("no-driving-input", n.id_span, format!("node `{}` has no undelayed `join: lockstep` input, so nothing decides which frames it runs", n.id))
+                        .with_hint("wire at least one input with the default `join: lockstep` and no `delay`"),
+                );
+            }
+        }
+    }
+    edges
+}
+
+/// Cycles must contain at least one delayed edge; find strongly connected components of the
+/// undelayed edges (Tarjan) and report each non-trivial one.
+fn check_cycles(spec: &GraphSpec, edges: &[SpannedEdge], diags: &mut Vec<Diagnostic>) {
+    let n = spec.nodes.len();
+    let mut adj: Vec<Vec<usize>> = vec![Vec::new(); n];
+    for e in edges.iter().filter(|e| e.edge.delay == 0) {
+        if let Some(list) = adj.get_mut(e.edge.from_node) {
+            list.push(e.edge.to_node);
+        }
+    }
+    for comp in tarjan(&adj) {
+        let cyclic = comp.len() > 1 || comp.first().is_some_and(|&v| adj.get(v).is_some_and(|a| a.contains(&v)));
+        if !cyclic {
+            continue;
+        }
+        let mut ids: Vec<usize> = comp.clone();
+        ids.sort_unstable();
+        let names: Vec<&str> = ids.iter().filter_map(|&i| spec.nodes.get(i).map(|n| n.id.as_str())).collect();
+        let edge = edges
+            .iter()
+            .filter(|e| e.edge.delay == 0 && comp.contains(&e.edge.from_node) && comp.contains(&e.edge.to_node))
+            .max_by_key(|e| e.span.offset);
+        let (span, hint) = match edge {
+            Some(e) => {
+                let to = spec.nodes.get(e.edge.to_node);
+                let port = to
+                    .and_then(|t| t.inputs.iter().find(|i| i.from.as_ref().is_some_and(|f| f.span == e.span)))
+                    .map_or("?", |i| i.port.as_str());
+                (
+                    Some(e.span),
+                    format!(
+                        "add `delay: 1` to one edge of the cycle, e.g. `{}/{port}`: `{{ from: ..., delay: 1 }}`",
+                        to.map_or("?", |t| t.id.as_str())
+                    ),
+                )
+            }
+            None => (None, "add `delay: 1` to one edge of the cycle".to_owned()),
+        };
+        diags.push(
+            Diagnostic::error(
+                "cycle",
+                span,
+                format!(
+                    "cycle without a delay through nodes {}",
+                    names.iter().map(|n| format!("`{n}`")).collect::<Vec<_>>().join(" -> ")
+                ),
+            )
+            .with_hint(hint),
+        );
+    }
+}
+
+fn tarjan(adj: &[Vec<usize>]) -> Vec<Vec<usize>> {
+    struct St<'a> {
+        adj: &'a [Vec<usize>],
+        index: Vec<Option<usize>>,
+        low: Vec<usize>,
+        on: Vec<bool>,
+        stack: Vec<usize>,
+        next: usize,
+        out: Vec<Vec<usize>>,
+    }
+    // Iterative to survive very large generated graphs without stack overflow.
+    fn visit(st: &mut St<'_>, root: usize) {
+        let mut work: Vec<(usize, usize)> = vec![(root, 0)];
+        while let Some(&mut (v, ref mut child)) = work.last_mut() {
+            if *child == 0 && st.index[v].is_none() {
+                st.index[v] = Some(st.next);
+                st.low[v] = st.next;
+                st.next += 1;
+                st.stack.push(v);
+                st.on[v] = true;
+            }
+            if let Some(&w) = st.adj[v].get(*child) {
+                *child += 1;
+                match st.index[w] {
+                    None => work.push((w, 0)),
+                    Some(iw) if st.on[w] => st.low[v] = st.low[v].min(iw),
+                    Some(_) => {}
+                }
+                continue;
+            }
+            work.pop();
+            if let Some(&(parent, _)) = work.last() {
+                st.low[parent] = st.low[parent].min(st.low[v]);
+            }
+            if Some(st.low[v]) == st.index[v] {
+                let mut comp = Vec::new();
+                while let Some(w) = st.stack.pop() {
+                    st.on[w] = false;
+                    comp.push(w);
+                    if w == v {
+                        break;
+                    }
+                }
+                st.out.push(comp);
+            }
+        }
+    }
+    let n = adj.len();
+    let mut st = St {
+        adj,
+        index: vec![None; n],
+        low: vec![0; n],
+        on: vec![false; n],
+        stack: Vec::new(),
+        next: 0,
+        out: Vec::new(),
+    };
+    for v in 0..n {
+        if st.index[v].is_none() {
+            visit(&mut st, v);
+        }
+    }
+    st.out
+}
+
+fn check_unused_outputs(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge], diags: &mut Vec<Diagnostic>) {
+    for (i, node) in nodes.iter().enumerate() {
+        if node.disabled {
+            continue;
+        }
+        for (j, out) in node.outputs.iter().enumerate() {
+            let consumed = edges.iter().any(|e| e.edge.from_node == i && e.edge.from_port == j);
+            if !consumed && out.record == RecordPolicy::None {
+                let span = spec.nodes.get(i).map(|n| n.id_span);
+                diags.push(
+                    Diagnostic::warning(
+                        "unused-output",
+                        span,
+                        format!("output `{}.{}` is neither consumed nor recorded", node.id, out.name),
+                    )
+                    .with_hint("wire it to a node, or record it (`record: all`)"),
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,124 @@
+//! Variants and command-line overrides: both patch a [`GraphSpec`] before validation, so a
+//! variant is checked exactly like the base graph.
+
+use super::{GraphSpec, NodePatch};
+use crate::diag::{Diagnostic, did_you_mean};
+use crate::yaml::{self, Key, Yaml, YamlKind};
+
+/// A `--set node.param=value` override.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Override {
+    /// Target node id.
+    pub node: String,
+    /// Parameter key.
+    pub param: String,
+    /// The value, parsed as YAML (so `3`, `true`, `[1, 2]` and `abc` all work).
+    pub value: Yaml,
+    /// The flag as given, for messages.
+    pub text: String,
+}
+
+impl Override {
+    /// Parse `node.param=value`.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        let (path, value) =
+            text.split_once('=').ok_or_else(|| format!("`--set {text}`: expected `node.param=value`"))?;
+        let (node, param) = path
+            .split_once('.')
+            .ok_or_else(|| format!("`--set {text}`: expected `node.param=value` (no `.` in `{path}`)"))?;
+        let value =
+            yaml::parse(value).map_err(|e| format!("`--set {text}`: value is not valid YAML: {}", e.message))?;
+        Ok(Self { node: node.trim().to_owned(), param: param.trim().to_owned(), value, text: text.to_owned() })
+    }
+}
+
+fn merge_params(into: &mut Vec<(Key, Yaml)>, patch: &[(Key, Yaml)]) {
+    for (k, v) in patch {
+        match into.iter_mut().find(|(ek, _)| ek.text == k.text) {
+            Some(slot) => *slot = (k.clone(), v.clone()),
+            None => into.push((k.clone(), v.clone())),
+        }
+    }
+}
+
+fn apply_patch(spec: &mut GraphSpec, patch: &NodePatch) -> bool {
+    let Some(node) = spec.nodes.iter_mut().find(|n| n.id == patch.node) else {
+        return false;
+    };
+    if let Some(d) = patch.disabled {
+        node.disabled = d;
+    }
+    merge_params(&mut node.params, &patch.params);
+    for input in &patch.inputs {
+        match node.inputs.iter_mut().find(|i| i.port == input.port) {
+            Some(slot) => *slot = input.clone(),
+            None => node.inputs.push(input.clone()),
+        }
+    }
+    if let Some(r) = &patch.record {
+        node.record = r.clone();
+    }
+    true
+}
+
+/// Apply the variant `name`. Unknown variants and patches of unknown nodes are errors.
+pub fn apply_variant(spec: &GraphSpec, name: &str) -> Result<GraphSpec, Vec<Diagnostic>> {
+    let Some(variant) = spec.variants.iter().find(|v| v.name == name) else {
+        let hint = did_you_mean(name, spec.variants.iter().map(|v| v.name.as_str())).unwrap_or_else(|| {
+            if spec.variants.is_empty() {
+                "this graph defines no variants".to_owned()
+            } else {
+                format!("variants: {}", spec.variants.iter().map(|v| v.name.as_str()).collect::<Vec<_>>().join(", "))
+            }
+        });
+        return Err(vec![
+            Diagnostic::error("unknown-variant", None, format!("unknown variant `{name}`")).with_hint(hint),
+        ]);
+    };
+    let mut out = spec.clone();
+    let mut diags = Vec::new();
+    for patch in &variant.patches {
+        if !apply_patch(&mut out, patch) {
+            diags.push(
+                Diagnostic::error(
+                    "unknown-node",
+                    patch.node_span,
+                    format!("variant `{name}` patches unknown node `{}`", patch.node),
+                )
+                .with_opt_hint(did_you_mean(&patch.node, spec.nodes.iter().map(|n| n.id.as_str()))),
+            );
+        }
+    }
+    if diags.is_empty() { Ok(out) } else { Err(diags) }
+}
+
+/// Apply `--set` overrides. The value's span is moved onto the node id so diagnostics point
+/// at the node being overridden.
+pub fn apply_overrides(spec: &mut GraphSpec, overrides: &[Override]) -> Vec<Diagnostic> {
+    let mut diags = Vec::new();
+    for o in overrides {
+        let known: Vec<String> = spec.nodes.iter().map(|n| n.id.clone()).collect();
+        let Some(node) = spec.nodes.iter_mut().find(|n| n.id == o.node) else {
+            diags.push(
+                Diagnostic::error("unknown-node", None, format!("`--set {}`: no node `{}`", o.text, o.node))
+                    .with_opt_hint(did_you_mean(&o.node, known.iter().map(String::as_str))),
+            );
+            continue;
+        };
+        let span = node.id_span;
+        let value = respan(&o.value, span);
+        merge_params(&mut node.params, &[(Key { text: o.param.clone(), span }, value)]);
+    }
+    diags
+}
+
+fn respan(v: &Yaml, span: yaml::Span) -> Yaml {
+    let kind = match &v.kind {
+        YamlKind::Scalar { .. } => v.kind.clone(),
+        YamlKind::Seq(items) => YamlKind::Seq(items.iter().map(|i| respan(i, span)).collect()),
+        YamlKind::Map(entries) => {
+            YamlKind::Map(entries.iter().map(|(k, v)| (Key { text: k.text.clone(), span }, respan(v, span))).collect())
+        }
+    };
+    Yaml { kind, span }
+}

@@ -1,0 +1,16 @@
+//! dynaflow's operators, one module per family. [`registry`] returns all of them.
+//!
+//! Families: `util` (test sources, pass-through, gating, fault injection: the pieces used to
+//! exercise the engine). Decoding, inference, ORB, flow, epipolar culling, PnP/BA and OctoMap
+//! families land in their own modules.
+
+mod util;
+
+use dynaflow_engine::op::Registry;
+
+/// Every operator dynaflow ships.
+pub fn registry() -> Registry {
+    let mut r = Registry::new();
+    util::register(&mut r);
+    r
+}

@@ -1,0 +1,38 @@
+//! One module per subcommand.
+
+pub mod graph;
+pub mod ops;
+pub mod run;
+pub mod validate;
+
+use std::path::Path;
+
+use dynaflow_engine::{LoadRequest, Loaded};
+
+/// Load a graph with the shipped operators; print diagnostics (rich on a terminal, plain
+/// `file:line:col: …` otherwise). `None` when it cannot run.
+pub fn load_and_report(path: &Path, req: &LoadRequest) -> Option<Loaded> {
+    let registry = dynaflow_operators::registry();
+    let loaded = match dynaflow_engine::load(path, &registry, req) {
+        Ok(l) => l,
+        Err(e) => {
+            eprintln!("error: cannot read graph file {}: {e}", path.display());
+            return None;
+        }
+    };
+    print_diagnostics(&loaded);
+    Some(loaded)
+}
+
+/// Print every diagnostic of a load to stderr.
+pub fn print_diagnostics(loaded: &Loaded) {
+    use std::io::IsTerminal;
+    let rich = std::io::stderr().is_terminal();
+    for d in &loaded.diagnostics {
+        if rich {
+            eprintln!("{:?}", loaded.source.report(d));
+        } else {
+            eprintln!("{}", loaded.source.plain(d));
+        }
+    }
+}

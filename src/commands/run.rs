@@ -1,0 +1,131 @@
+//! `dynaflow run`.
+
+use std::io::IsTerminal;
+use std::sync::atomic::Ordering;
+use std::time::Duration;
+
+use dynaflow_engine::LoadRequest;
+use dynaflow_engine::runtime::{self, RunOptions, RunStatus};
+use dynaflow_engine::sink::{DigestSink, Sink};
+use dynaflow_engine::spec::Override;
+use dynaflow_recordings::MessageLog;
+
+use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, RunArgs};
+
+pub fn run(args: &RunArgs) -> u8 {
+    let mut overrides = Vec::new();
+    for s in &args.set {
+        match Override::parse(s) {
+            Ok(o) => overrides.push(o),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return EXIT_BAD_INPUT;
+            }
+        }
+    }
+    let req = LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false };
+    let Some(graph) = super::load_and_report(&args.graph, &req).and_then(|l| l.graph) else {
+        return EXIT_BAD_INPUT;
+    };
+    if let Err(e) = std::fs::create_dir_all(&args.out) {
+        eprintln!("error: cannot create output folder {}: {e}", args.out.display());
+        return EXIT_BAD_INPUT;
+    }
+    let stem = match &graph.variant {
+        Some(v) => format!("{}-{v}", graph.name),
+        None => graph.name.clone(),
+    };
+
+    let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
+    for r in &args.record {
+        match r.trim() {
+            "jsonl" => sinks.push(Box::new(MessageLog::new(args.out.join(format!("{stem}.messages.jsonl"))))),
+            "none" | "" => {}
+            other => {
+                eprintln!("error: unknown recorder `{other}` (available: jsonl, none)");
+                return EXIT_BAD_INPUT;
+            }
+        }
+    }
+    let digest = DigestSink::default();
+    if args.digest {
+        sinks.push(Box::new(digest.clone()));
+    }
+
+    let options = RunOptions {
+        realtime: args.realtime,
+        max_frames: args.frames,
+        out_dir: Some(args.out.clone()),
+        ..RunOptions::default()
+    };
+    let rt = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+        Ok(rt) => rt,
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            return EXIT_FAILED;
+        }
+    };
+    let show_progress = !args.no_progress && std::io::stderr().is_terminal();
+    let result = rt.block_on(async {
+        runtime::stop_on_signals(options.stop.clone());
+        let progress = show_progress.then(|| spawn_progress(&options));
+        let result = runtime::run(&graph, options.clone(), sinks).await;
+        if let Some((bar, task)) = progress {
+            task.abort();
+            bar.finish_and_clear();
+        }
+        result
+    });
+    let report = match result {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return EXIT_BAD_INPUT;
+        }
+    };
+    println!("{}", report.table());
+    let mut summary = serde_json::to_value(&report).unwrap_or_default();
+    if args.digest
+        && let Some(obj) = summary.as_object_mut()
+    {
+        obj.insert("digests".into(), digest.to_json());
+    }
+    let path = args.out.join(format!("{stem}.summary.json"));
+    let written = serde_json::to_string_pretty(&summary)
+        .map_err(std::io::Error::other)
+        .and_then(|s| std::fs::write(&path, s + "\n"));
+    match written {
+        Ok(()) => tracing::info!("wrote {}", path.display()),
+        Err(e) => {
+            eprintln!("error: cannot write {}: {e}", path.display());
+            return EXIT_FAILED;
+        }
+    }
+    for f in &report.failures {
+        eprintln!("error: node `{}` failed: {}", f.node, f.error);
+    }
+    match report.status {
+        RunStatus::Completed => EXIT_OK,
+        RunStatus::Interrupted => EXIT_INTERRUPTED,
+        RunStatus::Failed => EXIT_FAILED,
+    }
+}
+
+fn spawn_progress(options: &RunOptions) -> (indicatif::ProgressBar, tokio::task::JoinHandle<()>) {
+    let bar = indicatif::ProgressBar::with_draw_target(None, indicatif::ProgressDrawTarget::stderr());
+    let style = indicatif::ProgressStyle::with_template("{spinner} {pos}/{len} frames [{elapsed_precise}] {per_sec}")
+        .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar());
+    bar.set_style(style);
+    let (progress, total, b) = (options.progress.clone(), options.total_frames.clone(), bar.clone());
+    let task = tokio::spawn(async move {
+        loop {
+            let t = total.load(Ordering::Relaxed);
+            if t > 0 {
+                b.set_length(t);
+            }
+            b.set_position(progress.load(Ordering::Relaxed));
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    });
+    (bar, task)
+}

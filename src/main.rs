@@ -1,0 +1,172 @@
+//! `dynaflow`: the command-line front end. Argument parsing, wiring and exit codes only; the
+//! work happens in the `dynaflow-engine`, `dynaflow-operators` and `dynaflow-recordings` crates.
+
+mod commands;
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand, ValueEnum};
+
+/// Exit status: success.
+pub const EXIT_OK: u8 = 0;
+/// Exit status: the run failed (operator error, panic, recording failure).
+pub const EXIT_FAILED: u8 = 1;
+/// Exit status: interrupted by SIGINT/SIGTERM (recordings closed, summary written), as shells expect.
+pub const EXIT_INTERRUPTED: u8 = 130;
+/// Exit status: bad input (invalid graph, missing file, bad flag).
+pub const EXIT_BAD_INPUT: u8 = 2;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "dynaflow",
+    version,
+    about = "Dataflow engine for dynamic-scene visual SLAM",
+    propagate_version = true
+)]
+struct Cli {
+    /// More log output (-v debug, -vv trace). RUST_LOG overrides.
+    #[arg(short, long, action = clap::ArgAction::Count, global = true)]
+    verbose: u8,
+    /// Only warnings and errors.
+    #[arg(short, long, global = true)]
+    quiet: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Run a graph: prints per-node timings and writes `<out>/<name>.summary.json` and recordings.
+    Run(RunArgs),
+    /// Check graph files (and all their variants) without running them.
+    Validate {
+        /// Graph files.
+        #[arg(required = true)]
+        graphs: Vec<PathBuf>,
+        /// Print diagnostics as JSON.
+        #[arg(long)]
+        json: bool,
+    },
+    /// List operators with their ports and parameters.
+    Ops {
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = OpsFormat::Text)]
+        format: OpsFormat,
+        /// Shorthand for `--format json`.
+        #[arg(long, conflicts_with = "format")]
+        json: bool,
+        /// Shorthand for `--format markdown`.
+        #[arg(long, conflicts_with_all = ["format", "json"])]
+        markdown: bool,
+    },
+    /// Draw a graph as Mermaid or Graphviz dot.
+    Graph {
+        /// Graph file.
+        graph: PathBuf,
+        /// Output format.
+        #[arg(long, value_enum, default_value_t = GraphFormat::Mermaid)]
+        format: GraphFormat,
+        /// Apply a variant first.
+        #[arg(long)]
+        variant: Option<String>,
+    },
+}
+
+/// `dynaflow run` arguments.
+#[derive(Debug, clap::Args)]
+pub struct RunArgs {
+    /// Graph file.
+    pub graph: PathBuf,
+    /// Output folder for the summary and recordings.
+    #[arg(long, default_value = "out")]
+    pub out: PathBuf,
+    /// Apply a named variant of the graph.
+    #[arg(long)]
+    pub variant: Option<String>,
+    /// Override a parameter: `node.param=value` (repeatable).
+    #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
+    pub set: Vec<String>,
+    /// Override the graph seed.
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Pace sources at sensor rate; `latest` joins take what has arrived.
+    #[arg(long)]
+    pub realtime: bool,
+    /// Stop after this many frames.
+    #[arg(long)]
+    pub frames: Option<u64>,
+    /// Recorders to write: `jsonl` (comma-separated; `none` for no recording).
+    #[arg(long, default_value = "jsonl", value_delimiter = ',')]
+    pub record: Vec<String>,
+    /// Add per-port content digests to the summary (for comparing runs).
+    #[arg(long)]
+    pub digest: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub no_progress: bool,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum OpsFormat {
+    Text,
+    Json,
+    Markdown,
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+enum GraphFormat {
+    Mermaid,
+    Dot,
+}
+
+fn init_logging(verbose: u8, quiet: bool) {
+    let default = match (quiet, verbose) {
+        (true, _) => "warn",
+        (false, 0) => "info",
+        (false, 1) => "debug",
+        _ => "trace",
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(default));
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .without_time()
+        .init();
+}
+
+fn main() -> ExitCode {
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => {
+            let code = if e.use_stderr() { EXIT_BAD_INPUT } else { EXIT_OK };
+            let _ = e.print();
+            return ExitCode::from(code);
+        }
+    };
+    init_logging(cli.verbose, cli.quiet);
+    let code = match cli.command {
+        Command::Run(args) => commands::run::run(&args),
+        Command::Validate { graphs, json } => commands::validate::validate(&graphs, json),
+        Command::Ops { format, json, markdown } => {
+            let format = if json {
+                OpsFormat::Json
+            } else if markdown {
+                OpsFormat::Markdown
+            } else {
+                format
+            };
+            commands::ops::ops(match format {
+                OpsFormat::Text => commands::ops::Format::Text,
+                OpsFormat::Json => commands::ops::Format::Json,
+                OpsFormat::Markdown => commands::ops::Format::Markdown,
+            })
+        }
+        Command::Graph { graph, format, variant } => {
+            commands::graph::graph(&graph, matches!(format, GraphFormat::Dot), variant)
+        }
+    };
+    ExitCode::from(code)
+}
