@@ -158,7 +158,7 @@ fn main() -> ExitCode {
             } else {
                 format
             };
-            commands::ops::ops(match format {
+            commands::ops::ops(&match format {
                 OpsFormat::Text => commands::ops::Format::Text,
                 OpsFormat::Json => commands::ops::Format::Json,
                 OpsFormat::Markdown => commands::ops::Format::Markdown,

@@ -87,11 +87,14 @@ pub trait Sink: Send {
     fn close(&mut self) -> Result<(), SinkError>;
 }
 
+/// `(node, port, message)`.
+pub type Recorded = (String, String, Arc<Message>);
+
 /// Keeps every recorded message in memory (tests, in-process comparisons).
 #[derive(Clone, Debug, Default)]
 pub struct MemorySink {
     /// `(node, port, message)` in arrival order.
-    pub messages: Arc<Mutex<Vec<(String, String, Arc<Message>)>>>,
+    pub messages: Arc<Mutex<Vec<Recorded>>>,
     /// Whether `close` was called.
     pub closed: Arc<Mutex<bool>>,
 }

@@ -79,7 +79,7 @@ impl Sink for MessageLog {
         });
         self.line(&v)?;
         self.count += 1;
-        if self.count % FLUSH_EVERY == 0 {
+        if self.count.is_multiple_of(FLUSH_EVERY) {
             self.out.as_mut().map_or(Ok(()), Write::flush).map_err(|e| self.err(e))?;
         }
         Ok(())

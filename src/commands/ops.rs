@@ -11,7 +11,7 @@ pub enum Format {
     Markdown,
 }
 
-pub fn ops(format: Format) -> u8 {
+pub fn ops(format: &Format) -> u8 {
     let registry = dynaflow_operators::registry();
     let ops: Vec<&OpSpec> = registry.iter().collect();
     match format {

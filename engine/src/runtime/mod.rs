@@ -140,6 +140,8 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     }
 
     let info = RunInfo::new(graph, options.realtime);
+    // Without sinks nothing is tapped, so an unrecorded run pays nothing for recording.
+    let recording = !sinks.is_empty();
     let (tap_tx, sink_thread) = sink_thread(sinks, &info)?;
     let failures: Arc<Mutex<Vec<Failure>>> = Arc::default();
 
@@ -171,7 +173,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
             realtime: options.realtime,
         };
         let outputs = node::Outputs {
-            ports: node.outputs.iter().map(|o| (o.name, o.ty, o.record)).collect(),
+            ports: node.outputs.iter().map(|o| (o.name, o.ty, if recording { o.record } else { RecordPolicy::None })).collect(),
             senders: std::mem::take(senders.get_mut(i).unwrap_or(&mut Vec::new())),
             tap: tap_tx.clone(),
         };
@@ -320,7 +322,7 @@ pub(crate) fn records(policy: RecordPolicy, seq: u64) -> bool {
     match policy {
         RecordPolicy::All => true,
         RecordPolicy::None => false,
-        RecordPolicy::Every(n) => seq % n.max(1) == 0,
+        RecordPolicy::Every(n) => seq.is_multiple_of(n.max(1)),
     }
 }
 

@@ -90,7 +90,7 @@ impl NodeTask {
                     self.ctx = ctx;
                     (src, r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p))))))
                 }
-                Err(e) => return (Box::new(Ended), Err(OpError::Failed(format!("task failed: {e}")))),
+                Err(e) => (Box::new(Ended), Err(OpError::Failed(format!("task failed: {e}")))),
             }
         } else {
             let r = std::panic::catch_unwind(AssertUnwindSafe(|| src.next(&mut self.ctx, seq)));

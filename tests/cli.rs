@@ -1,0 +1,159 @@
+//! The `dynaflow` binary end to end: exit codes, outputs, SIGINT, generated docs.
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+fn read_json(path: &std::path::Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
+}
+
+#[test]
+fn default_graph_runs_and_writes_summary_and_log() {
+    let dir = common::TempDir::new("default");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--digest", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/default.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("detector") && stdout.contains("p95 ms"), "{stdout}");
+    let summary = read_json(&dir.path().join("default.summary.json"));
+    assert_eq!(summary["status"], "completed");
+    assert_eq!(summary["frames"], 300);
+    let nodes = summary["nodes"].as_array().unwrap();
+    assert_eq!(nodes.len(), 5);
+    for key in ["frames", "skipped", "latency", "busy_s", "max_queue", "dropped"] {
+        assert!(nodes[0].get(key).is_some(), "summary lacks {key}");
+    }
+    assert_eq!(summary["digests"]["detector/value"]["count"], 60);
+    let log = std::fs::read_to_string(dir.path().join("default.messages.jsonl")).unwrap();
+    let lines: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.first().unwrap()["kind"], "run");
+    assert_eq!(lines.last().unwrap()["kind"], "end");
+    assert_eq!(lines.last().unwrap()["messages"].as_u64().unwrap() as usize, lines.len() - 2);
+
+    // Same seed twice: identical digests (the CLI path is deterministic too).
+    let dir2 = common::TempDir::new("default2");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--digest", "--record", "none", "--out"])
+        .arg(dir2.path())
+        .arg(common::repo().join("graphs/default.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    assert_eq!(read_json(&dir2.path().join("default.summary.json"))["digests"], summary["digests"]);
+}
+
+#[test]
+fn failing_operator_exits_1_and_names_the_node() {
+    let dir = common::TempDir::new("fail");
+    let graph = dir.path().join("fail.yaml");
+    std::fs::write(&graph, "name: fail\nnodes:\n  camera: { op: test_pattern }\n  bad: { op: fault, in: { input: camera.tick }, params: { at_frame: 3, mode: panic } }\n").unwrap();
+    let out = common::bin().args(["run", "--no-progress", "--out"]).arg(dir.path()).arg(&graph).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("node `bad` failed"));
+    let summary = read_json(&dir.path().join("fail.summary.json"));
+    assert_eq!(summary["status"], "failed");
+    let log = std::fs::read_to_string(dir.path().join("fail.messages.jsonl")).unwrap();
+    assert!(log.lines().last().unwrap().contains("\"kind\":\"end\""), "log not closed after a panic");
+}
+
+#[test]
+fn missing_graph_and_bad_output_dir_are_bad_input() {
+    let out = common::bin().args(["run", "--no-progress", "no/such/graph.yaml"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no/such/graph.yaml"));
+    let dir = common::TempDir::new("badout");
+    let blocker = dir.path().join("file");
+    std::fs::write(&blocker, "").unwrap();
+    let out = common::bin()
+        .args(["run", "--no-progress", "--out"])
+        .arg(blocker.join("sub"))
+        .arg(common::repo().join("graphs/default.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("cannot create output folder"));
+}
+
+#[cfg(unix)]
+#[test]
+fn sigint_finishes_in_flight_frames_and_closes_sinks() {
+    let dir = common::TempDir::new("sigint");
+    let graph = dir.path().join("long.yaml");
+    std::fs::write(
+        &graph,
+        "name: long\nnodes:\n  camera: { op: test_pattern, params: { frames: 1000000 } }\n  work: { op: simulate_work, in: { input: camera.tick }, params: { work_us: 2000 } }\n",
+    )
+    .unwrap();
+    let child = common::bin()
+        .args(["run", "--no-progress", "--out"])
+        .arg(dir.path())
+        .arg(&graph)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Wait until the run is producing (the log has flushed a batch), however slow the machine.
+    let log = dir.path().join("long.messages.jsonl");
+    let t = Instant::now();
+    while std::fs::metadata(&log).map_or(0, |m| m.len()) < 20_000 {
+        assert!(t.elapsed() < Duration::from_secs(120), "run never started");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let status = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
+    let summary = read_json(&dir.path().join("long.summary.json"));
+    assert_eq!(summary["status"], "interrupted");
+    let frames = summary["frames"].as_u64().unwrap();
+    assert!(frames > 0 && frames < 1_000_000);
+    let text = std::fs::read_to_string(&log).unwrap();
+    let lines: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(lines.last().unwrap()["kind"], "end", "message log not closed");
+    // In-flight frames were finished: every frame the source emitted reached the consumer.
+    let count = |node: &str| lines.iter().filter(|l| l["node"] == node).count() as u64;
+    assert_eq!(count("camera") / 2, frames);
+    assert_eq!(count("work"), frames);
+}
+
+#[test]
+fn graph_reference_doc_is_up_to_date() {
+    let out = common::bin().args(["ops", "--markdown"]).output().unwrap();
+    assert!(out.status.success());
+    let generated = String::from_utf8(out.stdout).unwrap();
+    let checked_in = std::fs::read_to_string(common::repo().join("docs/graph-reference.md")).unwrap_or_default();
+    assert!(
+        generated == checked_in,
+        "docs/graph-reference.md is stale: run `cargo run -- ops --markdown > docs/graph-reference.md`"
+    );
+}
+
+#[test]
+fn ops_json_lists_every_operator_with_ports_and_params() {
+    let out = common::bin().args(["ops", "--json"]).output().unwrap();
+    let ops: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let names: Vec<&str> = ops.as_array().unwrap().iter().map(|o| o["name"].as_str().unwrap()).collect();
+    for op in ["test_pattern", "passthrough", "gate", "random_scalar", "scalar_sum", "simulate_work", "fault"] {
+        assert!(names.contains(&op), "{op} missing from {names:?}");
+    }
+    let tp = ops.as_array().unwrap().iter().find(|o| o["name"] == "test_pattern").unwrap();
+    assert_eq!(tp["params"][0]["name"], "frames");
+    assert_eq!(tp["outputs"][0]["ty"], "image");
+}
+
+#[test]
+fn graph_renders_mermaid_and_dot() {
+    let g = common::repo().join("graphs/default.yaml");
+    let out = common::bin().arg("graph").arg(&g).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.starts_with("flowchart LR") && text.contains("smooth -.->|\"sum→b, delay 1\"| smooth"), "{text}");
+    let out = common::bin().args(["graph", "--format", "dot"]).arg(&g).output().unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.starts_with("digraph \"default\"") && text.contains("\"camera\" -> \"keyframes\""), "{text}");
+}

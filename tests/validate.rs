@@ -1,0 +1,227 @@
+//! `dynaflow validate` on broken graphs: every case is reported with its line:col and a hint,
+//! the CLI exits 2, and no input makes validation panic.
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+mod common;
+
+use dynaflow_engine::diag::Severity;
+use dynaflow_engine::yaml::line_col;
+use dynaflow_engine::{LoadRequest, load_str};
+use proptest::prelude::*;
+
+/// `(line, col, code, text the message or hint must contain)`.
+type Expect = (usize, usize, &'static str, &'static str);
+
+fn check(file: &str, expected: &[Expect]) {
+    let path = common::repo().join("tests/graphs/invalid").join(file);
+    let text = std::fs::read_to_string(&path).unwrap();
+    let req = LoadRequest { all_variants: true, ..LoadRequest::default() };
+    let loaded = load_str(file, &text, None, &dynaflow_operators::registry(), &req);
+    let errors: Vec<(usize, usize, &str, String)> = loaded
+        .diagnostics
+        .iter()
+        .filter(|d| d.severity == Severity::Error)
+        .map(|d| {
+            let (l, c) = d.span.map_or((0, 0), |s| line_col(&text, s.offset));
+            (l, c, d.code, format!("{} | {}", d.message, d.hint.clone().unwrap_or_default()))
+        })
+        .collect();
+    assert!(loaded.graph.is_none(), "{file}: invalid graph resolved");
+    for (line, col, code, needle) in expected {
+        assert!(
+            errors.iter().any(|(l, c, k, m)| l == line && c == col && k == code && m.contains(needle)),
+            "{file}: expected {code} at {line}:{col} containing {needle:?}; got {errors:#?}"
+        );
+    }
+    assert_eq!(errors.len(), expected.len(), "{file}: unexpected extra errors: {errors:#?}");
+    for d in loaded.diagnostics.iter().filter(|d| d.is_error()) {
+        assert!(d.hint.is_some() || d.code == "bad-value" || d.code == "variant", "{file}: error without hint: {d:?}");
+    }
+    // The CLI agrees and exits 2, printing file:line:col.
+    let out = common::bin().arg("validate").arg(&path).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "{file}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    for (line, col, _, _) in expected {
+        assert!(stderr.contains(&format!("{file}:{line}:{col}:")), "{file}: CLI output lacks {line}:{col}:\n{stderr}");
+    }
+}
+
+#[test]
+fn yaml_syntax_error() {
+    check("yaml_syntax.yaml", &[(4, 3, "yaml-syntax", "YAML syntax error")]);
+}
+
+#[test]
+fn unknown_op() {
+    check("unknown_op.yaml", &[(3, 17, "unknown-op", "did you mean `test_pattern`?")]);
+}
+
+#[test]
+fn misspelt_param() {
+    check("misspelt_param.yaml", &[(5, 27, "unknown-param", "did you mean `width`?")]);
+}
+
+#[test]
+fn ill_typed_and_out_of_range_params() {
+    check(
+        "bad_param_value.yaml",
+        &[
+            (5, 23, "param-range", "-3 is out of range 1..=100000000"),
+            (5, 36, "param-range", "finite"),
+            (5, 49, "param-type", "expects integer"),
+            (9, 29, "param-value", "`gausian` is not one of"),
+        ],
+    );
+}
+
+#[test]
+fn type_mismatched_edge() {
+    check("type_mismatch.yaml", &[(6, 14, "port-type-mismatch", "outputs of that type: `camera.tick`")]);
+}
+
+#[test]
+fn cycle_without_delay() {
+    check("cycle.yaml", &[(10, 10, "cycle", "delay: 1")]);
+}
+
+#[test]
+fn missing_input() {
+    check("missing_input.yaml", &[(4, 3, "missing-input", "in: { a: camera.tick }")]);
+}
+
+#[test]
+fn bad_variants() {
+    check(
+        "bad_variant.yaml",
+        &[(9, 5, "unknown-node", "did you mean `fuse`?"), (11, 23, "unknown-param", "variant `wrong_param`")],
+    );
+}
+
+#[test]
+fn unknown_nodes_and_ports() {
+    check(
+        "unknown_refs.yaml",
+        &[
+            (7, 10, "unknown-node", "did you mean `camera`?"),
+            (8, 10, "unknown-port", "did you mean `tick`?"),
+            (9, 7, "unknown-port", "has no input `c`"),
+            (12, 18, "bad-port-ref", "write `camera.image`"),
+        ],
+    );
+}
+
+#[test]
+fn duplicate_ids() {
+    check("duplicate_id.yaml", &[(4, 3, "duplicate-id", "duplicate node id `camera`")]);
+}
+
+#[test]
+fn structural_errors() {
+    check(
+        "structure.yaml",
+        &[
+            (2, 1, "unknown-key", "did you mean `seed`?"),
+            (4, 39, "bad-value", "record policy"),
+            (5, 3, "bad-id", "letters, digits"),
+            (5, 3, "missing-input", "required input `input`"),
+            (9, 37, "bad-value", "did you mean `lockstep`?"),
+            (9, 70, "bad-value", "at least 1"),
+        ],
+    );
+}
+
+#[test]
+fn unknown_variant_on_the_command_line() {
+    let out = common::bin()
+        .args(["run", "--no-progress", "--variant", "no_detectr"])
+        .arg(common::repo().join("graphs/default.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("unknown variant `no_detectr`") && stderr.contains("did you mean `no_detector`?"), "{stderr}");
+}
+
+#[test]
+fn bad_set_override_points_at_the_node() {
+    let out = common::bin()
+        .args(["validate"])
+        .arg(common::repo().join("graphs/default.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = common::bin()
+        .args(["run", "--no-progress", "--set", "camera.frame=3"])
+        .arg(common::repo().join("graphs/default.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("did you mean `frames`?"));
+}
+
+#[test]
+fn unused_outputs_are_warnings() {
+    let text = "name: w\nnodes:\n  camera: { op: test_pattern, record: { image: none } }\n  p: { op: passthrough, in: { input: camera.tick } }\n";
+    let loaded = load_str("w.yaml", text, None, &dynaflow_operators::registry(), &LoadRequest::default());
+    assert!(loaded.graph.is_some());
+    let w: Vec<_> = loaded.diagnostics.iter().filter(|d| d.severity == Severity::Warning).collect();
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert_eq!(w[0].code, "unused-output");
+    assert!(w[0].message.contains("camera.image"));
+}
+
+#[test]
+fn every_shipped_graph_validates() {
+    for entry in std::fs::read_dir(common::repo().join("graphs")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "yaml") {
+            let out = common::bin().arg("validate").arg(&path).output().unwrap();
+            assert_eq!(out.status.code(), Some(0), "{}: {}", path.display(), String::from_utf8_lossy(&out.stderr));
+        }
+    }
+}
+
+const VALID: &str = include_str!("../graphs/default.yaml");
+
+fn assert_sane(text: &str) {
+    let loaded = load_str("fuzz.yaml", text, None, &dynaflow_operators::registry(), &LoadRequest { all_variants: true, ..Default::default() });
+    for d in &loaded.diagnostics {
+        if let Some(s) = d.span {
+            assert!(s.offset + s.len <= text.len(), "span out of bounds: {d:?}");
+        }
+        let _ = loaded.source.plain(d);
+        let _ = format!("{:?}", loaded.source.report(d));
+    }
+    assert_eq!(loaded.graph.is_some(), !loaded.has_errors());
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+
+    /// Arbitrary text never panics the validator and every span lies inside the text.
+    #[test]
+    fn arbitrary_text_never_panics(text in "\\PC{0,200}") {
+        assert_sane(&text);
+    }
+
+    /// YAML-ish token soup: structure characters, keys the schema knows, odd values.
+    #[test]
+    fn token_soup_never_panics(tokens in proptest::collection::vec(prop::sample::select(vec![
+        "name: g\n", "nodes:\n", "  a: ", "  b: ", "{ op: test_pattern }", "{ op: passthrough, in: { input: a.image } }",
+        "op: ", "in: ", "params: ", "{", "}", "[", "]", ": ", ", ", "\n", "    ", "- ", "&x ", "*x", "~", "'q'", "\"d\"",
+        "1e999", "-1", ".nan", "delay: 1", "join: latest", "queue: { drop_oldest: 2 }", "variants:\n", "  v: { a: { disabled: true } }",
+        "a.tick", "a.image", "b.output", "record: every 2", "é", "\t", "---\n", "...\n", "!!str ", "? ", "|\n",
+    ]), 0..40)) {
+        assert_sane(&tokens.concat());
+    }
+
+    /// Single-character mutations of a valid graph.
+    #[test]
+    fn mutated_valid_graph_never_panics(pos in 0usize..VALID.len(), ch in prop::sample::select(vec![' ', ':', '{', '}', '-', '\n', 'x', '.', '#', '"'])) {
+        let mut text = VALID.to_owned();
+        if text.is_char_boundary(pos) {
+            text.insert(pos, ch);
+        }
+        assert_sane(&text);
+    }
+}
