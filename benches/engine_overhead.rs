@@ -13,7 +13,9 @@ use dynaflow_engine::{LoadRequest, load_str};
 const HOPS: usize = 10;
 
 fn chain_yaml(frames: u64) -> String {
-    let mut y = format!("name: chain\nnodes:\n  src: {{ op: test_pattern, params: {{ frames: {frames}, width: 1, height: 1 }} }}\n");
+    let mut y = format!(
+        "name: chain\nnodes:\n  src: {{ op: test_pattern, params: {{ frames: {frames}, width: 1, height: 1 }} }}\n"
+    );
     let mut prev = "src.tick".to_owned();
     for i in 0..HOPS {
         y.push_str(&format!("  p{i}: {{ op: passthrough, in: {{ input: {prev} }} }}\n"));
@@ -23,7 +25,8 @@ fn chain_yaml(frames: u64) -> String {
 }
 
 fn engine(rt: &tokio::runtime::Runtime, frames: u64) -> f64 {
-    let loaded = load_str("chain.yaml", &chain_yaml(frames), None, &dynaflow_operators::registry(), &LoadRequest::default());
+    let loaded =
+        load_str("chain.yaml", &chain_yaml(frames), None, &dynaflow_operators::registry(), &LoadRequest::default());
     let graph = loaded.graph.expect("chain graph is valid");
     let t = Instant::now();
     let report = rt.block_on(runtime::run(&graph, RunOptions::default(), Vec::new())).expect("run");
@@ -60,7 +63,9 @@ fn bare_tokio(rt: &tokio::runtime::Runtime, frames: u64) -> f64 {
         });
         for seq in 0..frames {
             let header = Header { seq, stamp: seq as f64 / 30.0, frame_id: "camera".into() };
-            let body = Body::Scalars(Scalars { values: vec![("frame".into(), seq as f64), ("time".into(), seq as f64 / 30.0)] });
+            let body = Body::Scalars(Scalars {
+                values: vec![("frame".into(), seq as f64), ("time".into(), seq as f64 / 30.0)],
+            });
             tx0.send(Arc::new(Message::new(header, body))).await.expect("send");
         }
         drop(tx0);
@@ -86,7 +91,10 @@ fn main() {
     let best = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
     let per_hop = |wall: f64| wall * 1e6 / (frames as f64 * HOPS as f64);
     let (ew, bw) = (best(&e), best(&b));
-    println!("engine overhead, {HOPS}-node pass-through chain, {frames} frames, best of 3, {} worker threads", std::thread::available_parallelism().map_or(0, |n| n.get()));
+    println!(
+        "engine overhead, {HOPS}-node pass-through chain, {frames} frames, best of 3, {} worker threads",
+        std::thread::available_parallelism().map_or(0, |n| n.get())
+    );
     println!("  dynaflow runtime : {:8.3} s  {:6.2} µs/hop  {:9.0} frames/s", ew, per_hop(ew), frames as f64 / ew);
     println!("  bare tokio mpsc  : {:8.3} s  {:6.2} µs/hop  {:9.0} frames/s", bw, per_hop(bw), frames as f64 / bw);
     println!("  ratio dynaflow / bare tokio: {:.2}x", ew / bw);

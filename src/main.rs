@@ -60,6 +60,13 @@ enum Command {
         #[arg(long, conflicts_with_all = ["format", "json"])]
         markdown: bool,
     },
+    /// Compare two recorded runs (MCAP): per topic, counts, first differing frame, deltas, ATE.
+    Diff(commands::diff::DiffArgs),
+    /// Open a `.rrd` recording in the rerun viewer (if installed).
+    View {
+        /// Recording file.
+        file: PathBuf,
+    },
     /// Draw a graph as Mermaid or Graphviz dot.
     Graph {
         /// Graph file.
@@ -96,9 +103,15 @@ pub struct RunArgs {
     /// Stop after this many frames.
     #[arg(long)]
     pub frames: Option<u64>,
-    /// Recorders to write: `jsonl` (comma-separated; `none` for no recording).
-    #[arg(long, default_value = "jsonl", value_delimiter = ',')]
+    /// Recorders (comma-separated): `rrd` (rerun), `mcap`, `jsonl` (message log); `none` records nothing.
+    #[arg(long, default_value = "rrd,mcap", value_delimiter = ',')]
     pub record: Vec<String>,
+    /// How colour images are stored in recordings: `jpeg` (quality 90) or lossless `png`.
+    #[arg(long, default_value = "jpeg", value_parser = ["jpeg", "png"])]
+    pub image_format: String,
+    /// MCAP chunk size bound in KiB (a killed run loses at most one chunk, or one second).
+    #[arg(long, default_value_t = 1024)]
+    pub mcap_chunk_kib: u64,
     /// Add per-port content digests to the summary (for comparing runs).
     #[arg(long)]
     pub digest: bool,
@@ -164,6 +177,8 @@ fn main() -> ExitCode {
                 OpsFormat::Markdown => commands::ops::Format::Markdown,
             })
         }
+        Command::Diff(args) => commands::diff::diff(&args),
+        Command::View { file } => commands::view::view(&file),
         Command::Graph { graph, format, variant } => {
             commands::graph::graph(&graph, matches!(format, GraphFormat::Dot), variant)
         }

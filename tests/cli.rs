@@ -13,7 +13,7 @@ fn read_json(path: &std::path::Path) -> serde_json::Value {
 fn default_graph_runs_and_writes_summary_and_log() {
     let dir = common::TempDir::new("default");
     let out = common::bin()
-        .args(["run", "--no-progress", "--digest", "--out"])
+        .args(["run", "--no-progress", "--digest", "--record", "jsonl", "--out"])
         .arg(dir.path())
         .arg(common::repo().join("graphs/default.yaml"))
         .output()
@@ -53,13 +53,21 @@ fn failing_operator_exits_1_and_names_the_node() {
     let dir = common::TempDir::new("fail");
     let graph = dir.path().join("fail.yaml");
     std::fs::write(&graph, "name: fail\nnodes:\n  camera: { op: test_pattern }\n  bad: { op: fault, in: { input: camera.tick }, params: { at_frame: 3, mode: panic } }\n").unwrap();
-    let out = common::bin().args(["run", "--no-progress", "--out"]).arg(dir.path()).arg(&graph).output().unwrap();
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "rrd,mcap,jsonl", "--out"])
+        .arg(dir.path())
+        .arg(&graph)
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("node `bad` failed"));
     let summary = read_json(&dir.path().join("fail.summary.json"));
     assert_eq!(summary["status"], "failed");
     let log = std::fs::read_to_string(dir.path().join("fail.messages.jsonl")).unwrap();
     assert!(log.lines().last().unwrap().contains("\"kind\":\"end\""), "log not closed after a panic");
+    let mcap = dynaflow_recordings::diff::read_mcap(&dir.path().join("fail.mcap")).unwrap();
+    assert!(!mcap.truncated, "MCAP not finished after a panic");
+    assert_eq!(mcap.topics["/bad/output"].frames.len(), 3);
 }
 
 #[test]
@@ -91,7 +99,7 @@ fn sigint_finishes_in_flight_frames_and_closes_sinks() {
     )
     .unwrap();
     let child = common::bin()
-        .args(["run", "--no-progress", "--out"])
+        .args(["run", "--no-progress", "--record", "rrd,mcap,jsonl", "--out"])
         .arg(dir.path())
         .arg(&graph)
         .stdout(std::process::Stdio::piped())
@@ -120,6 +128,10 @@ fn sigint_finishes_in_flight_frames_and_closes_sinks() {
     let count = |node: &str| lines.iter().filter(|l| l["node"] == node).count() as u64;
     assert_eq!(count("camera") / 2, frames);
     assert_eq!(count("work"), frames);
+    // The MCAP was finished properly (summary and end magic present).
+    let mcap = dynaflow_recordings::diff::read_mcap(&dir.path().join("long.mcap")).unwrap();
+    assert!(!mcap.truncated);
+    assert_eq!(mcap.topics["/work/output"].frames.len() as u64, frames);
 }
 
 #[test]

@@ -139,16 +139,15 @@ fn unknown_variant_on_the_command_line() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(stderr.contains("unknown variant `no_detectr`") && stderr.contains("did you mean `no_detector`?"), "{stderr}");
+    assert!(
+        stderr.contains("unknown variant `no_detectr`") && stderr.contains("did you mean `no_detector`?"),
+        "{stderr}"
+    );
 }
 
 #[test]
 fn bad_set_override_points_at_the_node() {
-    let out = common::bin()
-        .args(["validate"])
-        .arg(common::repo().join("graphs/default.yaml"))
-        .output()
-        .unwrap();
+    let out = common::bin().args(["validate"]).arg(common::repo().join("graphs/default.yaml")).output().unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     let out = common::bin()
         .args(["run", "--no-progress", "--set", "camera.frame=3"])
@@ -184,7 +183,13 @@ fn every_shipped_graph_validates() {
 const VALID: &str = include_str!("../graphs/default.yaml");
 
 fn assert_sane(text: &str) {
-    let loaded = load_str("fuzz.yaml", text, None, &dynaflow_operators::registry(), &LoadRequest { all_variants: true, ..Default::default() });
+    let loaded = load_str(
+        "fuzz.yaml",
+        text,
+        None,
+        &dynaflow_operators::registry(),
+        &LoadRequest { all_variants: true, ..Default::default() },
+    );
     for d in &loaded.diagnostics {
         if let Some(s) = d.span {
             assert!(s.offset + s.len <= text.len(), "span out of bounds: {d:?}");

@@ -42,6 +42,8 @@ pub struct RunInfo {
     pub params: BTreeMap<String, serde_json::Value>,
     /// dynaflow version.
     pub version: String,
+    /// git commit dynaflow was built from (`-dirty` if the tree had changes).
+    pub git_commit: String,
     /// Realtime or lockstep.
     pub realtime: bool,
     /// Recorded ports: `node/port` → type.
@@ -62,6 +64,7 @@ impl RunInfo {
                 .map(|n| (n.id.to_string(), serde_json::Value::Object(n.params.as_map().clone())))
                 .collect(),
             version: env!("CARGO_PKG_VERSION").to_owned(),
+            git_commit: env!("DYNAFLOW_GIT_COMMIT").to_owned(),
             realtime,
             ports: graph
                 .nodes
@@ -69,6 +72,22 @@ impl RunInfo {
                 .flat_map(|n| n.outputs.iter().map(move |o| (format!("{}/{}", n.id, o.name), o.ty)))
                 .collect(),
         }
+    }
+}
+
+impl RunInfo {
+    /// Provenance as string pairs (MCAP metadata).
+    pub fn to_strings(&self) -> BTreeMap<String, String> {
+        BTreeMap::from([
+            ("graph".to_owned(), self.graph.clone()),
+            ("variant".to_owned(), self.variant.clone().unwrap_or_default()),
+            ("seed".to_owned(), self.seed.to_string()),
+            ("graph_yaml".to_owned(), self.graph_yaml.clone()),
+            ("params".to_owned(), serde_json::to_string(&self.params).unwrap_or_default()),
+            ("dynaflow_version".to_owned(), self.version.clone()),
+            ("git_commit".to_owned(), self.git_commit.clone()),
+            ("realtime".to_owned(), self.realtime.to_string()),
+        ])
     }
 }
 

@@ -1,9 +1,11 @@
 //! dynaflow's operators, one module per family. [`registry`] returns all of them.
 //!
-//! Families: `util` (test sources, pass-through, gating, fault injection: the pieces used to
-//! exercise the engine). Decoding, inference, ORB, flow, epipolar culling, PnP/BA and OctoMap
+//! Families: `synth` (the semi-synthetic dynamic RGB-D generator), `util` (test sources,
+//! pass-through, gating, fault injection: the pieces used to exercise the engine). Decoding, inference, ORB, flow, epipolar culling, PnP/BA and OctoMap
 //! families land in their own modules.
 
+pub mod decode;
+pub mod synth;
 mod util;
 
 use dynaflow_engine::op::Registry;
@@ -12,5 +14,7 @@ use dynaflow_engine::op::Registry;
 pub fn registry() -> Registry {
     let mut r = Registry::new();
     util::register(&mut r);
+    r.register(synth::SYNTH);
+    r.register(decode::TUM_RGBD);
     r
 }

@@ -1,7 +1,19 @@
-//! dynaflow's recorders. Today: a JSON-lines message log (one line per recorded message with
-//! its header, type, content digest and a small summary). The rerun `.rrd` and MCAP sinks and
-//! `dynaflow diff` build on the same [`dynaflow_engine::sink::Sink`] interface.
+//! dynaflow's recorders and run tools: the rerun `.rrd` recorder, the MCAP recorder, the
+//! JSON-lines message log, and `dynaflow diff` of two recorded runs. This is the only crate
+//! that depends on `rerun` or `mcap`.
+//!
+//! Modules: `rrd` (rerun), `mcap` (MCAP + Foxglove JSON schemas), `jsonl` (message log),
+//! `payload` (the numeric `dynaflow` object stored with each MCAP message), `encode` (pixel
+//! codecs), `diff` (run comparison).
 
+pub mod diff;
+mod encode;
 mod jsonl;
+pub mod mcap;
+mod payload;
+mod rrd;
 
+pub use encode::ImageCodec;
 pub use jsonl::MessageLog;
+pub use mcap::McapSink;
+pub use rrd::RrdSink;

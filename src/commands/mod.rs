@@ -1,9 +1,11 @@
 //! One module per subcommand.
 
+pub mod diff;
 pub mod graph;
 pub mod ops;
 pub mod run;
 pub mod validate;
+pub mod view;
 
 use std::path::Path;
 

@@ -8,7 +8,8 @@ use dynaflow_engine::LoadRequest;
 use dynaflow_engine::runtime::{self, RunOptions, RunStatus};
 use dynaflow_engine::sink::{DigestSink, Sink};
 use dynaflow_engine::spec::Override;
-use dynaflow_recordings::MessageLog;
+use dynaflow_recordings::mcap::DEFAULT_FLUSH_INTERVAL;
+use dynaflow_recordings::{ImageCodec, McapSink, MessageLog, RrdSink};
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, RunArgs};
 
@@ -36,13 +37,20 @@ pub fn run(args: &RunArgs) -> u8 {
         None => graph.name.clone(),
     };
 
+    let codec = if args.image_format == "png" { ImageCodec::Png } else { ImageCodec::Jpeg(90) };
     let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
     for r in &args.record {
         match r.trim() {
             "jsonl" => sinks.push(Box::new(MessageLog::new(args.out.join(format!("{stem}.messages.jsonl"))))),
+            "rrd" => sinks.push(Box::new(RrdSink::new(args.out.join(format!("{stem}.rrd"))).with_codec(codec))),
+            "mcap" => sinks.push(Box::new(
+                McapSink::new(args.out.join(format!("{stem}.mcap")))
+                    .with_codec(codec)
+                    .with_chunking(args.mcap_chunk_kib.saturating_mul(1024), DEFAULT_FLUSH_INTERVAL),
+            )),
             "none" | "" => {}
             other => {
-                eprintln!("error: unknown recorder `{other}` (available: jsonl, none)");
+                eprintln!("error: unknown recorder `{other}` (available: rrd, mcap, jsonl, none)");
                 return EXIT_BAD_INPUT;
             }
         }

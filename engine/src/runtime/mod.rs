@@ -142,7 +142,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     let info = RunInfo::new(graph, options.realtime);
     // Without sinks nothing is tapped, so an unrecorded run pays nothing for recording.
     let recording = !sinks.is_empty();
-    let (tap_tx, sink_thread) = sink_thread(sinks, &info)?;
+    let (tap_tx, sink_handles) = sink_threads(sinks, &info)?;
     let failures: Arc<Mutex<Vec<Failure>>> = Arc::default();
 
     // Wire edges.
@@ -173,7 +173,11 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
             realtime: options.realtime,
         };
         let outputs = node::Outputs {
-            ports: node.outputs.iter().map(|o| (o.name, o.ty, if recording { o.record } else { RecordPolicy::None })).collect(),
+            ports: node
+                .outputs
+                .iter()
+                .map(|o| (o.name, o.ty, if recording { o.record } else { RecordPolicy::None }))
+                .collect(),
             senders: std::mem::take(senders.get_mut(i).unwrap_or(&mut Vec::new())),
             tap: tap_tx.clone(),
         };
@@ -207,11 +211,17 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
             }
         }
     }
-    let (sink_failures, sink_dropped) = tokio::task::spawn_blocking(move || sink_thread.join())
-        .await
-        .ok()
-        .and_then(Result::ok)
-        .unwrap_or_else(|| (vec![Failure { node: "sinks".into(), error: "sink thread panicked".into() }], 0));
+    let (mut sink_failures, mut sink_dropped) = (Vec::new(), 0);
+    for handle in sink_handles {
+        let joined = tokio::task::spawn_blocking(move || handle.join()).await.ok().and_then(Result::ok);
+        match joined {
+            Some((f, lost)) => {
+                sink_failures.extend(f);
+                sink_dropped += lost;
+            }
+            None => sink_failures.push(Failure { node: "sinks".into(), error: "a recorder thread panicked".into() }),
+        }
+    }
 
     let mut failures = std::mem::take(&mut *failures.lock().unwrap_or_else(PoisonError::into_inner));
     failures.extend(sink_failures);
@@ -266,16 +276,18 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     })
 }
 
-/// Capacity of the channel to the sink thread; producers wait when it is full, so recording
-/// applies backpressure instead of losing messages.
+/// Capacity of each recorder's queue; producers wait when it is full, so recording applies
+/// backpressure instead of losing messages.
 const TAP_CAPACITY: usize = 256;
 
 type SinkJoin = std::thread::JoinHandle<(Vec<Failure>, u64)>;
 
-fn sink_thread(
+/// Open every sink, then give each its own thread and queue, so a slow recorder (image
+/// encoding) never holds up a fast one.
+fn sink_threads(
     mut sinks: Vec<Box<dyn Sink>>,
     info: &RunInfo,
-) -> Result<(tokio::sync::mpsc::Sender<Tap>, SinkJoin), SinkError> {
+) -> Result<(Vec<tokio::sync::mpsc::Sender<Tap>>, Vec<SinkJoin>), SinkError> {
     for i in 0..sinks.len() {
         if let Some(Err(e)) = sinks.get_mut(i).map(|s| s.open(info)) {
             // Close the ones already open so their files are valid.
@@ -285,36 +297,39 @@ fn sink_thread(
             return Err(e);
         }
     }
-    let (tx, mut rx) = tokio::sync::mpsc::channel::<Tap>(TAP_CAPACITY);
-    let handle = std::thread::Builder::new()
-        .name("dynaflow-sinks".into())
-        .spawn(move || {
-            let mut live: Vec<Option<Box<dyn Sink>>> = sinks.into_iter().map(Some).collect();
-            let mut failures = Vec::new();
-            let mut lost = 0u64;
-            while let Some(tap) = rx.blocking_recv() {
-                for slot in &mut live {
-                    let Some(sink) = slot else {
+    let mut senders = Vec::new();
+    let mut handles = Vec::new();
+    for mut sink in sinks {
+        let (tx, mut rx) = tokio::sync::mpsc::channel::<Tap>(TAP_CAPACITY);
+        let name = format!("dynaflow-sink-{}", sink.name());
+        let handle = std::thread::Builder::new()
+            .name(name)
+            .spawn(move || {
+                let mut failures = Vec::new();
+                let mut lost = 0u64;
+                let mut live = true;
+                while let Some(tap) = rx.blocking_recv() {
+                    if !live {
                         lost += 1;
                         continue;
-                    };
+                    }
                     if let Err(e) = sink.record(&tap.node, tap.port, &tap.msg) {
                         tracing::error!("recording stopped: {e}");
                         failures.push(Failure { node: format!("sink:{}", sink.name()), error: e.to_string() });
                         let _ = sink.close();
-                        *slot = None;
+                        live = false;
                     }
                 }
-            }
-            for sink in live.iter_mut().flatten() {
-                if let Err(e) = sink.close() {
+                if live && let Err(e) = sink.close() {
                     failures.push(Failure { node: format!("sink:{}", sink.name()), error: e.to_string() });
                 }
-            }
-            (failures, lost)
-        })
-        .map_err(|e| SinkError::new("sinks", format!("cannot start the sink thread: {e}")))?;
-    Ok((tx, handle))
+                (failures, lost)
+            })
+            .map_err(|e| SinkError::new("sinks", format!("cannot start a recorder thread: {e}")))?;
+        senders.push(tx);
+        handles.push(handle);
+    }
+    Ok((senders, handles))
 }
 
 /// Whether a message of frame `seq` is recorded under `policy`.

@@ -15,7 +15,7 @@ use crate::spec::{Join, RecordPolicy, ResolvedNode};
 pub(super) struct Outputs {
     pub ports: Vec<(&'static str, PortType, RecordPolicy)>,
     pub senders: Vec<Vec<EdgeTx>>,
-    pub tap: tokio::sync::mpsc::Sender<Tap>,
+    pub tap: Vec<tokio::sync::mpsc::Sender<Tap>>,
 }
 
 pub(super) struct NodeTask {
@@ -132,11 +132,17 @@ impl NodeTask {
                 }
             }
             let born = Instant::now();
+            let out_was_empty = out.items.is_empty();
             if let Err(e) = self.emit(seq, out, born).await {
                 self.fail(e.to_string());
                 break;
             }
-            metrics.frames += 1;
+            // A source frame without any output is a skipped frame (e.g. an unreadable file).
+            if out_was_empty {
+                metrics.skipped += 1;
+            } else {
+                metrics.frames += 1;
+            }
             metrics.busy += busy;
             metrics.latency_us.push(busy.as_secs_f32() * 1e6);
             metrics.age_us.push(0.0);
@@ -318,8 +324,10 @@ impl NodeTask {
             if let Some(m) = &msg
                 && records(*record, seq)
             {
-                // A closed sink thread only happens at teardown; nothing to record then.
-                let _ = self.outputs.tap.send(Tap { node: self.node.id.clone(), port, msg: m.clone() }).await;
+                for tap in &self.outputs.tap {
+                    // A closed recorder queue only happens at teardown; nothing to record then.
+                    let _ = tap.send(Tap { node: self.node.id.clone(), port, msg: m.clone() }).await;
+                }
             }
             for tx in senders {
                 tx.send(Envelope { seq, msg: msg.clone(), born }).await;

@@ -1,0 +1,198 @@
+//! TUM index files (`rgb.txt`, `depth.txt`: `timestamp filename`; `groundtruth.txt`:
+//! `timestamp tx ty tz qx qy qz qw`), association by nearest timestamp, and pose
+//! interpolation. Every error names the file and line.
+
+use std::path::{Path, PathBuf};
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+
+/// A problem in an index file.
+#[derive(Debug, thiserror::Error)]
+#[error("{}:{line}: {message}", path.display())]
+pub struct IndexError {
+    /// The file.
+    pub path: PathBuf,
+    /// 1-based line (0 for the whole file).
+    pub line: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+fn bad(path: &Path, line: usize, message: impl Into<String>) -> IndexError {
+    IndexError { path: path.to_path_buf(), line, message: message.into() }
+}
+
+/// Data lines of a TUM text file: `(line number, fields)`, comments and blank lines skipped.
+fn lines(path: &Path) -> Result<Vec<(usize, Vec<String>)>, IndexError> {
+    let text = std::fs::read(path).map_err(|e| bad(path, 0, e.to_string()))?;
+    let text = String::from_utf8(text).map_err(|_| bad(path, 0, "not a text file (invalid UTF-8)"))?;
+    Ok(text
+        .lines()
+        .enumerate()
+        .filter_map(|(i, l)| {
+            let l = l.trim();
+            (!l.is_empty() && !l.starts_with('#')).then(|| (i + 1, l.split_whitespace().map(str::to_owned).collect()))
+        })
+        .collect())
+}
+
+fn stamp(path: &Path, line: usize, field: &str) -> Result<f64, IndexError> {
+    field
+        .parse::<f64>()
+        .ok()
+        .filter(|t| t.is_finite())
+        .ok_or_else(|| bad(path, line, format!("`{field}` is not a timestamp")))
+}
+
+fn check_order(path: &Path, prev: Option<(usize, f64)>, line: usize, t: f64) -> Result<(), IndexError> {
+    match prev {
+        Some((pl, pt)) if t == pt => Err(bad(path, line, format!("duplicate timestamp {t:.6} (also on line {pl})"))),
+        Some((pl, pt)) if t < pt => Err(bad(
+            path,
+            line,
+            format!("timestamp {t:.6} is earlier than {pt:.6} on line {pl}; timestamps must increase"),
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// `timestamp filename` lines, in order; timestamps must strictly increase.
+pub fn read_index(path: &Path) -> Result<Vec<(f64, String)>, IndexError> {
+    let mut out: Vec<(f64, String)> = Vec::new();
+    let mut prev = None;
+    for (line, fields) in lines(path)? {
+        let [t, file] = fields.as_slice() else {
+            return Err(bad(path, line, format!("expected `timestamp filename`, found {} fields", fields.len())));
+        };
+        let t = stamp(path, line, t)?;
+        check_order(path, prev, line, t)?;
+        prev = Some((line, t));
+        out.push((t, file.clone()));
+    }
+    if out.is_empty() {
+        return Err(bad(path, 0, "no entries"));
+    }
+    Ok(out)
+}
+
+/// A TUM trajectory file: `(stamp, world_from_cam)` in order.
+pub fn read_trajectory(path: &Path) -> Result<Vec<(f64, Isometry3<f64>)>, IndexError> {
+    let mut out = Vec::new();
+    let mut prev = None;
+    for (line, fields) in lines(path)? {
+        if fields.len() != 8 {
+            return Err(bad(
+                path,
+                line,
+                format!("expected `timestamp tx ty tz qx qy qz qw`, found {} fields", fields.len()),
+            ));
+        }
+        let v: Vec<f64> = fields.iter().map(|f| stamp(path, line, f)).collect::<Result<_, _>>()?;
+        check_order(path, prev, line, v[0])?;
+        prev = Some((line, v[0]));
+        let q = Quaternion::new(v[7], v[4], v[5], v[6]);
+        if (q.norm() - 1.0).abs() > 1e-2 {
+            return Err(bad(path, line, format!("quaternion norm {:.4} is not 1", q.norm())));
+        }
+        out.push((
+            v[0],
+            Isometry3::from_parts(Translation3::new(v[1], v[2], v[3]), UnitQuaternion::from_quaternion(q)),
+        ));
+    }
+    Ok(out)
+}
+
+/// An associated RGB-D pair.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Associated {
+    /// Colour timestamp (the frame's stamp).
+    pub rgb_stamp: f64,
+    /// Colour file, relative to the sequence folder.
+    pub rgb: String,
+    /// Depth timestamp.
+    pub depth_stamp: f64,
+    /// Depth file.
+    pub depth: String,
+}
+
+/// Associate by nearest timestamp within `max_difference`, each entry used at most once,
+/// closest pairs first (the algorithm of TUM's `associate.py`), sorted by colour time.
+pub fn associate(rgb: &[(f64, String)], depth: &[(f64, String)], max_difference: f64) -> Vec<Associated> {
+    let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
+    let mut lo = 0;
+    for (i, (t, _)) in rgb.iter().enumerate() {
+        while lo < depth.len() && depth[lo].0 < t - max_difference {
+            lo += 1;
+        }
+        let mut j = lo;
+        while j < depth.len() && depth[j].0 < t + max_difference {
+            candidates.push(((t - depth[j].0).abs(), i, j));
+            j += 1;
+        }
+    }
+    candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let (mut used_rgb, mut used_depth) = (vec![false; rgb.len()], vec![false; depth.len()]);
+    let mut out = Vec::new();
+    for (_, i, j) in candidates {
+        if used_rgb[i] || used_depth[j] {
+            continue;
+        }
+        used_rgb[i] = true;
+        used_depth[j] = true;
+        out.push(Associated {
+            rgb_stamp: rgb[i].0,
+            rgb: rgb[i].1.clone(),
+            depth_stamp: depth[j].0,
+            depth: depth[j].1.clone(),
+        });
+    }
+    out.sort_by(|a, b| a.rgb_stamp.total_cmp(&b.rgb_stamp));
+    out
+}
+
+/// The pose at `t`: linear in translation, slerp in rotation, between the two bracketing
+/// poses. `None` when `t` is outside the trajectory by more than `slack` seconds.
+pub fn interpolate_pose(traj: &[(f64, Isometry3<f64>)], t: f64, slack: f64) -> Option<Isometry3<f64>> {
+    let (first, last) = (traj.first()?, traj.last()?);
+    if t < first.0 - slack || t > last.0 + slack {
+        return None;
+    }
+    let i = traj.partition_point(|(s, _)| *s <= t);
+    match (i.checked_sub(1).and_then(|k| traj.get(k)), traj.get(i)) {
+        (Some(a), Some(b)) => {
+            let s = ((t - a.0) / (b.0 - a.0)).clamp(0.0, 1.0);
+            let tr: Vector3<f64> = a.1.translation.vector.lerp(&b.1.translation.vector, s);
+            let rot = a.1.rotation.try_slerp(&b.1.rotation, s, 1e-9).unwrap_or(a.1.rotation);
+            Some(Isometry3::from_parts(Translation3::from(tr), rot))
+        }
+        (Some(a), None) => Some(a.1),
+        (None, Some(b)) => Some(b.1),
+        (None, None) => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn list(ts: &[f64]) -> Vec<(f64, String)> {
+        ts.iter().map(|t| (*t, format!("{t}.png"))).collect()
+    }
+
+    #[test]
+    fn association_is_greedy_closest_first_and_one_to_one() {
+        let rgb = list(&[1.00, 1.03, 1.07, 2.0]);
+        let depth = list(&[1.01, 1.02, 1.08]);
+        let a = associate(&rgb, &depth, 0.02);
+        let pairs: Vec<(f64, f64)> = a.iter().map(|x| (x.rgb_stamp, x.depth_stamp)).collect();
+        assert_eq!(pairs, vec![(1.00, 1.01), (1.03, 1.02), (1.07, 1.08)]);
+    }
+
+    #[test]
+    fn interpolation_is_linear_and_bounded() {
+        let traj = vec![(0.0, Isometry3::translation(0.0, 0.0, 0.0)), (1.0, Isometry3::translation(2.0, 0.0, 0.0))];
+        let p = interpolate_pose(&traj, 0.25, 0.0).unwrap();
+        assert!((p.translation.x - 0.5).abs() < 1e-12);
+        assert!(interpolate_pose(&traj, 1.5, 0.1).is_none());
+    }
+}

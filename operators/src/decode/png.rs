@@ -1,0 +1,48 @@
+//! Loading colour and depth PNGs with explicit format checks.
+
+use std::path::Path;
+
+use dynaflow_engine::msg::{DepthImage, Image, PixelFormat};
+use image::{DynamicImage, ImageReader};
+
+fn open(path: &Path) -> Result<DynamicImage, String> {
+    ImageReader::open(path)
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .with_guessed_format()
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .decode()
+        .map_err(|e| format!("{}: cannot decode: {e}", path.display()))
+}
+
+/// An 8-bit colour (or grey, kept grey) image.
+pub fn load_rgb(path: &Path) -> Result<Image, String> {
+    match open(path)? {
+        DynamicImage::ImageRgb8(img) => {
+            Ok(Image { width: img.width(), height: img.height(), format: PixelFormat::Rgb8, data: img.into_raw() })
+        }
+        DynamicImage::ImageRgba8(img) => {
+            let rgb = DynamicImage::ImageRgba8(img).into_rgb8();
+            Ok(Image { width: rgb.width(), height: rgb.height(), format: PixelFormat::Rgb8, data: rgb.into_raw() })
+        }
+        DynamicImage::ImageLuma8(img) => {
+            Ok(Image { width: img.width(), height: img.height(), format: PixelFormat::Gray8, data: img.into_raw() })
+        }
+        other => Err(format!("{}: expected an 8-bit colour image, found {:?}", path.display(), other.color())),
+    }
+}
+
+/// A 16-bit depth PNG, `value / factor` metres (0 = no measurement).
+pub fn load_depth(path: &Path, factor: f64) -> Result<DepthImage, String> {
+    match open(path)? {
+        DynamicImage::ImageLuma16(img) => {
+            let (width, height) = (img.width(), img.height());
+            let data = img.into_raw().into_iter().map(|v| (f64::from(v) / factor) as f32).collect();
+            Ok(DepthImage { width, height, data })
+        }
+        other => Err(format!(
+            "{}: expected a 16-bit single-channel depth PNG, found {:?} (TUM depth is 16-bit, {factor} per metre)",
+            path.display(),
+            other.color()
+        )),
+    }
+}

@@ -1,0 +1,238 @@
+//! `tum_rgbd`: reads a TUM RGB-D sequence folder as it is.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use dynaflow_engine::msg::{Body, CameraInfo, Header, PortType, Pose};
+use dynaflow_engine::op::{
+    Context, Default, Instance, OpError, OpKind, OpSpec, Outputs, ParamSpec, ParamType, Params, PortSpec, Source,
+};
+use nalgebra::Isometry3;
+
+use super::index::{Associated, associate, interpolate_pose, read_index, read_trajectory};
+use super::intrinsics::{Intrinsics, preset_for_folder};
+use super::png::{load_depth, load_rgb};
+
+/// Ground truth may end this long before/after a frame and still be used (TUM's mocap runs at
+/// 100 Hz; its ends can miss the first or last frame by a few ms).
+const GT_SLACK_S: f64 = 0.05;
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Config {
+    path: String,
+    intrinsics: String,
+    max_difference: f64,
+    depth_factor: f64,
+    on_error: String,
+    frames: u64,
+}
+
+pub(crate) const TUM_RGBD: OpSpec = OpSpec {
+    name: "tum_rgbd",
+    family: "decode",
+    doc: "Reads a TUM RGB-D sequence folder as published: `rgb.txt`, `depth.txt` and optional `groundtruth.txt` ('#' comments), associating colour and depth by nearest timestamp within `max_difference` (as TUM's associate.py). Ground truth is interpolated at each colour timestamp. Bad input names the file and line; with `on_error: skip` unreadable frames are skipped, counted and logged.",
+    kind: OpKind::Source,
+    inputs: &[],
+    outputs: &[
+        PortSpec::output("rgb", PortType::Image, "colour image (RGB8, or Gray8 if the file is grey)"),
+        PortSpec::output("depth", PortType::Depth, "depth in metres (value / depth_factor)"),
+        PortSpec::output("camera_info", PortType::CameraInfo, "intrinsics with distortion"),
+        PortSpec::output(
+            "gt_pose",
+            PortType::Pose,
+            "ground-truth world_from_cam interpolated at the frame time (if groundtruth.txt exists)",
+        ),
+    ],
+    params: &[
+        ParamSpec { name: "path", ty: ParamType::Path, default: Default::Required, doc: "sequence folder" },
+        ParamSpec {
+            name: "intrinsics",
+            ty: ParamType::Str,
+            default: Default::Str("auto"),
+            doc: "`auto` (from the folder name `rgbd_dataset_freiburgN_*`, else `calibration.txt`), `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy` or `fx,fy,cx,cy,k1,k2,p1,p2,k3`",
+        },
+        ParamSpec {
+            name: "max_difference",
+            ty: ParamType::Float { min: 0.0, max: 1.0 },
+            default: Default::Float(0.02),
+            doc: "largest colour/depth time difference to associate, seconds",
+        },
+        ParamSpec {
+            name: "depth_factor",
+            ty: ParamType::Float { min: 1e-6, max: 1e9 },
+            default: Default::Float(5000.0),
+            doc: "depth PNG value per metre",
+        },
+        ParamSpec {
+            name: "on_error",
+            ty: ParamType::Enum { values: &["fail", "skip"] },
+            default: Default::Str("fail"),
+            doc: "unreadable frame or missing ground truth: fail the run, or skip the frame (counted, logged)",
+        },
+        ParamSpec {
+            name: "frames",
+            ty: ParamType::Int { min: 0, max: i64::MAX },
+            default: Default::Int(0),
+            doc: "read at most this many frames (0 = all)",
+        },
+    ],
+    cpu_heavy: true,
+    build,
+};
+
+fn resolve_intrinsics(dir: &Path, spec: &str) -> Result<Intrinsics, OpError> {
+    let config = |message: String| OpError::Config { key: "intrinsics".into(), message };
+    if spec != "auto" {
+        return Intrinsics::parse(spec).map_err(config);
+    }
+    if let Some(preset) = preset_for_folder(dir) {
+        return Ok(preset);
+    }
+    let calib = dir.join("calibration.txt");
+    if calib.is_file() {
+        let text = std::fs::read_to_string(&calib).map_err(|source| OpError::Io { path: calib.clone(), source })?;
+        let line = text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#')).unwrap_or("");
+        return Intrinsics::parse(line).map_err(|e| config(format!("{}: {e}", calib.display())));
+    }
+    Err(config(format!(
+        "{}: cannot tell the camera: the folder is not named `rgbd_dataset_freiburgN_*` and has no calibration.txt; set `intrinsics: fr1|fr2|fr3|fx,fy,cx,cy` (or `--intrinsics`)",
+        dir.display()
+    )))
+}
+
+fn build(params: &Params) -> Result<Instance, OpError> {
+    let c: Config = params.parse()?;
+    let dir = params.resolve_path(&c.path);
+    if !dir.is_dir() {
+        return Err(OpError::Input(format!("{}: not a folder", dir.display())));
+    }
+    let intrinsics = resolve_intrinsics(&dir, &c.intrinsics)?;
+    let input = |e: super::index::IndexError| OpError::Input(e.to_string());
+    for file in ["rgb.txt", "depth.txt"] {
+        if !dir.join(file).is_file() {
+            return Err(OpError::Input(format!(
+                "{}: missing (a TUM RGB-D folder has rgb.txt, depth.txt and rgb/, depth/)",
+                dir.join(file).display()
+            )));
+        }
+    }
+    let rgb = read_index(&dir.join("rgb.txt")).map_err(input)?;
+    let depth = read_index(&dir.join("depth.txt")).map_err(input)?;
+    let mut frames = associate(&rgb, &depth, c.max_difference);
+    if frames.is_empty() {
+        return Err(OpError::Input(format!(
+            "{}: no colour frame has a depth frame within {} s (rgb.txt {:.3}..{:.3}, depth.txt {:.3}..{:.3})",
+            dir.display(),
+            c.max_difference,
+            rgb.first().map_or(0.0, |r| r.0),
+            rgb.last().map_or(0.0, |r| r.0),
+            depth.first().map_or(0.0, |r| r.0),
+            depth.last().map_or(0.0, |r| r.0)
+        )));
+    }
+    if c.frames > 0 {
+        frames.truncate(c.frames as usize);
+    }
+    let gt_path = dir.join("groundtruth.txt");
+    let gt = if gt_path.is_file() { Some(read_trajectory(&gt_path).map_err(input)?) } else { None };
+    let skip = c.on_error == "skip";
+    if let Some(gt) = &gt
+        && !skip
+        && let Some(f) = frames.iter().find(|f| interpolate_pose(gt, f.rgb_stamp, GT_SLACK_S).is_none())
+    {
+        return Err(OpError::Input(format!(
+            "{}: ground truth covers {:.6}..{:.6} but frame {} is at {:.6}; use `on_error: skip` to drop uncovered frames",
+            gt_path.display(),
+            gt.first().map_or(0.0, |g| g.0),
+            gt.last().map_or(0.0, |g| g.0),
+            f.rgb,
+            f.rgb_stamp
+        )));
+    }
+    Ok(Instance::Source(Box::new(TumSource {
+        dir,
+        frames,
+        gt,
+        intrinsics,
+        factor: c.depth_factor,
+        skip,
+        skipped: Vec::new(),
+        frame_id: "camera".into(),
+    })))
+}
+
+struct TumSource {
+    dir: PathBuf,
+    frames: Vec<Associated>,
+    gt: Option<Vec<(f64, Isometry3<f64>)>>,
+    intrinsics: Intrinsics,
+    factor: f64,
+    skip: bool,
+    skipped: Vec<String>,
+    frame_id: Arc<str>,
+}
+
+impl TumSource {
+    fn load(&self, seq: u64, f: &Associated) -> Result<Outputs, String> {
+        let rgb = load_rgb(&self.dir.join(&f.rgb))?;
+        let depth = load_depth(&self.dir.join(&f.depth), self.factor)?;
+        if (rgb.width, rgb.height) != (depth.width, depth.height) {
+            return Err(format!(
+                "{}: {}x{} but {} is {}x{}",
+                f.depth, depth.width, depth.height, f.rgb, rgb.width, rgb.height
+            ));
+        }
+        let header = Header { seq, stamp: f.rgb_stamp, frame_id: self.frame_id.clone() };
+        let k = &self.intrinsics;
+        let info = CameraInfo {
+            width: rgb.width,
+            height: rgb.height,
+            fx: k.fx,
+            fy: k.fy,
+            cx: k.cx,
+            cy: k.cy,
+            distortion: k.distortion,
+        };
+        let mut out = Outputs::new()
+            .with("rgb", header.clone(), Body::Image(rgb))
+            .with("depth", header.clone(), Body::Depth(depth))
+            .with("camera_info", header.clone(), Body::CameraInfo(info));
+        if let Some(gt) = &self.gt {
+            let pose = interpolate_pose(gt, f.rgb_stamp, GT_SLACK_S)
+                .ok_or_else(|| format!("groundtruth.txt does not cover {:.6}", f.rgb_stamp))?;
+            out.push(
+                "gt_pose",
+                Header { frame_id: "world".into(), ..header },
+                Body::Pose(Pose { world_from_cam: pose }),
+            );
+        }
+        Ok(out)
+    }
+}
+
+impl Source for TumSource {
+    fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
+        let Some(f) = self.frames.get(seq as usize) else { return Ok(None) };
+        match self.load(seq, f) {
+            Ok(out) => Ok(Some(out)),
+            Err(e) if self.skip => {
+                tracing::warn!("skipping frame {seq}: {e}");
+                self.skipped.push(e);
+                Ok(Some(Outputs::new()))
+            }
+            Err(e) => Err(OpError::Input(format!("{}: {e}", self.dir.display()))),
+        }
+    }
+
+    fn stop(&mut self, _ctx: &mut Context) -> Result<(), OpError> {
+        if !self.skipped.is_empty() {
+            tracing::warn!("{}: skipped {} of {} frames", self.dir.display(), self.skipped.len(), self.frames.len());
+        }
+        Ok(())
+    }
+
+    fn len_hint(&self) -> Option<u64> {
+        Some(self.frames.len() as u64)
+    }
+}

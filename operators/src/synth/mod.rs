@@ -1,0 +1,187 @@
+//! The semi-synthetic dynamic RGB-D generator (`synth`) with exact ground truth.
+//!
+//! A textured room with furniture and walking (or sitting) people made of oriented boxes is
+//! ray cast from a camera following a TUM-fr3-like motion; Kinect-like depth noise, holes and
+//! quantisation and image noise/blur are added. Ground truth: camera poses
+//! (`world_from_cam`, TUM convention), per-pixel class and instance masks, optical flow.
+//!
+//! Split: `scene` (geometry and motion of people), `texture` (procedural patterns),
+//! `motion` (camera trajectories), `render` (ray caster), `sensor` (noise models), `tum`
+//! (writing the TUM RGB-D layout), `op` (the `synth` source operator).
+
+mod motion;
+mod op;
+mod render;
+mod scene;
+mod sensor;
+mod texture;
+mod tum;
+
+pub use motion::Motion;
+pub(crate) use op::SYNTH;
+pub use render::Intrinsics;
+pub use scene::PeopleMode;
+pub use tum::{WriteOptions, write_tum};
+
+use nalgebra::{Isometry3, Point3};
+
+/// TUM fr3 intrinsics: what the generated camera uses, so `tum_rgbd` reads it back with `fr3`.
+pub const FR3: Intrinsics = Intrinsics { width: 640, height: 480, fx: 535.4, fy: 539.2, cx: 320.1, cy: 247.6 };
+/// First timestamp (seconds), in the range of TUM's Unix-time stamps.
+pub const STAMP_BASE: f64 = 1_700_000_000.0;
+
+/// Generator settings.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SynthConfig {
+    /// Camera motion.
+    pub motion: Motion,
+    /// Number of people.
+    pub people: usize,
+    /// Walking or sitting.
+    pub mode: PeopleMode,
+    /// Scene and noise seed.
+    pub seed: u64,
+    /// Frame rate, Hz.
+    pub rate_hz: f64,
+    /// Camera model (scaled FR3 by default).
+    pub intrinsics: Intrinsics,
+    /// Kinect depth noise, holes and quantisation.
+    pub depth_noise: bool,
+    /// Image noise σ in grey levels (0 = none).
+    pub image_noise: f32,
+    /// 3×3 blur of the image.
+    pub blur: bool,
+}
+
+impl Default for SynthConfig {
+    fn default() -> Self {
+        Self {
+            motion: Motion::Xyz,
+            people: 2,
+            mode: PeopleMode::Walking,
+            seed: 0,
+            rate_hz: 30.0,
+            intrinsics: FR3,
+            depth_noise: true,
+            image_noise: 2.0,
+            blur: true,
+        }
+    }
+}
+
+/// Intrinsics for another resolution: FR3 scaled.
+pub fn scaled_fr3(width: u32, height: u32) -> Intrinsics {
+    let (sx, sy) = (f64::from(width) / 640.0, f64::from(height) / 480.0);
+    Intrinsics {
+        width,
+        height,
+        fx: FR3.fx * sx,
+        fy: FR3.fy * sy,
+        cx: (FR3.cx + 0.5) * sx - 0.5,
+        cy: (FR3.cy + 0.5) * sy - 0.5,
+    }
+}
+
+/// One generated frame.
+#[derive(Clone, Debug)]
+pub struct Frame {
+    /// Frame number.
+    pub index: u64,
+    /// Timestamp, seconds.
+    pub stamp: f64,
+    /// Ground-truth camera pose.
+    pub world_from_cam: Isometry3<f64>,
+    /// RGB8 with sensor effects.
+    pub rgb: Vec<u8>,
+    /// Depth in metres with sensor effects (0 = no measurement).
+    pub depth: Vec<f32>,
+    /// Depth in metres without noise.
+    pub depth_true: Vec<f32>,
+    /// 0 static, 1 person.
+    pub class: Vec<u16>,
+    /// 0 static, `i + 1` person `i`.
+    pub instance: Vec<u16>,
+    /// Optical flow to the next frame `(du, dv)` per pixel, when asked for.
+    pub flow: Option<Vec<[f32; 2]>>,
+}
+
+/// The generator: a scene plus a clock.
+#[derive(Clone, Debug)]
+pub struct Generator {
+    config: SynthConfig,
+    scene: scene::Scene,
+}
+
+impl Generator {
+    /// A generator for `config`.
+    pub fn new(config: SynthConfig) -> Self {
+        let scene = scene::Scene::new(config.seed, config.people, config.mode);
+        Self { config, scene }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &SynthConfig {
+        &self.config
+    }
+
+    /// Time of frame `k` since the start, seconds.
+    pub fn time(&self, k: u64) -> f64 {
+        k as f64 / self.config.rate_hz
+    }
+
+    /// Ground-truth pose of frame `k`.
+    pub fn pose(&self, k: u64) -> Isometry3<f64> {
+        self.config.motion.pose(self.time(k))
+    }
+
+    /// Render frame `k` (and its flow to frame `k + 1` if `flow`).
+    pub fn frame(&self, k: u64, flow: bool) -> Frame {
+        let c = &self.config;
+        let t = self.time(k);
+        let world_from_cam = self.pose(k);
+        let parts = self.scene.people_parts(t);
+        let r = render::render(&self.scene, &parts, &world_from_cam, &c.intrinsics, flow);
+        let (w, h) = (c.intrinsics.width as usize, c.intrinsics.height as usize);
+        let seed32 = (c.seed ^ (c.seed >> 32)) as u32;
+        let frame32 = k as u32;
+        let depth = if c.depth_noise { sensor::kinect_depth(&r.depth, w, seed32, frame32) } else { r.depth.clone() };
+        let rgb = sensor::camera_image(&r.rgb, w, h, c.image_noise, c.blur, seed32, frame32);
+        let flow = flow.then(|| {
+            let t1 = self.time(k + 1);
+            let next_parts = self.scene.people_parts(t1);
+            let cam1_from_world = self.pose(k + 1).inverse();
+            let k_ = &c.intrinsics;
+            r.hits
+                .iter()
+                .enumerate()
+                .map(|(i, hit)| {
+                    let p = Point3::new(f64::from(hit.point[0]), f64::from(hit.point[1]), f64::from(hit.point[2]));
+                    let world = match next_parts.get(hit.part as usize) {
+                        Some(part) if hit.part != u32::MAX => part.world_from_part * p,
+                        _ => p,
+                    };
+                    let q = cam1_from_world * world;
+                    let (u, v) = ((i % w) as f64, (i / w) as f64);
+                    if q.z <= 1e-6 {
+                        return [f32::NAN, f32::NAN];
+                    }
+                    [(k_.fx * q.x / q.z + k_.cx - u) as f32, (k_.fy * q.y / q.z + k_.cy - v) as f32]
+                })
+                .collect()
+        });
+        Frame {
+            index: k,
+            stamp: STAMP_BASE + t,
+            world_from_cam,
+            rgb,
+            depth,
+            depth_true: r.depth,
+            class: r.class,
+            instance: r.instance,
+            flow,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests;

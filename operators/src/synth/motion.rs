@@ -1,0 +1,73 @@
+//! Camera trajectories modelled on the TUM fr3 sequences: `static`, `xyz`, `rpy`, `halfsphere`.
+
+use std::f64::consts::PI;
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use super::scene::look_rotation;
+
+/// A camera motion.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Motion {
+    /// Fixed camera.
+    Static,
+    /// Translation along x, y and z (±0.3 m), orientation fixed.
+    Xyz,
+    /// Roll, pitch and yaw oscillations (±10–20°), position fixed.
+    Rpy,
+    /// The camera moves on a half sphere around the scene, looking at its centre.
+    Halfsphere,
+}
+
+impl Motion {
+    /// Names used in graphs and on the command line.
+    pub const NAMES: &'static [&'static str] = &["static", "xyz", "rpy", "halfsphere"];
+
+    /// Parse a name.
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "static" => Some(Self::Static),
+            "xyz" => Some(Self::Xyz),
+            "rpy" => Some(Self::Rpy),
+            "halfsphere" => Some(Self::Halfsphere),
+            _ => None,
+        }
+    }
+
+    /// `world_from_cam` at time `t` seconds.
+    pub fn pose(self, t: f64) -> Isometry3<f64> {
+        let base = Vector3::new(0.0, -2.5, 1.4);
+        let target = Vector3::new(0.0, 1.5, 1.05);
+        let up = Vector3::z();
+        let w = |period: f64| 2.0 * PI * t / period;
+        match self {
+            Motion::Static => Isometry3::from_parts(Translation3::from(base), look_rotation(&(target - base), &up)),
+            Motion::Xyz => {
+                let p = base + Vector3::new(0.3 * w(6.0).sin(), 0.25 * w(9.0).sin(), 0.2 * w(7.5).sin());
+                Isometry3::from_parts(Translation3::from(p), look_rotation(&(target - base), &up))
+            }
+            Motion::Rpy => {
+                let look = look_rotation(&(target - base), &up);
+                // Intrinsic rotations in the camera frame: yaw about y (down), pitch about x, roll about z.
+                let yaw = 0.35 * w(8.0).sin();
+                let pitch = 0.2 * w(6.5).sin();
+                let roll = 0.2 * w(10.0).sin();
+                let wiggle = UnitQuaternion::from_euler_angles(pitch, yaw, roll);
+                Isometry3::from_parts(Translation3::from(base), look * wiggle)
+            }
+            Motion::Halfsphere => {
+                let centre = Vector3::new(0.0, 1.5, 1.0);
+                let azimuth = 0.5 * w(20.0).sin();
+                let elevation = 0.22 + 0.2 * w(13.0).sin();
+                let r = 3.8;
+                let p = centre
+                    + r * Vector3::new(
+                        azimuth.sin() * elevation.cos(),
+                        -azimuth.cos() * elevation.cos(),
+                        elevation.sin(),
+                    );
+                Isometry3::from_parts(Translation3::from(p), look_rotation(&(centre - p), &up))
+            }
+        }
+    }
+}

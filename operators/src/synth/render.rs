@@ -1,0 +1,283 @@
+//! A ray caster for the scene: per pixel the nearest of the room's inner faces, the furniture
+//! boxes and the people's boxes. Rays are `((u - cx)/fx, (v - cy)/fy, 1)` in the camera frame,
+//! so the ray parameter is the z-depth directly. Objects are culled per pixel by their
+//! projected screen rectangle; rows are split across threads.
+
+use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
+
+use super::scene::{Kind, Part, ROOM_HALF_DEPTH, ROOM_HALF_WIDTH, ROOM_HEIGHT, Scene};
+use super::texture::Texture;
+
+/// Pinhole intrinsics of the rendered camera (no distortion).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Intrinsics {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Focal length x.
+    pub fx: f64,
+    /// Focal length y.
+    pub fy: f64,
+    /// Principal point x.
+    pub cx: f64,
+    /// Principal point y.
+    pub cy: f64,
+}
+
+/// What a pixel's ray hit, for ground-truth flow.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Hit {
+    /// Index into the dynamic parts, or `u32::MAX` for static geometry.
+    pub part: u32,
+    /// The point: world coordinates if static, part coordinates if dynamic.
+    pub point: [f32; 3],
+}
+
+/// A rendered frame before sensor effects.
+#[derive(Clone, Debug, Default)]
+pub struct Rendered {
+    /// RGB8, row-major.
+    pub rgb: Vec<u8>,
+    /// True z-depth in metres (no noise); 0 where nothing was hit.
+    pub depth: Vec<f32>,
+    /// 0 = static, 1 = person.
+    pub class: Vec<u16>,
+    /// 0 = static, `i + 1` = person `i`.
+    pub instance: Vec<u16>,
+    /// Per-pixel hit, when asked for.
+    pub hits: Vec<Hit>,
+}
+
+struct Prepared<'a> {
+    part: &'a Part,
+    cam_from_part_rot: Matrix3<f64>,
+    cam_from_part_t: Vector3<f64>,
+    /// Screen rectangle `[u0, v0, u1, v1]` (inclusive) where the box may appear.
+    rect: [i64; 4],
+    dynamic_index: u32,
+}
+
+fn prepare<'a>(part: &'a Part, cam_from_world: &Isometry3<f64>, k: &Intrinsics, dynamic_index: u32) -> Prepared<'a> {
+    let cam_from_part = cam_from_world * part.world_from_part;
+    let (w, h) = (i64::from(k.width), i64::from(k.height));
+    let mut rect = [i64::MAX, i64::MAX, i64::MIN, i64::MIN];
+    let mut behind = false;
+    for corner in 0..8 {
+        let s = |bit: u32| if corner & (1 << bit) == 0 { -1.0 } else { 1.0 };
+        let p = cam_from_part * Point3::new(s(0) * part.half.x, s(1) * part.half.y, s(2) * part.half.z);
+        if p.z < 0.05 {
+            behind = true;
+            break;
+        }
+        let (u, v) = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
+        rect = [
+            rect[0].min(u.floor() as i64),
+            rect[1].min(v.floor() as i64),
+            rect[2].max(u.ceil() as i64),
+            rect[3].max(v.ceil() as i64),
+        ];
+    }
+    if behind {
+        rect = [0, 0, w - 1, h - 1];
+    }
+    Prepared {
+        part,
+        cam_from_part_rot: cam_from_part.rotation.to_rotation_matrix().into_inner(),
+        cam_from_part_t: cam_from_part.translation.vector,
+        rect,
+        dynamic_index,
+    }
+}
+
+/// Slab test of a camera-frame ray (origin 0) against an oriented box: `(t, face axis, local point)`.
+fn hit_box(p: &Prepared<'_>, d: &Vector3<f64>) -> Option<(f64, usize, Vector3<f64>)> {
+    // Ray in part coordinates: o' = Rᵀ(0 − t), d' = Rᵀ d.
+    let rt = p.cam_from_part_rot.transpose();
+    let o = -(rt * p.cam_from_part_t);
+    let dl = rt * d;
+    let mut tmin = f64::NEG_INFINITY;
+    let mut tmax = f64::INFINITY;
+    let mut axis = 0;
+    for a in 0..3 {
+        let h = p.part.half[a];
+        if dl[a].abs() < 1e-12 {
+            if o[a].abs() > h {
+                return None;
+            }
+            continue;
+        }
+        let (t1, t2) = ((-h - o[a]) / dl[a], (h - o[a]) / dl[a]);
+        let (lo, hi) = if t1 < t2 { (t1, t2) } else { (t2, t1) };
+        if lo > tmin {
+            tmin = lo;
+            axis = a;
+        }
+        tmax = tmax.min(hi);
+    }
+    (tmax >= tmin && tmin > 1e-4).then(|| (tmin, axis, o + dl * tmin))
+}
+
+fn shade(colour: [f32; 3], light: f32) -> [u8; 3] {
+    colour.map(|c| (c * light * 255.0).round().clamp(0.0, 255.0) as u8)
+}
+
+/// Render the scene from `world_from_cam` with the given dynamic parts.
+pub fn render(
+    scene: &Scene,
+    dynamic: &[Part],
+    world_from_cam: &Isometry3<f64>,
+    k: &Intrinsics,
+    want_hits: bool,
+) -> Rendered {
+    let cam_from_world = world_from_cam.inverse();
+    let objects: Vec<Prepared<'_>> = scene
+        .statics()
+        .iter()
+        .map(|p| prepare(p, &cam_from_world, k, u32::MAX))
+        .chain(dynamic.iter().enumerate().map(|(i, p)| prepare(p, &cam_from_world, k, i as u32)))
+        .collect();
+    let (w, h) = (k.width as usize, k.height as usize);
+    let n = w * h;
+    let mut out = Rendered {
+        rgb: vec![0; n * 3],
+        depth: vec![0.0; n],
+        class: vec![0; n],
+        instance: vec![0; n],
+        hits: if want_hits { vec![Hit::default(); n] } else { Vec::new() },
+    };
+    let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get).clamp(1, 8);
+    let rows_per = h.div_ceil(threads).max(1);
+    let room_rot = world_from_cam.rotation.to_rotation_matrix().into_inner();
+    let origin = world_from_cam.translation.vector;
+    std::thread::scope(|s| {
+        let rgb = out.rgb.chunks_mut(rows_per * w * 3);
+        let depth = out.depth.chunks_mut(rows_per * w);
+        let class = out.class.chunks_mut(rows_per * w);
+        let inst = out.instance.chunks_mut(rows_per * w);
+        let mut hits: Vec<Option<&mut [Hit]>> = if want_hits {
+            out.hits.chunks_mut(rows_per * w).map(Some).collect()
+        } else {
+            (0..threads).map(|_| None).collect()
+        };
+        for (band, (((rgb, depth), class), inst)) in rgb.zip(depth).zip(class).zip(inst).enumerate() {
+            let hits = hits.get_mut(band).and_then(Option::take);
+            let objects = &objects;
+            s.spawn(move || {
+                let v0 = band * rows_per;
+                render_rows(scene, objects, k, &room_rot, &origin, v0, rgb, depth, class, inst, hits);
+            });
+        }
+    });
+    out
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_rows(
+    scene: &Scene,
+    objects: &[Prepared<'_>],
+    k: &Intrinsics,
+    world_from_cam_rot: &Matrix3<f64>,
+    origin: &Vector3<f64>,
+    v0: usize,
+    rgb: &mut [u8],
+    depth: &mut [f32],
+    class: &mut [u16],
+    inst: &mut [u16],
+    mut hits: Option<&mut [Hit]>,
+) {
+    let w = k.width as usize;
+    let light = Vector3::new(0.3, -0.5, 0.8).normalize();
+    let bounds_min = Vector3::new(-ROOM_HALF_WIDTH, -ROOM_HALF_DEPTH, 0.0);
+    let bounds_max = Vector3::new(ROOM_HALF_WIDTH, ROOM_HALF_DEPTH, ROOM_HEIGHT);
+    for (row, depth_row) in depth.chunks_mut(w).enumerate() {
+        let v = v0 + row;
+        let vi = v as i64;
+        let candidates: Vec<&Prepared<'_>> = objects.iter().filter(|o| o.rect[1] <= vi && vi <= o.rect[3]).collect();
+        for (u, depth_px) in depth_row.iter_mut().enumerate() {
+            let d = Vector3::new((u as f64 - k.cx) / k.fx, (v as f64 - k.cy) / k.fy, 1.0);
+            let ui = u as i64;
+            let mut best: Option<(f64, &Prepared<'_>, usize, Vector3<f64>)> = None;
+            for o in candidates.iter().filter(|o| o.rect[0] <= ui && ui <= o.rect[2]) {
+                if let Some((t, axis, local)) = hit_box(o, &d)
+                    && best.as_ref().is_none_or(|b| t < b.0)
+                {
+                    best = Some((t, o, axis, local));
+                }
+            }
+            // The room always encloses the camera: its exit distance bounds every hit.
+            let dw = world_from_cam_rot * d;
+            let mut t_room = f64::INFINITY;
+            let mut face = 0;
+            for a in 0..3 {
+                let (t, f) = if dw[a] > 1e-12 {
+                    ((bounds_max[a] - origin[a]) / dw[a], 2 * a + 1)
+                } else if dw[a] < -1e-12 {
+                    ((bounds_min[a] - origin[a]) / dw[a], 2 * a)
+                } else {
+                    continue;
+                };
+                if t < t_room {
+                    t_room = t;
+                    face = f;
+                }
+            }
+            let idx = row * w + u;
+            let (t, colour, normal_w, kind, hit) = match best {
+                Some((t, o, axis, local)) if t < t_room => {
+                    let (a, b) = match axis {
+                        0 => (local.y + o.part.half.y, local.z + o.part.half.z),
+                        1 => (local.x + o.part.half.x, local.z + o.part.half.z),
+                        _ => (local.x + o.part.half.x, local.y + o.part.half.y),
+                    };
+                    let mut n = Vector3::zeros();
+                    n[axis] = local[axis].signum();
+                    let nw = o.part.world_from_part.rotation * n;
+                    let hit = if o.dynamic_index == u32::MAX {
+                        let pw = origin + dw * t;
+                        Hit { part: u32::MAX, point: [pw.x as f32, pw.y as f32, pw.z as f32] }
+                    } else {
+                        Hit { part: o.dynamic_index, point: [local.x as f32, local.y as f32, local.z as f32] }
+                    };
+                    (t, o.part.texture.sample(a as f32, b as f32), nw, o.part.kind, hit)
+                }
+                _ => {
+                    let pw = origin + dw * t_room;
+                    let axis = face / 2;
+                    let (a, b) = match axis {
+                        0 => (pw.y, pw.z),
+                        1 => (pw.x, pw.z),
+                        _ => (pw.x, pw.y),
+                    };
+                    let tex: &Texture = scene.wall(face);
+                    let mut n = Vector3::zeros();
+                    n[axis] = if face % 2 == 0 { 1.0 } else { -1.0 };
+                    (
+                        t_room,
+                        tex.sample(a as f32, b as f32),
+                        n,
+                        Kind::Static,
+                        Hit { part: u32::MAX, point: [pw.x as f32, pw.y as f32, pw.z as f32] },
+                    )
+                }
+            };
+            let lambert = 0.7 + 0.3 * normal_w.dot(&light).abs() as f32;
+            let px = shade(colour, lambert);
+            if let Some(dst) = rgb.get_mut(idx * 3..idx * 3 + 3) {
+                dst.copy_from_slice(&px);
+            }
+            *depth_px = t as f32;
+            if let Kind::Person(i) = kind {
+                if let Some(c) = class.get_mut(idx) {
+                    *c = 1;
+                }
+                if let Some(c) = inst.get_mut(idx) {
+                    *c = i + 1;
+                }
+            }
+            if let Some(h) = hits.as_deref_mut().and_then(|h| h.get_mut(idx)) {
+                *h = hit;
+            }
+        }
+    }
+}

@@ -1,0 +1,243 @@
+//! The scene: a textured room with furniture boxes and walking people, all made of oriented
+//! boxes, and its state at any time `t` (deterministic by seed).
+
+use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+use super::texture::{Texture, hash};
+
+/// Room extent: `x ∈ [-W, W]`, `y ∈ [-D, D]`, `z ∈ [0, H]` (z up), metres.
+pub const ROOM_HALF_WIDTH: f64 = 3.0;
+/// See [`ROOM_HALF_WIDTH`].
+pub const ROOM_HALF_DEPTH: f64 = 3.2;
+/// See [`ROOM_HALF_WIDTH`].
+pub const ROOM_HEIGHT: f64 = 2.7;
+
+/// What a pixel sees.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// Walls, floor, ceiling, furniture.
+    Static,
+    /// Person number `i` (instance `i + 1`).
+    Person(u16),
+}
+
+/// An oriented box with a texture.
+#[derive(Clone, Debug)]
+pub struct Part {
+    /// Pose of the box centre.
+    pub world_from_part: Isometry3<f64>,
+    /// Half extents along the box axes.
+    pub half: Vector3<f64>,
+    /// Surface pattern.
+    pub texture: Texture,
+    /// Static or which person.
+    pub kind: Kind,
+}
+
+/// How people behave.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PeopleMode {
+    /// Walking across the room at 0.5–1.2 m/s.
+    Walking,
+    /// Seated near a spot, moving little (TUM `sitting`).
+    Sitting,
+}
+
+#[derive(Clone, Debug)]
+struct Person {
+    start: Vector3<f64>,
+    heading: f64,
+    speed: f64,
+    phase: f64,
+    clothes: Texture,
+    skin: Texture,
+    height: f64,
+}
+
+/// The static room plus the people's motion model.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    statics: Vec<Part>,
+    people: Vec<Person>,
+    mode: PeopleMode,
+    walls: [Texture; 6],
+}
+
+fn unit(h: u32) -> f64 {
+    f64::from(h & 0xffff) / 65535.0
+}
+
+impl Scene {
+    /// A room with `people` people, deterministic by `seed`.
+    pub fn new(seed: u64, people: usize, mode: PeopleMode) -> Self {
+        let s = hash((seed ^ (seed >> 32)) as u32 ^ 0x5eed);
+        let tex =
+            |i: u32, base: [f32; 3], tile: f32, contrast: f32| Texture { base, tile, seed: hash(s ^ i), contrast };
+        let walls = [
+            tex(1, [0.75, 0.72, 0.65], 0.45, 0.9), // x-
+            tex(2, [0.65, 0.72, 0.78], 0.45, 0.9), // x+
+            tex(3, [0.78, 0.70, 0.60], 0.40, 0.9), // y-
+            tex(4, [0.70, 0.75, 0.68], 0.40, 0.9), // y+ (facing the camera)
+            tex(5, [0.55, 0.45, 0.35], 0.50, 0.7), // floor
+            tex(6, [0.90, 0.90, 0.88], 0.60, 0.4), // ceiling
+        ];
+        let mut statics = Vec::new();
+        // Furniture along the walls: cabinets, shelves, a table.
+        for i in 0..7u32 {
+            let h = hash(s ^ (100 + i));
+            let (sx, sy, sz) = (0.3 + 0.6 * unit(h), 0.25 + 0.35 * unit(h >> 7), 0.5 + 1.3 * unit(h >> 13));
+            let along = -0.8 + 1.6 * unit(hash(h));
+            let (x, y) = match i % 4 {
+                0 => (along * (ROOM_HALF_WIDTH - 0.6), ROOM_HALF_DEPTH - sy - 0.01),
+                1 => (-ROOM_HALF_WIDTH + sy + 0.01, along * (ROOM_HALF_DEPTH - 0.8) + 1.0),
+                2 => (ROOM_HALF_WIDTH - sy - 0.01, along * (ROOM_HALF_DEPTH - 0.8) + 1.0),
+                _ => (along * 1.5, 1.8 + 0.6 * unit(h >> 3)),
+            };
+            let (sz, z) = if i % 4 == 3 { (0.38, 0.38) } else { (sz, sz) };
+            let colour =
+                [0.3 + 0.5 * unit(h >> 2) as f32, 0.3 + 0.4 * unit(h >> 5) as f32, 0.25 + 0.4 * unit(h >> 11) as f32];
+            statics.push(Part {
+                world_from_part: Isometry3::translation(x, y, z),
+                half: Vector3::new(sx, sy, sz),
+                texture: tex(200 + i, colour, 0.12 + 0.1 * unit(h >> 17) as f32, 1.0),
+                kind: Kind::Static,
+            });
+        }
+        let n = people.max(1) as f64;
+        let people = (0..people as u32)
+            .map(|i| {
+                let h = hash(s ^ (1000 + i));
+                let speed = 0.5 + 0.7 * unit(h);
+                // Walk roughly across the view (along x), at depths spread from near the camera
+                // (where one person covers 20-40 % of the image) to the back of the room.
+                let y = -1.5 + 3.4 * ((f64::from(i) + 0.6 * unit(h >> 5)) / n);
+                let x = -2.4 + 4.8 * unit(h >> 9);
+                let heading = if h & 1 == 0 { 0.0 } else { std::f64::consts::PI } + (unit(h >> 13) - 0.5) * 0.5;
+                let colour = [
+                    0.2 + 0.7 * unit(h >> 3) as f32,
+                    0.2 + 0.6 * unit(h >> 8) as f32,
+                    0.2 + 0.7 * unit(h >> 14) as f32,
+                ];
+                Person {
+                    start: Vector3::new(x, y, 0.0),
+                    heading,
+                    speed,
+                    phase: unit(h >> 11) * std::f64::consts::TAU,
+                    clothes: Texture { base: colour, tile: 0.09, seed: hash(h), contrast: 1.0 },
+                    skin: Texture { base: [0.85, 0.68, 0.55], tile: 0.05, seed: hash(h ^ 7), contrast: 0.5 },
+                    height: 1.65 + 0.2 * unit(h >> 19),
+                }
+            })
+            .collect();
+        Self { statics, people, mode, walls }
+    }
+
+    /// The texture of room face `f` (`0..6`: x-, x+, y-, y+, floor, ceiling).
+    pub fn wall(&self, f: usize) -> &Texture {
+        &self.walls[f.min(5)]
+    }
+
+    /// Furniture.
+    pub fn statics(&self) -> &[Part] {
+        &self.statics
+    }
+
+    /// Where person `p` stands and faces at time `t`: position on the floor, heading (rad).
+    fn person_pose(&self, p: &Person, t: f64) -> (Vector3<f64>, f64, f64) {
+        match self.mode {
+            PeopleMode::Walking => {
+                // Walk along the heading and bounce between the side walls (a triangle wave).
+                let span = 2.0 * (ROOM_HALF_WIDTH - 0.5);
+                let dir = p.heading.cos().signum();
+                let s = p.start.x + 2.4 - 0.5 + dir * p.speed * t; // offset into [0, span] coordinates
+                let m = s.rem_euclid(2.0 * span);
+                let (pos, forward) = if m < span { (m, 1.0) } else { (2.0 * span - m, -1.0) };
+                let x = -ROOM_HALF_WIDTH + 0.5 + pos;
+                let heading = if forward > 0.0 { 0.0 } else { std::f64::consts::PI } + (p.heading.sin() * 0.3);
+                let y = p.start.y + 0.25 * (t * 0.4 + p.phase).sin();
+                let gait = p.phase + t * p.speed * 5.0;
+                (Vector3::new(x, y, 0.0), heading, gait)
+            }
+            PeopleMode::Sitting => {
+                let sway = 0.05 * (t * 0.7 + p.phase).sin();
+                (
+                    p.start + Vector3::new(sway, 0.03 * (t * 0.5 + p.phase).cos(), 0.0),
+                    p.heading + 0.2 * (t * 0.3 + p.phase).sin(),
+                    0.0,
+                )
+            }
+        }
+    }
+
+    /// The people's boxes at time `t`.
+    pub fn people_parts(&self, t: f64) -> Vec<Part> {
+        let mut parts = Vec::with_capacity(self.people.len() * 6);
+        for (i, p) in self.people.iter().enumerate() {
+            let (pos, heading, gait) = self.person_pose(p, t);
+            let kind = Kind::Person(i as u16);
+            let body = Isometry3::from_parts(
+                Translation3::from(pos),
+                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), heading),
+            );
+            let s = p.height / 1.75;
+            let sitting = self.mode == PeopleMode::Sitting;
+            let swing = if sitting { 0.0 } else { 0.45 * gait.sin() };
+            let hip_z = if sitting { 0.5 } else { 0.9 * s };
+            let torso_h = 0.3 * s;
+            let mut push =
+                |offset: Vector3<f64>, pivot: Vector3<f64>, angle: f64, half: Vector3<f64>, texture: Texture| {
+                    // Rotate about the body's lateral (y) axis at `pivot`, then hang the box below/above it.
+                    let joint = Isometry3::from_parts(
+                        Translation3::from(pivot),
+                        UnitQuaternion::from_axis_angle(&Vector3::y_axis(), angle),
+                    );
+                    parts.push(Part {
+                        world_from_part: body * joint * Isometry3::translation(offset.x, offset.y, offset.z),
+                        half,
+                        texture,
+                        kind,
+                    });
+                };
+            // Torso, head.
+            push(
+                Vector3::new(0.0, 0.0, torso_h),
+                Vector3::new(0.0, 0.0, hip_z),
+                0.0,
+                Vector3::new(0.12, 0.2, torso_h),
+                p.clothes,
+            );
+            push(
+                Vector3::new(0.0, 0.0, 0.12 * s),
+                Vector3::new(0.0, 0.0, hip_z + 2.0 * torso_h + 0.02),
+                0.0,
+                Vector3::new(0.1, 0.09, 0.12 * s),
+                p.skin,
+            );
+            // Legs swing opposite each other; arms opposite the legs.
+            let leg = Vector3::new(0.07, 0.07, 0.45 * s);
+            let legs_angle = if sitting { -1.45 } else { swing };
+            push(Vector3::new(0.0, 0.0, -leg.z), Vector3::new(0.0, 0.1, hip_z), legs_angle, leg, p.clothes);
+            push(
+                Vector3::new(0.0, 0.0, -leg.z),
+                Vector3::new(0.0, -0.1, hip_z),
+                if sitting { -1.45 } else { -swing },
+                leg,
+                p.clothes,
+            );
+            let arm = Vector3::new(0.05, 0.05, 0.32 * s);
+            let shoulder = hip_z + 2.0 * torso_h - 0.05;
+            push(Vector3::new(0.0, 0.0, -arm.z), Vector3::new(0.0, 0.26, shoulder), -swing * 0.8, arm, p.skin);
+            push(Vector3::new(0.0, 0.0, -arm.z), Vector3::new(0.0, -0.26, shoulder), swing * 0.8, arm, p.skin);
+        }
+        parts
+    }
+}
+
+/// Rotation from the camera frame (x right, y down, z forward) to a world frame with z up,
+/// for a camera looking along world `forward` with world `up`.
+pub fn look_rotation(forward: &Vector3<f64>, up: &Vector3<f64>) -> UnitQuaternion<f64> {
+    let z = forward.normalize();
+    let x = z.cross(up).normalize();
+    let y = z.cross(&x);
+    UnitQuaternion::from_rotation_matrix(&Rotation3::from_basis_unchecked(&[x, y, z]))
+}

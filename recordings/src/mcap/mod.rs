@@ -1,0 +1,147 @@
+//! The MCAP recorder: one channel per recorded port (`/<node>/<port>`), Foxglove JSON
+//! schemas, zstd chunks of bounded size, provenance as a metadata record.
+//!
+//! Crash safety: a chunk is written when it reaches `chunk_size` bytes or has been open for
+//! `flush_interval`, whichever comes first, so a killed run loses at most that much; every
+//! complete chunk before the cut reads back (see `docs/recordings.md`).
+//!
+//! Submodules: `schemas` (message → Foxglove JSON and the JSON Schemas).
+
+pub mod schemas;
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use dynaflow_engine::msg::Message;
+use dynaflow_engine::sink::{RunInfo, Sink, SinkError};
+
+use crate::encode::ImageCodec;
+
+/// Default chunk size bound (bytes before compression).
+pub const DEFAULT_CHUNK_SIZE: u64 = 1 << 20;
+/// Default longest time a chunk stays open.
+pub const DEFAULT_FLUSH_INTERVAL: Duration = Duration::from_secs(1);
+
+/// Writes `<out>/<graph>.mcap`.
+pub struct McapSink {
+    path: PathBuf,
+    writer: Option<mcap::Writer<BufWriter<File>>>,
+    channels: HashMap<(String, String), u16>,
+    schemas: HashMap<&'static str, u16>,
+    codec: ImageCodec,
+    chunk_size: u64,
+    flush_interval: Duration,
+    last_flush: Instant,
+}
+
+impl McapSink {
+    /// A recorder writing to `path` with default chunking and JPEG (q 90) colour images.
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        Self {
+            path: path.into(),
+            writer: None,
+            channels: HashMap::new(),
+            schemas: HashMap::new(),
+            codec: ImageCodec::Jpeg(90),
+            chunk_size: DEFAULT_CHUNK_SIZE,
+            flush_interval: DEFAULT_FLUSH_INTERVAL,
+            last_flush: Instant::now(),
+        }
+    }
+
+    /// Bound chunk size and age (how much a crash can lose).
+    #[must_use]
+    pub fn with_chunking(mut self, chunk_size: u64, flush_interval: Duration) -> Self {
+        self.chunk_size = chunk_size.max(1024);
+        self.flush_interval = flush_interval;
+        self
+    }
+
+    /// How colour images are stored.
+    #[must_use]
+    pub fn with_codec(mut self, codec: ImageCodec) -> Self {
+        self.codec = codec;
+        self
+    }
+
+    fn err(&self, e: impl std::fmt::Display) -> SinkError {
+        SinkError::new("mcap", format!("{}: {e}", self.path.display()))
+    }
+
+    fn channel(&mut self, node: &str, port: &str, msg: &Message) -> Result<u16, SinkError> {
+        if let Some(id) = self.channels.get(&(node.to_owned(), port.to_owned())) {
+            return Ok(*id);
+        }
+        let name = schemas::schema_name(msg.body.port_type());
+        let path = self.path.clone();
+        let err = |e: mcap::McapError| SinkError::new("mcap", format!("{}: {e}", path.display()));
+        let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
+        let schema = match self.schemas.get(name) {
+            Some(id) => *id,
+            None => {
+                let id = writer.add_schema(name, "jsonschema", schemas::schema_text(name).as_bytes()).map_err(err)?;
+                self.schemas.insert(name, id);
+                id
+            }
+        };
+        let meta = BTreeMap::from([("dynaflow.type".to_owned(), msg.body.port_type().name().to_owned())]);
+        let id = writer.add_channel(schema, &format!("/{node}/{port}"), "json", &meta).map_err(err)?;
+        self.channels.insert((node.to_owned(), port.to_owned()), id);
+        Ok(id)
+    }
+}
+
+impl Sink for McapSink {
+    fn name(&self) -> &str {
+        "mcap"
+    }
+
+    fn open(&mut self, info: &RunInfo) -> Result<(), SinkError> {
+        let file = File::create(&self.path).map_err(|e| self.err(e))?;
+        let options = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Zstd))
+            .chunk_size(Some(self.chunk_size))
+            .profile("")
+            .library(format!("dynaflow {}", info.version));
+        let mut writer = options.create(BufWriter::new(file)).map_err(|e| self.err(e))?;
+        let metadata = mcap::records::Metadata { name: "dynaflow".into(), metadata: info.to_strings() };
+        writer.write_metadata(&metadata).map_err(|e| self.err(e))?;
+        self.writer = Some(writer);
+        self.last_flush = Instant::now();
+        Ok(())
+    }
+
+    fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError> {
+        let channel_id = self.channel(node, port, msg)?;
+        let json = schemas::to_json(msg, self.codec).map_err(|e| self.err(format!("encoding {node}/{port}: {e}")))?;
+        let data = serde_json::to_vec(&json).map_err(|e| self.err(e))?;
+        let ns = (msg.header.stamp.max(0.0) * 1e9) as u64;
+        let header = mcap::records::MessageHeader {
+            channel_id,
+            sequence: msg.header.seq as u32,
+            log_time: ns,
+            publish_time: ns,
+        };
+        let flush_due = self.last_flush.elapsed() >= self.flush_interval;
+        let path = self.path.clone();
+        let err = |e: mcap::McapError| SinkError::new("mcap", format!("{}: {e}", path.display()));
+        let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
+        writer.write_to_known_channel(&header, &data).map_err(err)?;
+        if flush_due {
+            writer.flush().map_err(err)?;
+            self.last_flush = Instant::now();
+        }
+        Ok(())
+    }
+
+    fn close(&mut self) -> Result<(), SinkError> {
+        let Some(mut writer) = self.writer.take() else { return Ok(()) };
+        writer.finish().map_err(|e| self.err(e))?;
+        let mut inner = writer.into_inner();
+        inner.flush().map_err(|e| self.err(e))?;
+        inner.get_ref().sync_all().map_err(|e| self.err(e))
+    }
+}

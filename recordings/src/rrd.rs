@@ -1,0 +1,337 @@
+//! The rerun recorder: every recorded port becomes entity `/<node>/<port>` logged as its
+//! natural archetype, on the `frame` (sequence) and `sensor_time` (seconds) timelines, with
+//! provenance as recording properties and a default blueprint.
+//!
+//! | port type | entity | archetype |
+//! |---|---|---|
+//! | image | `/<node>/<port>` | `EncodedImage` (JPEG/PNG) |
+//! | depth | `/<node>/<port>` | `DepthImage` (metres) |
+//! | camera_info | `/world/camera` | `Pinhole` (with the latest pose) |
+//! | keypoints | `/<node>/<port>` | `Points2D` coloured by octave |
+//! | tracks | `/<node>/<port>` | `Arrows2D` |
+//! | detections | `/<node>/<port>` | `Boxes2D` with class labels |
+//! | mask | `/<node>/<port>` | `SegmentationImage` + `AnnotationContext` |
+//! | point_labels | `/<node>/<port>` | `Points2D` red = dynamic, green = static |
+//! | pose | `/world/<node>/<port>` | `Transform3D` (+ `Pinhole` once intrinsics are known) |
+//! | trajectory | `/world/<node>/<port>` | `LineStrips3D` |
+//! | point_cloud | `/world/<node>/<port>` | `Points3D` |
+//! | octree_update | `/world/<node>/<port>` | `Boxes3D` |
+//! | scalars | `/metrics/<node>/<port>/<name>` | `Scalars` |
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+
+use dynaflow_engine::msg::{Body, CameraInfo, Message, PortType};
+use dynaflow_engine::sink::{RunInfo, Sink, SinkError};
+use rerun::blueprint::{
+    Blueprint, BlueprintActivation, ContainerLike, Horizontal, Spatial2DView, Spatial3DView, TimeSeriesView, Vertical,
+};
+
+use crate::encode::{self, ImageCodec};
+
+/// Writes `<out>/<graph>.rrd`.
+pub struct RrdSink {
+    path: PathBuf,
+    rec: Option<rerun::RecordingStream>,
+    codec: ImageCodec,
+    intrinsics: Option<CameraInfo>,
+    /// Positions of the latest keypoints/tracks per frame, to place point labels.
+    points_by_seq: HashMap<u64, Vec<[f32; 2]>>,
+}
+
+impl RrdSink {
+    /// A recorder writing to `path`, colour images as JPEG (q 90).
+    pub fn new(path: impl Into<PathBuf>) -> Self {
+        Self {
+            path: path.into(),
+            rec: None,
+            codec: ImageCodec::Jpeg(90),
+            intrinsics: None,
+            points_by_seq: HashMap::new(),
+        }
+    }
+
+    /// How colour images are stored.
+    #[must_use]
+    pub fn with_codec(mut self, codec: ImageCodec) -> Self {
+        self.codec = codec;
+        self
+    }
+
+    fn err(&self, e: impl std::fmt::Display) -> SinkError {
+        SinkError::new("rerun", format!("{}: {e}", self.path.display()))
+    }
+}
+
+/// The default layout: 2-D camera views with overlays, the 3-D world, metrics over time.
+fn blueprint(info: &RunInfo) -> Blueprint {
+    let overlays: Vec<String> = info
+        .ports
+        .iter()
+        .filter(|(_, ty)| {
+            matches!(
+                ty,
+                PortType::Keypoints | PortType::Tracks | PortType::Detections | PortType::Mask | PortType::PointLabels
+            )
+        })
+        .map(|(p, _)| format!("/{p}"))
+        .collect();
+    let mut views: Vec<ContainerLike> = info
+        .ports
+        .iter()
+        .filter(|(_, ty)| matches!(ty, PortType::Image | PortType::Depth))
+        .map(|(p, _)| {
+            let mut contents = vec![format!("/{p}")];
+            contents.extend(overlays.iter().cloned());
+            Spatial2DView::new(p.clone()).with_origin("/").with_contents(contents).into()
+        })
+        .collect();
+    if views.is_empty() && !overlays.is_empty() {
+        views.push(Spatial2DView::new("image space").with_origin("/").with_contents(overlays).into());
+    }
+    let right: Vec<ContainerLike> = vec![
+        Spatial3DView::new("world").with_origin("/world").into(),
+        TimeSeriesView::new("metrics").with_origin("/metrics").into(),
+    ];
+    let mut columns: Vec<ContainerLike> = Vec::new();
+    if !views.is_empty() {
+        columns.push(Vertical::new(views).into());
+    }
+    columns.push(Vertical::new(right).into());
+    Blueprint::new(Horizontal::new(columns))
+}
+
+fn octave_color(octave: u8) -> rerun::Color {
+    const PALETTE: [[u8; 3]; 8] = [
+        [230, 25, 75],
+        [60, 180, 75],
+        [255, 225, 25],
+        [0, 130, 200],
+        [245, 130, 48],
+        [145, 30, 180],
+        [70, 240, 240],
+        [240, 50, 230],
+    ];
+    let [r, g, b] = PALETTE[usize::from(octave) % PALETTE.len()];
+    rerun::Color::from_rgb(r, g, b)
+}
+
+fn class_color(id: u16) -> rerun::Color {
+    // Golden-ratio hue steps give distinct, stable colours per class id.
+    let h = (f32::from(id) * 0.618_034).fract() * 6.0;
+    let x = 1.0 - (h % 2.0 - 1.0).abs();
+    let (r, g, b) = match h as u32 {
+        0 => (1.0, x, 0.0),
+        1 => (x, 1.0, 0.0),
+        2 => (0.0, 1.0, x),
+        3 => (0.0, x, 1.0),
+        4 => (x, 0.0, 1.0),
+        _ => (1.0, 0.0, x),
+    };
+    rerun::Color::from_rgb((r * 220.0) as u8 + 35, (g * 220.0) as u8 + 35, (b * 220.0) as u8 + 35)
+}
+
+impl Sink for RrdSink {
+    fn name(&self) -> &str {
+        "rerun"
+    }
+
+    fn open(&mut self, info: &RunInfo) -> Result<(), SinkError> {
+        let rec = rerun::RecordingStreamBuilder::new("dynaflow").save(&self.path).map_err(|e| self.err(e))?;
+        let name = match &info.variant {
+            Some(v) => format!("{} ({v})", info.graph),
+            None => info.graph.clone(),
+        };
+        rec.send_recording_name(name).map_err(|e| self.err(e))?;
+        let props = rerun::AnyValues::default()
+            .with_component_from_data(
+                "graph",
+                std::sync::Arc::new(rerun::external::arrow::array::StringArray::from(vec![info.graph.clone()])),
+            )
+            .with_component_from_data(
+                "variant",
+                std::sync::Arc::new(rerun::external::arrow::array::StringArray::from(vec![
+                    info.variant.clone().unwrap_or_default(),
+                ])),
+            )
+            .with_component_from_data(
+                "seed",
+                std::sync::Arc::new(rerun::external::arrow::array::UInt64Array::from(vec![info.seed])),
+            )
+            .with_component_from_data(
+                "dynaflow_version",
+                std::sync::Arc::new(rerun::external::arrow::array::StringArray::from(vec![info.version.clone()])),
+            )
+            .with_component_from_data(
+                "git_commit",
+                std::sync::Arc::new(rerun::external::arrow::array::StringArray::from(vec![info.git_commit.clone()])),
+            );
+        rec.send_property("dynaflow", &props).map_err(|e| self.err(e))?;
+        let params = serde_json::to_string_pretty(&info.params).unwrap_or_default();
+        let doc = format!(
+            "# {}\n\n- variant: `{}`\n- seed: `{}`\n- dynaflow {} (commit `{}`)\n- realtime: `{}`\n\n## Graph\n\n```yaml\n{}\n```\n\n## Resolved parameters\n\n```json\n{}\n```\n",
+            info.graph,
+            info.variant.as_deref().unwrap_or("-"),
+            info.seed,
+            info.version,
+            info.git_commit,
+            info.realtime,
+            info.graph_yaml.trim_end(),
+            params
+        );
+        rec.log_static("provenance", &rerun::TextDocument::new(doc).with_media_type(rerun::MediaType::markdown()))
+            .map_err(|e| self.err(e))?;
+        rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Y_DOWN()).map_err(|e| self.err(e))?;
+        blueprint(info)
+            .send(&rec, BlueprintActivation { make_active: true, make_default: true })
+            .map_err(|e| self.err(e))?;
+        self.rec = Some(rec);
+        Ok(())
+    }
+
+    fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError> {
+        let Some(rec) = self.rec.clone() else { return Err(self.err("not open")) };
+        rec.set_time_sequence("frame", msg.header.seq as i64);
+        rec.set_duration_secs("sensor_time", msg.header.stamp);
+        let path = format!("{node}/{port}");
+        let world = format!("world/{node}/{port}");
+        let r = match &msg.body {
+            Body::Image(img) => {
+                let e = encode::image(img, self.codec).map_err(|e| self.err(e))?;
+                let media = if e.format == "jpeg" { rerun::MediaType::jpeg() } else { rerun::MediaType::png() };
+                rec.log(path, &rerun::EncodedImage::from_file_contents(e.bytes).with_media_type(media))
+            }
+            Body::Depth(d) => {
+                let bytes: Vec<u8> = d.data.iter().flat_map(|v| v.to_le_bytes()).collect();
+                let format = rerun::datatypes::ImageFormat::depth([d.width, d.height], rerun::ChannelDatatype::F32);
+                rec.log(path, &rerun::DepthImage::new(bytes, format).with_meter(1.0))
+            }
+            Body::CameraInfo(c) => {
+                self.intrinsics = Some(c.clone());
+                Ok(())
+            }
+            Body::Keypoints(k) => {
+                let xy: Vec<[f32; 2]> = k.points.iter().map(|p| [p.x, p.y]).collect();
+                self.points_by_seq.insert(msg.header.seq, xy.clone());
+                rec.log(
+                    path,
+                    &rerun::Points2D::new(xy)
+                        .with_colors(k.points.iter().map(|p| octave_color(p.octave)))
+                        .with_radii([2.0]),
+                )
+            }
+            Body::Tracks(t) => {
+                self.points_by_seq.insert(msg.header.seq, t.tracks.iter().map(|t| t.cur).collect());
+                let origins: Vec<[f32; 2]> = t.tracks.iter().map(|t| t.prev).collect();
+                let vectors: Vec<[f32; 2]> =
+                    t.tracks.iter().map(|t| [t.cur[0] - t.prev[0], t.cur[1] - t.prev[1]]).collect();
+                rec.log(path, &rerun::Arrows2D::from_vectors(vectors).with_origins(origins))
+            }
+            Body::Detections(d) => {
+                let mins: Vec<[f32; 2]> = d.detections.iter().map(|b| [b.bbox[0], b.bbox[1]]).collect();
+                let sizes: Vec<[f32; 2]> =
+                    d.detections.iter().map(|b| [b.bbox[2] - b.bbox[0], b.bbox[3] - b.bbox[1]]).collect();
+                let labels: Vec<String> = d.detections.iter().map(|b| format!("{} {:.2}", b.label, b.score)).collect();
+                let ids: Vec<u16> = d.detections.iter().map(|b| b.class_id as u16).collect();
+                rec.log(path, &rerun::Boxes2D::from_mins_and_sizes(mins, sizes).with_labels(labels).with_class_ids(ids))
+            }
+            Body::Mask(m) => {
+                let classes: Vec<(u16, String, rerun::Color)> = m
+                    .class_names
+                    .iter()
+                    .enumerate()
+                    .map(|(i, n)| (i as u16, n.to_string(), class_color(i as u16)))
+                    .collect();
+                let ctx = rerun::AnnotationContext::new(classes.iter().map(|(i, n, c)| (*i, n.as_str(), c.0)));
+                rec.log(path.clone(), &ctx).map_err(|e| self.err(e))?;
+                let bytes: Vec<u8> = m.classes.iter().flat_map(|c| c.to_le_bytes()).collect();
+                let format =
+                    rerun::datatypes::ImageFormat::segmentation([m.width, m.height], rerun::ChannelDatatype::U16);
+                rec.log(path, &rerun::SegmentationImage::new(bytes, format).with_opacity(0.5))
+            }
+            Body::PointLabels(l) => {
+                let pts = self.points_by_seq.get(&msg.header.seq).cloned().unwrap_or_default();
+                let (xy, colors): (Vec<[f32; 2]>, Vec<rerun::Color>) = l
+                    .labels
+                    .iter()
+                    .filter_map(|lab| {
+                        let p = pts.get(lab.index as usize)?;
+                        let c = if lab.dynamic {
+                            rerun::Color::from_rgb(230, 40, 40)
+                        } else {
+                            rerun::Color::from_rgb(40, 200, 60)
+                        };
+                        Some((*p, c))
+                    })
+                    .unzip();
+                rec.log(path, &rerun::Points2D::new(xy).with_colors(colors).with_radii([3.0]))
+            }
+            Body::Pose(p) => {
+                let t = p.world_from_cam.translation.vector;
+                let q = p.world_from_cam.rotation.coords;
+                let tf = rerun::Transform3D::from_translation_rotation(
+                    [t.x as f32, t.y as f32, t.z as f32],
+                    rerun::Quaternion::from_xyzw([q.x as f32, q.y as f32, q.z as f32, q.w as f32]),
+                );
+                rec.log(world.clone(), &tf).map_err(|e| self.err(e))?;
+                match &self.intrinsics {
+                    Some(c) => rec.log(
+                        world,
+                        &rerun::Pinhole::from_focal_length_and_resolution(
+                            [c.fx as f32, c.fy as f32],
+                            [c.width as f32, c.height as f32],
+                        )
+                        .with_principal_point([c.cx as f32, c.cy as f32])
+                        .with_image_plane_distance(0.3),
+                    ),
+                    None => Ok(()),
+                }
+            }
+            Body::Trajectory(tr) => {
+                let strip: Vec<[f32; 3]> = tr
+                    .poses
+                    .iter()
+                    .map(|p| {
+                        let t = p.world_from_cam.translation.vector;
+                        [t.x as f32, t.y as f32, t.z as f32]
+                    })
+                    .collect();
+                rec.log(world, &rerun::LineStrips3D::new([strip]))
+            }
+            Body::PointCloud(c) => {
+                let mut pts = rerun::Points3D::new(c.points.iter().copied());
+                if let Some(colors) = &c.colors {
+                    pts = pts.with_colors(colors.iter().map(|[r, g, b]| rerun::Color::from_rgb(*r, *g, *b)));
+                }
+                rec.log(world, &pts)
+            }
+            Body::OctreeUpdate(o) => {
+                let h = o.resolution / 2.0;
+                let centers: Vec<[f32; 3]> = o.occupied.iter().map(|(p, _)| *p).collect();
+                let colors: Vec<rerun::Color> = o.occupied.iter().map(|(_, c)| class_color(*c)).collect();
+                rec.log(world, &rerun::Boxes3D::from_centers_and_half_sizes(centers, [[h, h, h]]).with_colors(colors))
+            }
+            Body::Scalars(s) => {
+                for (name, v) in &s.values {
+                    rec.log(format!("metrics/{node}/{port}/{name}"), &rerun::Scalars::new([*v]))
+                        .map_err(|e| self.err(e))?;
+                }
+                Ok(())
+            }
+            _ => Ok(()),
+        };
+        // Bound the label lookup table: frames older than a few hundred are never labelled.
+        if self.points_by_seq.len() > 256 {
+            let newest = msg.header.seq;
+            self.points_by_seq.retain(|k, _| *k + 128 >= newest);
+        }
+        r.map_err(|e| self.err(e))
+    }
+
+    fn close(&mut self) -> Result<(), SinkError> {
+        let Some(rec) = self.rec.take() else { return Ok(()) };
+        rec.flush_blocking().map_err(|e| self.err(e))?;
+        drop(rec);
+        Ok(())
+    }
+}
