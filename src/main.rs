@@ -62,6 +62,8 @@ enum Command {
     },
     /// Compare two recorded runs (MCAP): per topic, counts, first differing frame, deltas, ATE.
     Diff(commands::diff::DiffArgs),
+    /// Generate a semi-synthetic dynamic RGB-D sequence in the TUM layout, with ground truth.
+    Synth(commands::synth::SynthArgs),
     /// Open a `.rrd` recording in the rerun viewer (if installed).
     View {
         /// Recording file.
@@ -94,6 +96,14 @@ pub struct RunArgs {
     /// Override a parameter: `node.param=value` (repeatable).
     #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
     pub set: Vec<String>,
+    /// Run on a recorded sequence instead of the graph's own source: a TUM RGB-D folder or a
+    /// folder of images (detected from the files).
+    #[arg(long)]
+    pub input: Option<PathBuf>,
+    /// Camera of `--input`: `fr1`, `fr2`, `fr3` or `fx,fy,cx,cy[,k1,k2,p1,p2,k3]` (TUM folders
+    /// named `rgbd_dataset_freiburgN_*` need none).
+    #[arg(long)]
+    pub intrinsics: Option<String>,
     /// Override the graph seed.
     #[arg(long)]
     pub seed: Option<u64>,
@@ -178,6 +188,7 @@ fn main() -> ExitCode {
             })
         }
         Command::Diff(args) => commands::diff::diff(&args),
+        Command::Synth(args) => commands::synth::synth(&args),
         Command::View { file } => commands::view::view(&file),
         Command::Graph { graph, format, variant } => {
             commands::graph::graph(&graph, matches!(format, GraphFormat::Dot), variant)

@@ -15,13 +15,13 @@ fn default_graph_runs_and_writes_summary_and_log() {
     let out = common::bin()
         .args(["run", "--no-progress", "--digest", "--record", "jsonl", "--out"])
         .arg(dir.path())
-        .arg(common::repo().join("graphs/default.yaml"))
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("detector") && stdout.contains("p95 ms"), "{stdout}");
-    let summary = read_json(&dir.path().join("default.summary.json"));
+    let summary = read_json(&dir.path().join("engine_smoke.summary.json"));
     assert_eq!(summary["status"], "completed");
     assert_eq!(summary["frames"], 300);
     let nodes = summary["nodes"].as_array().unwrap();
@@ -30,7 +30,7 @@ fn default_graph_runs_and_writes_summary_and_log() {
         assert!(nodes[0].get(key).is_some(), "summary lacks {key}");
     }
     assert_eq!(summary["digests"]["detector/value"]["count"], 60);
-    let log = std::fs::read_to_string(dir.path().join("default.messages.jsonl")).unwrap();
+    let log = std::fs::read_to_string(dir.path().join("engine_smoke.messages.jsonl")).unwrap();
     let lines: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(lines.first().unwrap()["kind"], "run");
     assert_eq!(lines.last().unwrap()["kind"], "end");
@@ -41,11 +41,11 @@ fn default_graph_runs_and_writes_summary_and_log() {
     let out = common::bin()
         .args(["run", "--no-progress", "--digest", "--record", "none", "--out"])
         .arg(dir2.path())
-        .arg(common::repo().join("graphs/default.yaml"))
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(0));
-    assert_eq!(read_json(&dir2.path().join("default.summary.json"))["digests"], summary["digests"]);
+    assert_eq!(read_json(&dir2.path().join("engine_smoke.summary.json"))["digests"], summary["digests"]);
 }
 
 #[test]
@@ -81,7 +81,7 @@ fn missing_graph_and_bad_output_dir_are_bad_input() {
     let out = common::bin()
         .args(["run", "--no-progress", "--out"])
         .arg(blocker.join("sub"))
-        .arg(common::repo().join("graphs/default.yaml"))
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
@@ -161,11 +161,11 @@ fn ops_json_lists_every_operator_with_ports_and_params() {
 
 #[test]
 fn graph_renders_mermaid_and_dot() {
-    let g = common::repo().join("graphs/default.yaml");
+    let g = common::repo().join("graphs/engine_smoke.yaml");
     let out = common::bin().arg("graph").arg(&g).output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
     assert!(text.starts_with("flowchart LR") && text.contains("smooth -.->|\"sum→b, delay 1\"| smooth"), "{text}");
     let out = common::bin().args(["graph", "--format", "dot"]).arg(&g).output().unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.starts_with("digraph \"default\"") && text.contains("\"camera\" -> \"keyframes\""), "{text}");
+    assert!(text.starts_with("digraph \"engine_smoke\"") && text.contains("\"camera\" -> \"keyframes\""), "{text}");
 }

@@ -16,7 +16,7 @@ fn run_default(dir: &Path, extra: &[&str]) -> std::process::Output {
         .args(["run", "--no-progress", "--record", "rrd,mcap,jsonl", "--out"])
         .arg(dir)
         .args(extra)
-        .arg(common::repo().join("graphs/default.yaml"))
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
@@ -61,7 +61,7 @@ fn rerun_rrd(rerun: &Path, args: &[&str], file: &Path) -> std::process::Output {
 fn default_run_writes_complete_rrd_and_mcap() {
     let dir = common::TempDir::new("rec");
     run_default(dir.path(), &[]);
-    let rec = read_mcap(&dir.path().join("default.mcap")).unwrap();
+    let rec = read_mcap(&dir.path().join("engine_smoke.mcap")).unwrap();
     assert!(!rec.truncated);
     // One channel per recorded port, each with its schema.
     let expected =
@@ -80,11 +80,11 @@ fn default_run_writes_complete_rrd_and_mcap() {
     assert_eq!(rec.topics["/detector/value"].schema, "dynaflow.Scalars");
     assert_eq!(rec.topics["/camera/image"].frames.len(), 300);
     assert_eq!(rec.topics["/keyframes/output"].frames.len(), 60);
-    assert_eq!(rec.metadata["graph"], "default");
+    assert_eq!(rec.metadata["graph"], "engine_smoke");
     assert!(rec.metadata["graph_yaml"].contains("random_scalar"));
     assert_eq!(rec.metadata["seed"], "7");
     // The MCAP and the message log agree message for message (same digests).
-    let log = std::fs::read_to_string(dir.path().join("default.messages.jsonl")).unwrap();
+    let log = std::fs::read_to_string(dir.path().join("engine_smoke.messages.jsonl")).unwrap();
     let mut n = 0;
     for line in log.lines() {
         let v: serde_json::Value = serde_json::from_str(line).unwrap();
@@ -96,7 +96,7 @@ fn default_run_writes_complete_rrd_and_mcap() {
         }
     }
     assert_eq!(n, rec.topics.values().map(|t| t.frames.len()).sum::<usize>());
-    let rrd = dir.path().join("default.rrd");
+    let rrd = dir.path().join("engine_smoke.rrd");
     assert!(std::fs::metadata(&rrd).unwrap().len() > 10_000);
     if let Some(rerun) = peer("rerun") {
         let out = rerun_rrd(&rerun, &["verify"], &rrd);
@@ -110,7 +110,7 @@ fn default_run_writes_complete_rrd_and_mcap() {
     if let Some(python) = peer("python") {
         let out = Command::new(python)
             .arg(common::repo().join("tests/peers/check_mcap.py"))
-            .arg(dir.path().join("default.mcap"))
+            .arg(dir.path().join("engine_smoke.mcap"))
             .output()
             .unwrap();
         assert!(
@@ -200,7 +200,8 @@ fn diff_same_seed_is_identical_and_a_changed_parameter_is_located() {
     run_default(a.path(), &[]);
     run_default(b.path(), &[]);
     run_default(c.path(), &["--set", "detector.scale=2.0"]);
-    let (ma, mb, mc) = (a.path().join("default.mcap"), b.path().join("default.mcap"), c.path().join("default.mcap"));
+    let (ma, mb, mc) =
+        (a.path().join("engine_smoke.mcap"), b.path().join("engine_smoke.mcap"), c.path().join("engine_smoke.mcap"));
 
     let out = common::bin().arg("diff").arg(&ma).arg(&mb).output().unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stdout));
@@ -248,15 +249,19 @@ fn unwritable_output_is_a_clear_error_not_a_hang() {
     let out_dir = dir.path().join("out");
     std::fs::create_dir_all(&out_dir).unwrap();
     // A directory where the recording file should go makes creating it fail.
-    std::fs::create_dir_all(out_dir.join("default.mcap")).unwrap();
+    std::fs::create_dir_all(out_dir.join("engine_smoke.mcap")).unwrap();
     let out = common::bin()
         .args(["run", "--no-progress", "--record", "mcap", "--out"])
         .arg(&out_dir)
-        .arg(common::repo().join("graphs/default.yaml"))
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&out.stderr).contains("default.mcap"), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("engine_smoke.mcap"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[cfg(target_os = "linux")]
@@ -267,14 +272,60 @@ fn full_disk_fails_the_run_with_the_file_named() {
         return;
     }
     let dir = common::TempDir::new("full");
-    std::os::unix::fs::symlink("/dev/full", dir.path().join("default.messages.jsonl")).unwrap();
+    std::os::unix::fs::symlink("/dev/full", dir.path().join("engine_smoke.messages.jsonl")).unwrap();
     let out = common::bin()
         .args(["run", "--no-progress", "--record", "jsonl", "--out"])
         .arg(dir.path())
-        .arg(common::repo().join("graphs/default.yaml"))
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_ne!(out.status.code(), Some(0), "{stderr}");
-    assert!(stderr.contains("default.messages.jsonl") && stderr.to_lowercase().contains("no space"), "{stderr}");
+    assert!(stderr.contains("engine_smoke.messages.jsonl") && stderr.to_lowercase().contains("no space"), "{stderr}");
+}
+
+#[test]
+fn default_synthetic_scene_recording_verifies() {
+    let dir = common::TempDir::new("synthrec");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--frames", "30", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/default.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let rec = read_mcap(&dir.path().join("default.mcap")).unwrap();
+    for (topic, schema) in [
+        ("/camera/rgb", "foxglove.CompressedImage"),
+        ("/camera/depth", "foxglove.CompressedImage"),
+        ("/camera/gt_mask", "foxglove.CompressedImage"),
+        ("/camera/gt_pose", "foxglove.PoseInFrame"),
+        ("/camera/camera_info", "foxglove.CameraCalibration"),
+        ("/dynamics/stats", "dynaflow.Scalars"),
+    ] {
+        assert_eq!(rec.topics[topic].schema, schema, "{topic}");
+        assert_eq!(rec.topics[topic].frames.len(), 30, "{topic}");
+    }
+    if let Some(rerun) = peer("rerun") {
+        let out = rerun_rrd(&rerun, &["verify"], &dir.path().join("default.rrd"));
+        assert!(
+            out.status.success(),
+            "rerun rrd verify: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
+    if let Some(python) = peer("python") {
+        let out = Command::new(python)
+            .arg(common::repo().join("tests/peers/check_mcap.py"))
+            .arg(dir.path().join("default.mcap"))
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "python mcap reader: {}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        );
+    }
 }

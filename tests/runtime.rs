@@ -32,7 +32,7 @@ fn scalar(m: &Message, key: &str) -> f64 {
 }
 
 fn default_graph(req: &LoadRequest) -> ResolvedGraph {
-    common::graph_with(include_str!("../graphs/default.yaml"), req)
+    common::graph_with(include_str!("../graphs/engine_smoke.yaml"), req)
 }
 
 #[test]

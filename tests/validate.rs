@@ -134,7 +134,7 @@ fn structural_errors() {
 fn unknown_variant_on_the_command_line() {
     let out = common::bin()
         .args(["run", "--no-progress", "--variant", "no_detectr"])
-        .arg(common::repo().join("graphs/default.yaml"))
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
@@ -147,11 +147,11 @@ fn unknown_variant_on_the_command_line() {
 
 #[test]
 fn bad_set_override_points_at_the_node() {
-    let out = common::bin().args(["validate"]).arg(common::repo().join("graphs/default.yaml")).output().unwrap();
+    let out = common::bin().args(["validate"]).arg(common::repo().join("graphs/engine_smoke.yaml")).output().unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     let out = common::bin()
         .args(["run", "--no-progress", "--set", "camera.frame=3"])
-        .arg(common::repo().join("graphs/default.yaml"))
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
@@ -180,7 +180,7 @@ fn every_shipped_graph_validates() {
     }
 }
 
-const VALID: &str = include_str!("../graphs/default.yaml");
+const VALID: &str = include_str!("../graphs/engine_smoke.yaml");
 
 fn assert_sane(text: &str) {
     let loaded = load_str(

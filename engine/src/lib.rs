@@ -17,4 +17,4 @@ pub mod sink;
 pub mod spec;
 pub mod yaml;
 
-pub use load::{LoadRequest, Loaded, load, load_str};
+pub use load::{LoadRequest, Loaded, SourceOverride, load, load_str};

@@ -18,6 +18,63 @@ pub struct LoadRequest {
     pub seed: Option<u64>,
     /// Also validate every variant (what `dynaflow validate` does).
     pub all_variants: bool,
+    /// `--input DIR`: replace the graph's single source with this reader.
+    pub source: Option<SourceOverride>,
+}
+
+/// A replacement for the graph's source node (`dynaflow run --input DIR`).
+#[derive(Clone, Debug, Default)]
+pub struct SourceOverride {
+    /// Reader operator, e.g. `tum_rgbd`.
+    pub op: String,
+    /// Its parameters (values are YAML, like `--set`).
+    pub params: Vec<(String, String)>,
+    /// What the user gave, for messages (`--input DIR`).
+    pub origin: String,
+}
+
+/// Point the graph's only source node at another reader.
+fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride) -> Vec<Diagnostic> {
+    let sources: Vec<usize> = spec
+        .nodes
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| registry.get(&n.op).is_some_and(|op| op.kind == crate::op::OpKind::Source))
+        .map(|(i, _)| i)
+        .collect();
+    let [i] = sources.as_slice() else {
+        let names: Vec<String> =
+            sources.iter().filter_map(|i| spec.nodes.get(*i)).map(|n| format!("`{}`", n.id)).collect();
+        return vec![
+            Diagnostic::error(
+                "input-ambiguous",
+                None,
+                format!(
+                    "`{}` replaces the graph's source, but the graph has {} source nodes ({})",
+                    over.origin,
+                    sources.len(),
+                    names.join(", ")
+                ),
+            )
+            .with_hint("use a graph with exactly one source, or set the reader's `path` with --set"),
+        ];
+    };
+    let Some(node) = spec.nodes.get_mut(*i) else { return Vec::new() };
+    let span = node.id_span;
+    node.op = over.op.clone();
+    node.op_span = span;
+    node.params = over
+        .params
+        .iter()
+        .map(|(k, v)| {
+            (
+                crate::yaml::Key { text: k.clone(), span },
+                crate::yaml::Yaml { kind: crate::yaml::YamlKind::Scalar { text: v.clone(), quoted: true }, span },
+            )
+        })
+        .collect();
+    tracing::info!("`{}`: node `{}` now reads with `{}`", over.origin, node.id, over.op);
+    Vec::new()
 }
 
 /// The outcome of loading a graph.
@@ -89,6 +146,9 @@ pub fn load_str(
                 Ok(s) => spec = s,
                 Err(d) => diags.extend(d),
             }
+        }
+        if let Some(over) = &req.source {
+            diags.extend(apply_source(&mut spec, registry, over));
         }
         diags.extend(spec::apply_overrides(&mut spec, &req.overrides));
         let (g, d) = spec::validate(&spec, registry, &cx);

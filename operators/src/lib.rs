@@ -16,5 +16,6 @@ pub fn registry() -> Registry {
     util::register(&mut r);
     r.register(synth::SYNTH);
     r.register(decode::TUM_RGBD);
+    r.register(decode::IMAGE_FOLDER);
     r
 }

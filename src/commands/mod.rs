@@ -4,6 +4,7 @@ pub mod diff;
 pub mod graph;
 pub mod ops;
 pub mod run;
+pub mod synth;
 pub mod validate;
 pub mod view;
 

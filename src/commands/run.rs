@@ -4,10 +4,10 @@ use std::io::IsTerminal;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use dynaflow_engine::LoadRequest;
 use dynaflow_engine::runtime::{self, RunOptions, RunStatus};
 use dynaflow_engine::sink::{DigestSink, Sink};
 use dynaflow_engine::spec::Override;
+use dynaflow_engine::{LoadRequest, SourceOverride};
 use dynaflow_recordings::mcap::DEFAULT_FLUSH_INTERVAL;
 use dynaflow_recordings::{ImageCodec, McapSink, MessageLog, RrdSink};
 
@@ -24,7 +24,21 @@ pub fn run(args: &RunArgs) -> u8 {
             }
         }
     }
-    let req = LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false };
+    let source = match &args.input {
+        None => None,
+        Some(dir) => match dynaflow_operators::decode::detect_layout(dir, args.intrinsics.as_deref()) {
+            Ok(layout) => Some(SourceOverride {
+                op: layout.op.to_owned(),
+                params: layout.params.into_iter().map(|(k, v)| (k.to_owned(), v)).collect(),
+                origin: format!("--input {}", dir.display()),
+            }),
+            Err(e) => {
+                eprintln!("error: {e}");
+                return EXIT_BAD_INPUT;
+            }
+        },
+    };
+    let req = LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source };
     let Some(graph) = super::load_and_report(&args.graph, &req).and_then(|l| l.graph) else {
         return EXIT_BAD_INPUT;
     };

@@ -43,6 +43,11 @@ pub(crate) const TUM_RGBD: OpSpec = OpSpec {
             PortType::Pose,
             "ground-truth world_from_cam interpolated at the frame time (if groundtruth.txt exists)",
         ),
+        PortSpec::output(
+            "gt_mask",
+            PortType::Mask,
+            "ground-truth class/instance mask from `mask/` and `instance/` (written by `dynaflow synth`; absent for real TUM data)",
+        ),
     ],
     params: &[
         ParamSpec { name: "path", ty: ParamType::Path, default: Default::Required, doc: "sequence folder" },
@@ -198,6 +203,27 @@ impl TumSource {
             .with("rgb", header.clone(), Body::Image(rgb))
             .with("depth", header.clone(), Body::Depth(depth))
             .with("camera_info", header.clone(), Body::CameraInfo(info));
+        let mask_path = self.dir.join("mask").join(Path::new(&f.rgb).file_name().unwrap_or_default());
+        if mask_path.is_file() {
+            let classes = load_rgb(&mask_path)?;
+            let inst_path = self.dir.join("instance").join(Path::new(&f.rgb).file_name().unwrap_or_default());
+            let instances = if inst_path.is_file() {
+                Some(load_rgb(&inst_path)?.data.into_iter().map(u16::from).collect())
+            } else {
+                None
+            };
+            if classes.format != dynaflow_engine::msg::PixelFormat::Gray8 {
+                return Err(format!("{}: expected an 8-bit grey class mask", mask_path.display()));
+            }
+            let mask = dynaflow_engine::msg::SegmentationMask {
+                width: classes.width,
+                height: classes.height,
+                classes: classes.data.into_iter().map(u16::from).collect(),
+                instances,
+                class_names: vec!["static".into(), "person".into()],
+            };
+            out.push("gt_mask", header.clone(), Body::Mask(mask));
+        }
         if let Some(gt) = &self.gt {
             let pose = interpolate_pose(gt, f.rgb_stamp, GT_SLACK_S)
                 .ok_or_else(|| format!("groundtruth.txt does not cover {:.6}", f.rgb_stamp))?;

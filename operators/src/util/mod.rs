@@ -17,4 +17,5 @@ pub(crate) fn register(r: &mut Registry) {
     r.register(transform::GATE);
     r.register(transform::SCALAR_SUM);
     r.register(transform::FAULT);
+    r.register(transform::MASK_STATS);
 }

@@ -8,6 +8,7 @@ use dynaflow_engine::op::{
     PortSpec,
 };
 use rand_core::Rng;
+use std::collections::BTreeSet;
 
 const ANY_IN: &[PortSpec] = &[PortSpec::input("input", PortType::Any, "any message")];
 const SAME_OUT: &[PortSpec] = &[PortSpec::output_like("output", "input", "the input message, unchanged")];
@@ -278,5 +279,36 @@ impl Operator for Fault {
             return Err(OpError::Failed(format!("fault injected at frame {}", inputs.seq)));
         }
         forward(inputs)
+    }
+}
+
+// --- mask_stats ------------------------------------------------------------------------
+
+pub(super) const MASK_STATS: OpSpec = OpSpec {
+    name: "mask_stats",
+    family: "util",
+    doc: "Statistics of a segmentation mask: the fraction of pixels of a non-background class (`dynamic_fraction`) and the number of distinct instances (`instances`). Shows how dynamic each frame of a sequence is.",
+    kind: OpKind::Transform,
+    inputs: &[PortSpec::input("mask", PortType::Mask, "class (and instance) mask; class 0 is background/static")],
+    outputs: &[PortSpec::output("stats", PortType::Scalars, "`dynamic_fraction`, `instances`")],
+    params: &[],
+    cpu_heavy: false,
+    build: |_| Ok(Instance::Transform(Box::new(MaskStats))),
+};
+
+struct MaskStats;
+
+impl Operator for MaskStats {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let msg = inputs.require("mask")?;
+        let Body::Mask(m) = &msg.body else {
+            return Err(OpError::Input(format!("expected a mask, got {}", msg.body.port_type())));
+        };
+        let dynamic = m.classes.iter().filter(|&&c| c != 0).count();
+        let fraction = if m.classes.is_empty() { 0.0 } else { dynamic as f64 / m.classes.len() as f64 };
+        let instances =
+            m.instances.as_ref().map_or(0, |i| i.iter().filter(|&&v| v != 0).collect::<BTreeSet<_>>().len());
+        let values = vec![("dynamic_fraction".into(), fraction), ("instances".into(), instances as f64)];
+        Ok(Outputs::new().with("stats", msg.header.clone(), Body::Scalars(Scalars { values })))
     }
 }
