@@ -25,8 +25,7 @@ fn chain_yaml(frames: u64) -> String {
 }
 
 fn engine(rt: &tokio::runtime::Runtime, frames: u64) -> f64 {
-    let loaded =
-        load_str("chain.yaml", &chain_yaml(frames), None, &dynaflow_operators::registry(), &LoadRequest::default());
+    let loaded = load_str("chain.yaml", &chain_yaml(frames), None, &dynaflow::registry(), &LoadRequest::default());
     let graph = loaded.graph.expect("chain graph is valid");
     let t = Instant::now();
     let report = rt.block_on(runtime::run(&graph, RunOptions::default(), Vec::new())).expect("run");

@@ -239,3 +239,67 @@ fn input_flag_points_the_default_graph_at_a_folder() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a TUM RGB-D folder"));
 }
+
+#[test]
+fn kitti_sequence_reads_stereo_calibration_and_poses() {
+    let dir = common::TempDir::new("kitti");
+    let synth = dir.path().join("synth");
+    let out = common::bin()
+        .args(["synth", "--frames", "3", "--width", "64", "--height", "48", "--out"])
+        .arg(&synth)
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    // dataset/sequences/07 with dataset/poses/07.txt, as KITTI ships it.
+    let seq = dir.path().join("dataset/sequences/07");
+    let rgb: Vec<std::path::PathBuf> = {
+        let mut v: Vec<_> = std::fs::read_dir(synth.join("rgb")).unwrap().map(|e| e.unwrap().path()).collect();
+        v.sort();
+        v
+    };
+    for cam in ["image_0", "image_1"] {
+        std::fs::create_dir_all(seq.join(cam)).unwrap();
+        for (i, f) in rgb.iter().enumerate() {
+            std::fs::copy(f, seq.join(cam).join(format!("{i:06}.png"))).unwrap();
+        }
+    }
+    let fx = 718.856;
+    std::fs::write(
+        seq.join("calib.txt"),
+        format!(
+            "P0: {fx} 0 607.1928 0 0 {fx} 185.2157 0 0 0 1 0\nP1: {fx} 0 607.1928 {} 0 {fx} 185.2157 0 0 0 1 0\nP2: {fx} 0 607.1928 45.38225 0 {fx} 185.2157 -0.1130887 0 0 1 0.003779761\nP3: {fx} 0 607.1928 -337.2877 0 {fx} 185.2157 2.369057 0 0 1 0.004915215\nTr: 1 0 0 0 0 1 0 0 0 0 1 0\n",
+            -386.1448
+        ),
+    )
+    .unwrap();
+    std::fs::write(seq.join("times.txt"), "0.000000e+00\n1.036300e-01\n2.072600e-01\n").unwrap();
+    std::fs::create_dir_all(dir.path().join("dataset/poses")).unwrap();
+    std::fs::write(
+        dir.path().join("dataset/poses/07.txt"),
+        "1 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0.1 0 1 0 0 0 0 1 0.5\n0 0 1 0.2 0 1 0 0 -1 0 0 1.0\n",
+    )
+    .unwrap();
+    let (report, sink) =
+        run(&format!("name: k\nnodes:\n  cam: {{ op: kitti_odometry, params: {{ path: '{}' }} }}\n", seq.display()))
+            .unwrap();
+    assert_eq!(report.status, RunStatus::Completed, "{:?}", report.failures);
+    assert_eq!((sink.port("cam", "left").len(), sink.port("cam", "right").len()), (3, 3));
+    let Body::Scalars(s) = &sink.port("cam", "stereo")[0].body else { panic!() };
+    assert!((s.get("baseline_m").unwrap() - 386.1448 / fx).abs() < 1e-9);
+    let Body::CameraInfo(k) = &sink.port("cam", "camera_info")[0].body else { panic!() };
+    assert_eq!((k.fx, k.cx, k.cy, k.width), (fx, 607.1928, 185.2157, 64));
+    let poses = sink.port("cam", "gt_pose");
+    assert_eq!(poses.len(), 3);
+    let Body::Pose(p) = &poses[2].body else { panic!() };
+    assert!((p.world_from_cam.translation.vector - nalgebra::Vector3::new(0.2, 0.0, 1.0)).norm() < 1e-9);
+    assert!((p.world_from_cam.rotation.angle() - std::f64::consts::FRAC_PI_2).abs() < 1e-9);
+    assert!((sink.port("cam", "left")[1].header.stamp - 0.10363).abs() < 1e-9);
+
+    // Too few poses for the frames: an error naming the pose file.
+    std::fs::write(dir.path().join("dataset/poses/07.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n").unwrap();
+    let e =
+        run(&format!("name: k\nnodes:\n  cam: {{ op: kitti_odometry, params: {{ path: '{}' }} }}\n", seq.display()))
+            .unwrap_err()
+            .to_string();
+    assert!(e.contains("07.txt") && e.contains("1 poses for 3 frames"), "{e}");
+}

@@ -16,7 +16,7 @@ fn check(file: &str, expected: &[Expect]) {
     let path = common::repo().join("tests/graphs/invalid").join(file);
     let text = std::fs::read_to_string(&path).unwrap();
     let req = LoadRequest { all_variants: true, ..LoadRequest::default() };
-    let loaded = load_str(file, &text, None, &dynaflow_operators::registry(), &req);
+    let loaded = load_str(file, &text, None, &dynaflow::registry(), &req);
     let errors: Vec<(usize, usize, &str, String)> = loaded
         .diagnostics
         .iter()
@@ -161,7 +161,7 @@ fn bad_set_override_points_at_the_node() {
 #[test]
 fn unused_outputs_are_warnings() {
     let text = "name: w\nnodes:\n  camera: { op: test_pattern, record: { image: none } }\n  p: { op: passthrough, in: { input: camera.tick } }\n";
-    let loaded = load_str("w.yaml", text, None, &dynaflow_operators::registry(), &LoadRequest::default());
+    let loaded = load_str("w.yaml", text, None, &dynaflow::registry(), &LoadRequest::default());
     assert!(loaded.graph.is_some());
     let w: Vec<_> = loaded.diagnostics.iter().filter(|d| d.severity == Severity::Warning).collect();
     assert_eq!(w.len(), 1, "{w:?}");
@@ -187,7 +187,7 @@ fn assert_sane(text: &str) {
         "fuzz.yaml",
         text,
         None,
-        &dynaflow_operators::registry(),
+        &dynaflow::registry(),
         &LoadRequest { all_variants: true, ..Default::default() },
     );
     for d in &loaded.diagnostics {

@@ -17,5 +17,6 @@ pub fn registry() -> Registry {
     r.register(synth::SYNTH);
     r.register(decode::TUM_RGBD);
     r.register(decode::IMAGE_FOLDER);
+    r.register(decode::KITTI_ODOMETRY);
     r
 }

@@ -4,16 +4,22 @@
 //!
 //! Modules: `rrd` (rerun), `mcap` (MCAP + Foxglove JSON schemas), `jsonl` (message log),
 //! `payload` (the numeric `dynaflow` object stored with each MCAP message), `encode` (pixel
-//! codecs), `diff` (run comparison).
+//! codecs), `diff` (run comparison), `replay` (the `mcap_replay` source).
 
 pub mod diff;
 mod encode;
 mod jsonl;
 pub mod mcap;
 mod payload;
+pub mod replay;
 mod rrd;
 
 pub use encode::ImageCodec;
 pub use jsonl::MessageLog;
 pub use mcap::McapSink;
 pub use rrd::RrdSink;
+
+/// Register the operators this crate provides (`mcap_replay`).
+pub fn register(registry: &mut dynaflow_engine::op::Registry) {
+    registry.register(replay::MCAP_REPLAY);
+}

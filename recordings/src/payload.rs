@@ -1,11 +1,13 @@
 //! The `dynaflow` object stored with every MCAP message: header, content digest and the
-//! numeric payload `dynaflow diff` compares (never pixels).
+//! numeric payload (never pixels) that `dynaflow diff` compares and `mcap_replay` restores:
+//! complete for every non-image type, so a replayed message equals the recorded one.
 //!
 //! ```json
 //! {"seq": 12, "stamp": 0.4, "frame_id": "camera", "type": "keypoints", "digest": "9f…",
 //!  "data": {"xy": [[10.5, 20.0], …], "octave": [0, …]}}
 //! ```
 
+use base64::Engine as _;
 use dynaflow_engine::msg::{Body, Message};
 use serde_json::{Value, json};
 
@@ -26,12 +28,18 @@ fn data(body: &Body) -> Value {
         Body::Keypoints(k) => json!({
             "xy": k.points.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>(),
             "octave": k.points.iter().map(|p| p.octave).collect::<Vec<_>>(),
+            "size": k.points.iter().map(|p| p.size).collect::<Vec<_>>(),
+            "angle": k.points.iter().map(|p| p.angle).collect::<Vec<_>>(),
+            "response": k.points.iter().map(|p| p.response).collect::<Vec<_>>(),
+            "descriptor_bytes": k.descriptors.as_ref().map(|d| d.bytes_per),
+            "descriptors": k.descriptors.as_ref().map(|d| base64::engine::general_purpose::STANDARD.encode(&d.data)),
         }),
         Body::Tracks(t) => json!({
             "prev_seq": t.prev_seq,
             "id": t.tracks.iter().map(|t| t.id).collect::<Vec<_>>(),
             "prev": t.tracks.iter().map(|t| t.prev).collect::<Vec<_>>(),
             "cur": t.tracks.iter().map(|t| t.cur).collect::<Vec<_>>(),
+            "error": t.tracks.iter().map(|t| t.error).collect::<Vec<_>>(),
         }),
         Body::PointLabels(l) => json!({
             "index": l.labels.iter().map(|l| l.index).collect::<Vec<_>>(),
@@ -64,7 +72,9 @@ fn data(body: &Body) -> Value {
         }
         Body::Image(i) => json!({"width": i.width, "height": i.height}),
         Body::Depth(d) => json!({"width": d.width, "height": d.height}),
-        Body::Mask(m) => json!({"width": m.width, "height": m.height}),
+        Body::Mask(m) => {
+            json!({"width": m.width, "height": m.height, "class_names": m.class_names.iter().map(|n| &**n).collect::<Vec<_>>()})
+        }
         _ => Value::Null,
     }
 }

@@ -12,7 +12,7 @@
 //! | detections | `/<node>/<port>` | `Boxes2D` with class labels |
 //! | mask | `/<node>/<port>` | `SegmentationImage` + `AnnotationContext` |
 //! | point_labels | `/<node>/<port>` | `Points2D` red = dynamic, green = static |
-//! | pose | `/world/<node>/<port>` | `Transform3D` (+ `Pinhole` once intrinsics are known) |
+//! | pose | `/world/<node>/<port>` | `Transform3D` (+ `Pinhole` once intrinsics are known); path so far at `…_path` (`LineStrips3D`) |
 //! | trajectory | `/world/<node>/<port>` | `LineStrips3D` |
 //! | point_cloud | `/world/<node>/<port>` | `Points3D` |
 //! | octree_update | `/world/<node>/<port>` | `Boxes3D` |
@@ -37,7 +37,12 @@ pub struct RrdSink {
     intrinsics: Option<CameraInfo>,
     /// Positions of the latest keypoints/tracks per frame, to place point labels.
     points_by_seq: HashMap<u64, Vec<[f32; 2]>>,
+    /// Positions of each pose stream so far, drawn as a path.
+    trails: HashMap<String, Vec<[f32; 3]>>,
 }
+
+/// A pose stream's path is re-logged every this many poses (each log carries the whole path).
+const TRAIL_EVERY: usize = 10;
 
 impl RrdSink {
     /// A recorder writing to `path`, colour images as JPEG (q 90).
@@ -48,6 +53,7 @@ impl RrdSink {
             codec: ImageCodec::Jpeg(90),
             intrinsics: None,
             points_by_seq: HashMap::new(),
+            trails: HashMap::new(),
         }
     }
 
@@ -181,7 +187,7 @@ impl Sink for RrdSink {
         );
         rec.log_static("provenance", &rerun::TextDocument::new(doc).with_media_type(rerun::MediaType::markdown()))
             .map_err(|e| self.err(e))?;
-        rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Y_DOWN()).map_err(|e| self.err(e))?;
+        rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP()).map_err(|e| self.err(e))?;
         blueprint(info)
             .send(&rec, BlueprintActivation { make_active: true, make_default: true })
             .map_err(|e| self.err(e))?;
@@ -279,6 +285,12 @@ impl Sink for RrdSink {
                     rerun::Quaternion::from_xyzw([q.x as f32, q.y as f32, q.z as f32, q.w as f32]),
                 );
                 rec.log(world.clone(), &tf).map_err(|e| self.err(e))?;
+                let trail = self.trails.entry(world.clone()).or_default();
+                trail.push([t.x as f32, t.y as f32, t.z as f32]);
+                if trail.len() % TRAIL_EVERY == 1 {
+                    rec.log(format!("{world}_path"), &rerun::LineStrips3D::new([trail.clone()]))
+                        .map_err(|e| self.err(e))?;
+                }
                 match &self.intrinsics {
                     Some(c) => rec.log(
                         world,

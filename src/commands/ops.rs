@@ -12,7 +12,7 @@ pub enum Format {
 }
 
 pub fn ops(format: &Format) -> u8 {
-    let registry = dynaflow_operators::registry();
+    let registry = dynaflow::registry();
     let ops: Vec<&OpSpec> = registry.iter().collect();
     match format {
         Format::Json => println!("{}", serde_json::to_string_pretty(&ops).unwrap_or_default()),

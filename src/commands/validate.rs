@@ -8,7 +8,7 @@ use crate::{EXIT_BAD_INPUT, EXIT_OK};
 
 pub fn validate(graphs: &[PathBuf], json: bool) -> u8 {
     let req = LoadRequest { all_variants: true, ..LoadRequest::default() };
-    let registry = dynaflow_operators::registry();
+    let registry = dynaflow::registry();
     let mut bad = false;
     let mut all = Vec::new();
     for path in graphs {

@@ -39,7 +39,7 @@ pub fn graph(text: &str) -> ResolvedGraph {
 }
 
 pub fn graph_with(text: &str, req: &LoadRequest) -> ResolvedGraph {
-    let loaded = load_str("test.yaml", text, None, &dynaflow_operators::registry(), req);
+    let loaded = load_str("test.yaml", text, None, &dynaflow::registry(), req);
     let rendered: Vec<String> = loaded.diagnostics.iter().map(|d| loaded.source.plain(d)).collect();
     loaded.graph.unwrap_or_else(|| panic!("graph invalid:\n{}", rendered.join("\n")))
 }

@@ -193,7 +193,8 @@ pub struct Layout {
     pub params: Vec<(&'static str, String)>,
 }
 
-/// Detect a TUM RGB-D folder or an image folder; the error says what was expected.
+/// Detect a TUM RGB-D folder, a KITTI odometry sequence or an image folder; the error says
+/// what was expected.
 pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, String> {
     if !dir.is_dir() {
         return Err(format!("{}: not a folder", dir.display()));
@@ -207,7 +208,8 @@ pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, Str
         return Ok(Layout { op: "tum_rgbd", params });
     }
     if dir.join("calib.txt").is_file() && dir.join("times.txt").is_file() {
-        return Err(format!("{}: this is a KITTI odometry sequence; dynaflow has no KITTI reader yet", dir.display()));
+        params.retain(|(k, _)| *k != "intrinsics"); // KITTI carries its own calibration
+        return Ok(Layout { op: "kitti_odometry", params });
     }
     for pattern in ["*.png", "*.jpg", "*.jpeg"] {
         if list(dir, pattern).is_ok_and(|l| !l.is_empty()) {
@@ -216,7 +218,7 @@ pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, Str
         }
     }
     Err(format!(
-        "{}: not a TUM RGB-D folder (rgb.txt + depth.txt), nor a folder of images (*.png, *.jpg)",
+        "{}: not a TUM RGB-D folder (rgb.txt + depth.txt), a KITTI odometry sequence (calib.txt + times.txt) or a folder of images (*.png, *.jpg)",
         dir.display()
     ))
 }

@@ -1,0 +1,71 @@
+//! Source throughput: the synthetic scene generator (frames/s at 640×480, noise on), and TUM
+//! decoding of the folder it wrote (colour + depth PNG per frame), side by side with OpenCV's
+//! `cv2.imread` on the same files when a Python with OpenCV is available
+//! (`DYNAFLOW_PEERS` venv, default `/tmp/dynaflow-peers`).
+//!
+//! `cargo bench --bench sources` (add `-- FRAMES`, default 120).
+
+use std::path::Path;
+use std::time::Instant;
+
+use dynaflow_operators::decode::{associate, load_depth, load_rgb, read_index};
+use dynaflow_operators::synth::{Generator, SynthConfig, WriteOptions, write_tum};
+
+fn main() {
+    let frames: u64 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(120);
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    let generator = Generator::new(SynthConfig::default());
+    let _ = generator.frame(0, false);
+    let t = Instant::now();
+    for k in 0..frames {
+        std::hint::black_box(generator.frame(k, false));
+    }
+    let synth = t.elapsed().as_secs_f64();
+    println!("synth: {frames} frames 640x480 (2 people, xyz, Kinect noise, blur), {threads} threads");
+    println!("  render + sensor model : {:6.1} frames/s (goal >= 30)", frames as f64 / synth);
+
+    let dir = std::env::temp_dir().join(format!("dynaflow-bench-src-{}", std::process::id()));
+    let t = Instant::now();
+    write_tum(&generator, &dir, &WriteOptions { frames, flow: false }).expect("write");
+    println!(
+        "  written as TUM folder : {:6.1} frames/s (rgb, depth, mask, instance PNGs)",
+        frames as f64 / t.elapsed().as_secs_f64()
+    );
+
+    let pairs = associate(
+        &read_index(&dir.join("rgb.txt")).expect("rgb.txt"),
+        &read_index(&dir.join("depth.txt")).expect("depth.txt"),
+        0.02,
+    );
+    let t = Instant::now();
+    for p in &pairs {
+        std::hint::black_box(load_rgb(&dir.join(&p.rgb)).expect("rgb"));
+        std::hint::black_box(load_depth(&dir.join(&p.depth), 5000.0).expect("depth"));
+    }
+    let ours = t.elapsed().as_secs_f64();
+    println!("TUM decode: {} frames (colour PNG + 16-bit depth PNG → metres)", pairs.len());
+    println!("  dynaflow (image crate): {:6.1} frames/s", pairs.len() as f64 / ours);
+    let venv = std::env::var("DYNAFLOW_PEERS").unwrap_or_else(|_| "/tmp/dynaflow-peers".into());
+    let python = Path::new(&venv).join("bin/python");
+    let script = r##"
+import sys, time, cv2, numpy as np
+d = sys.argv[1]
+pairs = []
+rgb = [l.split() for l in open(d + "/rgb.txt") if not l.startswith("#")]
+dep = [l.split() for l in open(d + "/depth.txt") if not l.startswith("#")]
+t = time.perf_counter()
+for (_, r), (_, z) in zip(rgb, dep):
+    a = cv2.imread(d + "/" + r, cv2.IMREAD_COLOR)
+    b = cv2.imread(d + "/" + z, cv2.IMREAD_UNCHANGED).astype(np.float32) / 5000.0
+print(len(rgb) / (time.perf_counter() - t))
+"##;
+    match std::process::Command::new(&python).arg("-c").arg(script).arg(&dir).output() {
+        Ok(out) if out.status.success() => {
+            let fps: f64 = String::from_utf8_lossy(&out.stdout).trim().parse().unwrap_or(f64::NAN);
+            println!("  OpenCV cv2.imread     : {fps:6.1} frames/s");
+            println!("  ratio dynaflow / OpenCV: {:.2}x", (pairs.len() as f64 / ours) / fps);
+        }
+        _ => println!("  (OpenCV peer not available: install opencv-python-headless into {venv})"),
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
