@@ -9,7 +9,7 @@ use std::time::Instant;
 use dynaflow_engine::runtime::{self, RunOptions};
 use dynaflow_engine::sink::Sink;
 use dynaflow_engine::{LoadRequest, load};
-use dynaflow_recordings::{McapSink, RrdSink};
+use dynaflow_recordings::{EncodeCache, McapSink, RrdSink};
 
 fn main() {
     let frames: u64 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(150);
@@ -27,9 +27,11 @@ fn main() {
         let t = Instant::now();
         rt.block_on(runtime::run(&graph, options(), Vec::new())).expect("run");
         off.push(t.elapsed().as_secs_f64());
+        // As `dynaflow run` wires them: both recorders share image encodings.
+        let cache = EncodeCache::new(2);
         let sinks: Vec<Box<dyn Sink>> = vec![
-            Box::new(RrdSink::new(out.join(format!("r{round}.rrd")))),
-            Box::new(McapSink::new(out.join(format!("r{round}.mcap")))),
+            Box::new(RrdSink::new(out.join(format!("r{round}.rrd"))).with_cache(cache.clone())),
+            Box::new(McapSink::new(out.join(format!("r{round}.mcap"))).with_cache(cache)),
         ];
         let t = Instant::now();
         rt.block_on(runtime::run(&graph, options(), sinks)).expect("run");

@@ -21,8 +21,16 @@ fn main() {
         std::hint::black_box(generator.frame(k, false));
     }
     let synth = t.elapsed().as_secs_f64();
-    println!("synth: {frames} frames 640x480 (2 people, xyz, Kinect noise, blur), {threads} threads");
-    println!("  render + sensor model : {:6.1} frames/s (goal >= 30)", frames as f64 / synth);
+    let clean =
+        Generator::new(SynthConfig { depth_noise: false, image_noise: 0.0, blur: false, ..SynthConfig::default() });
+    let t = Instant::now();
+    for k in 0..frames {
+        std::hint::black_box(clean.frame(k, false));
+    }
+    let render = t.elapsed().as_secs_f64();
+    println!("synth: {frames} frames 640x480 (2 people, xyz), {threads} threads");
+    println!("  render only (clean)   : {:6.1} frames/s", frames as f64 / render);
+    println!("  render + sensor model : {:6.1} frames/s (Kinect noise, blur; goal >= 30)", frames as f64 / synth);
 
     let dir = std::env::temp_dir().join(format!("dynaflow-bench-src-{}", std::process::id()));
     let t = Instant::now();
@@ -66,6 +74,37 @@ print(len(rgb) / (time.perf_counter() - t))
             println!("  ratio dynaflow / OpenCV: {:.2}x", (pairs.len() as f64 / ours) / fps);
         }
         _ => println!("  (OpenCV peer not available: install opencv-python-headless into {venv})"),
+    }
+    // The same on the real Kinect frames (written by TUM's libpng/zlib, not by us), repeated.
+    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/fixtures/slambook2_rgbd_pair");
+    let reps = 50;
+    let t = Instant::now();
+    for _ in 0..reps {
+        for f in ["1.png", "2.png"] {
+            std::hint::black_box(load_rgb(&real.join("rgb").join(f)).expect("rgb"));
+            std::hint::black_box(load_depth(&real.join("depth").join(f), 5000.0).expect("depth"));
+        }
+    }
+    let ours_real = (2 * reps) as f64 / t.elapsed().as_secs_f64();
+    println!("TUM decode of real TUM PNGs (tests/fixtures/slambook2_rgbd_pair, {} frames)", 2 * reps);
+    println!("  dynaflow (image crate): {ours_real:6.1} frames/s");
+    let script_real = r##"
+import sys, time, cv2, numpy as np
+d, reps = sys.argv[1], int(sys.argv[2])
+t = time.perf_counter()
+for _ in range(reps):
+    for f in ("1.png", "2.png"):
+        a = cv2.imread(d + "/rgb/" + f, cv2.IMREAD_COLOR)
+        b = cv2.imread(d + "/depth/" + f, cv2.IMREAD_UNCHANGED).astype(np.float32) / 5000.0
+print(2 * reps / (time.perf_counter() - t))
+"##;
+    match std::process::Command::new(&python).arg("-c").arg(script_real).arg(&real).arg(reps.to_string()).output() {
+        Ok(out) if out.status.success() => {
+            let fps: f64 = String::from_utf8_lossy(&out.stdout).trim().parse().unwrap_or(f64::NAN);
+            println!("  OpenCV cv2.imread     : {fps:6.1} frames/s");
+            println!("  ratio dynaflow / OpenCV: {:.2}x", ours_real / fps);
+        }
+        _ => println!("  (OpenCV peer not available)"),
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -16,6 +16,7 @@ pub enum ImageCodec {
 }
 
 /// An encoded image: bytes plus the format name (`jpeg` or `png`).
+#[derive(Debug)]
 pub struct Encoded {
     /// File contents.
     pub bytes: Vec<u8>,
@@ -72,5 +73,74 @@ pub fn mask_png(mask: &SegmentationMask) -> Result<Encoded, String> {
     } else {
         let bytes: Vec<u8> = mask.classes.iter().flat_map(|c| c.to_ne_bytes()).collect();
         png(&bytes, mask.width, mask.height, ExtendedColorType::L16)
+    }
+}
+
+/// Encodings shared between recorders: the rerun and MCAP recorders both store colour images
+/// as JPEG/PNG and depth as 16-bit PNG; with a shared cache each message is encoded once.
+///
+/// Entries are keyed by the message's address (both recorders receive the same `Arc`, so the
+/// address cannot be reused while an entry is pending) plus frame and kind, and removed once
+/// every user has taken them; a bounded size guards against a recorder that stopped.
+#[derive(Clone, Debug, Default)]
+pub struct EncodeCache {
+    inner: std::sync::Arc<std::sync::Mutex<CacheState>>,
+    users: usize,
+}
+
+type Slot = std::sync::Arc<std::sync::OnceLock<Result<std::sync::Arc<Encoded>, String>>>;
+
+#[derive(Debug, Default)]
+struct CacheState {
+    entries: std::collections::HashMap<(usize, u64, u8), (Slot, usize)>,
+    order: std::collections::VecDeque<(usize, u64, u8)>,
+}
+
+/// Most pending encodings kept (frames × kinds) before the oldest are dropped.
+const CACHE_CAPACITY: usize = 256;
+
+impl EncodeCache {
+    /// A cache shared by `users` recorders.
+    pub fn new(users: usize) -> Self {
+        Self { inner: std::sync::Arc::default(), users }
+    }
+
+    /// The encoding of `msg` (kind `kind`), computed by `encode` by the first user to ask.
+    pub fn get_or_encode(
+        &self,
+        msg: &dynaflow_engine::msg::Message,
+        kind: u8,
+        encode: impl FnOnce() -> Result<Encoded, String>,
+    ) -> Result<std::sync::Arc<Encoded>, String> {
+        if self.users <= 1 {
+            return encode().map(std::sync::Arc::new);
+        }
+        let key = (std::ptr::from_ref(msg) as usize, msg.header.seq, kind);
+        let slot = {
+            let mut st = self.inner.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            let slot = match st.entries.get_mut(&key) {
+                Some((slot, taken)) => {
+                    *taken += 1;
+                    slot.clone()
+                }
+                None => {
+                    let slot: Slot = std::sync::Arc::default();
+                    st.entries.insert(key, (slot.clone(), 1));
+                    st.order.push_back(key);
+                    while st.order.len() > CACHE_CAPACITY {
+                        if let Some(old) = st.order.pop_front() {
+                            st.entries.remove(&old);
+                        }
+                    }
+                    slot
+                }
+            };
+            if st.entries.get(&key).is_some_and(|(_, taken)| *taken >= self.users) {
+                st.entries.remove(&key);
+                st.order.retain(|k| *k != key);
+            }
+            slot
+        };
+        slot.get_or_init(|| encode().map(std::sync::Arc::new)).clone()
     }
 }

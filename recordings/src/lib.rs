@@ -14,7 +14,7 @@ mod payload;
 pub mod replay;
 mod rrd;
 
-pub use encode::ImageCodec;
+pub use encode::{EncodeCache, ImageCodec};
 pub use jsonl::MessageLog;
 pub use mcap::McapSink;
 pub use rrd::RrdSink;

@@ -27,7 +27,7 @@ use rerun::blueprint::{
     Blueprint, BlueprintActivation, ContainerLike, Horizontal, Spatial2DView, Spatial3DView, TimeSeriesView, Vertical,
 };
 
-use crate::encode::{self, ImageCodec};
+use crate::encode::{self, EncodeCache, ImageCodec};
 
 /// Writes `<out>/<graph>.rrd`.
 pub struct RrdSink {
@@ -39,6 +39,7 @@ pub struct RrdSink {
     points_by_seq: HashMap<u64, Vec<[f32; 2]>>,
     /// Positions of each pose stream so far, drawn as a path.
     trails: HashMap<String, Vec<[f32; 3]>>,
+    cache: EncodeCache,
 }
 
 /// A pose stream's path is re-logged every this many poses (each log carries the whole path).
@@ -54,7 +55,15 @@ impl RrdSink {
             intrinsics: None,
             points_by_seq: HashMap::new(),
             trails: HashMap::new(),
+            cache: EncodeCache::default(),
         }
+    }
+
+    /// Share image encodings with other recorders (the MCAP recorder).
+    #[must_use]
+    pub fn with_cache(mut self, cache: EncodeCache) -> Self {
+        self.cache = cache;
+        self
     }
 
     /// How colour images are stored.
@@ -203,9 +212,10 @@ impl Sink for RrdSink {
         let world = format!("world/{node}/{port}");
         let r = match &msg.body {
             Body::Image(img) => {
-                let e = encode::image(img, self.codec).map_err(|e| self.err(e))?;
+                let codec = self.codec;
+                let e = self.cache.get_or_encode(msg, 0, || encode::image(img, codec)).map_err(|e| self.err(e))?;
                 let media = if e.format == "jpeg" { rerun::MediaType::jpeg() } else { rerun::MediaType::png() };
-                rec.log(path, &rerun::EncodedImage::from_file_contents(e.bytes).with_media_type(media))
+                rec.log(path, &rerun::EncodedImage::from_file_contents(e.bytes.clone()).with_media_type(media))
             }
             Body::Depth(d) => {
                 // 16-bit PNG in millimetres: lossless at the sensor's resolution, ~10x smaller than f32.

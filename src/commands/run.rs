@@ -9,7 +9,7 @@ use dynaflow_engine::sink::{DigestSink, Sink};
 use dynaflow_engine::spec::Override;
 use dynaflow_engine::{LoadRequest, SourceOverride};
 use dynaflow_recordings::mcap::DEFAULT_FLUSH_INTERVAL;
-use dynaflow_recordings::{ImageCodec, McapSink, MessageLog, RrdSink};
+use dynaflow_recordings::{EncodeCache, ImageCodec, McapSink, MessageLog, RrdSink};
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, RunArgs};
 
@@ -52,14 +52,19 @@ pub fn run(args: &RunArgs) -> u8 {
     };
 
     let codec = if args.image_format == "png" { ImageCodec::Png } else { ImageCodec::Jpeg(90) };
+    let image_recorders = args.record.iter().filter(|r| matches!(r.trim(), "rrd" | "mcap")).count();
+    let cache = EncodeCache::new(image_recorders);
     let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
     for r in &args.record {
         match r.trim() {
             "jsonl" => sinks.push(Box::new(MessageLog::new(args.out.join(format!("{stem}.messages.jsonl"))))),
-            "rrd" => sinks.push(Box::new(RrdSink::new(args.out.join(format!("{stem}.rrd"))).with_codec(codec))),
+            "rrd" => sinks.push(Box::new(
+                RrdSink::new(args.out.join(format!("{stem}.rrd"))).with_codec(codec).with_cache(cache.clone()),
+            )),
             "mcap" => sinks.push(Box::new(
                 McapSink::new(args.out.join(format!("{stem}.mcap")))
                     .with_codec(codec)
+                    .with_cache(cache.clone())
                     .with_chunking(args.mcap_chunk_kib.saturating_mul(1024), DEFAULT_FLUSH_INTERVAL),
             )),
             "none" | "" => {}

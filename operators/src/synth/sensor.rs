@@ -13,69 +13,107 @@ pub const MAX_RANGE: f32 = 6.0;
 /// A depth step above this between neighbours marks an edge where holes appear.
 const EDGE_STEP_M: f32 = 0.15;
 
-/// Deterministic per-pixel randomness: uniform in `[0, 1)`.
-fn uniform(seed: u32, frame: u32, idx: u32, salt: u32) -> f32 {
-    (hash(hash(seed ^ hash(frame ^ salt)) ^ idx) >> 8) as f32 / (1u32 << 24) as f32
+/// A per-pixel 32-bit random word, deterministic in (seed, frame, pixel, salt).
+fn word(seed: u32, frame: u32, idx: u32, salt: u32) -> u32 {
+    hash(hash(seed ^ hash(frame.wrapping_mul(0x9e37_79b9) ^ salt)) ^ idx)
 }
 
-/// Approximately standard normal (sum of four uniforms, scaled to unit variance).
-fn normal(seed: u32, frame: u32, idx: u32) -> f32 {
-    let s: f32 = (0..4).map(|k| uniform(seed, frame, idx, 0x100 + k)).sum();
-    (s - 2.0) * (3.0f32).sqrt()
+/// Uniform in `[0, 1)` from a random word.
+fn uniform(w: u32) -> f32 {
+    (w >> 8) as f32 / (1u32 << 24) as f32
+}
+
+/// Approximately standard normal from one random word: the sum of its four bytes (an
+/// Irwin–Hall(4) variable), centred and scaled to unit variance.
+fn normal(w: u32) -> f32 {
+    let s = (w & 0xff) + ((w >> 8) & 0xff) + ((w >> 16) & 0xff) + (w >> 24);
+    // Mean 4·127.5, variance 4·(256² − 1)/12.
+    (s as f32 - 510.0) / 147.8
+}
+
+/// Run `f(first_row, rows)` over bands of rows on all cores.
+fn par_rows<T: Send>(out: &mut [T], width: usize, f: impl Fn(usize, &mut [T]) + Sync) {
+    let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get).clamp(1, 8);
+    let rows = out.len() / width.max(1);
+    let per = rows.div_ceil(threads).max(1);
+    std::thread::scope(|s| {
+        for (band, chunk) in out.chunks_mut(per * width).enumerate() {
+            let f = &f;
+            s.spawn(move || f(band * per, chunk));
+        }
+    });
 }
 
 /// Kinect-like depth from true depth.
 pub fn kinect_depth(truth: &[f32], width: usize, seed: u32, frame: u32) -> Vec<f32> {
     let mut out = vec![0.0f32; truth.len()];
-    for (i, (&z, o)) in truth.iter().zip(out.iter_mut()).enumerate() {
-        if !(MIN_RANGE..=MAX_RANGE).contains(&z) {
-            continue;
+    par_rows(&mut out, width, |row0, chunk| {
+        for (j, o) in chunk.iter_mut().enumerate() {
+            let i = row0 * width + j;
+            let z = truth.get(i).copied().unwrap_or(0.0);
+            if !(MIN_RANGE..=MAX_RANGE).contains(&z) {
+                continue;
+            }
+            let neighbour = |k: Option<usize>| k.and_then(|k| truth.get(k)).map_or(0.0, |&n| (n - z).abs());
+            let edge = [i.checked_sub(1), Some(i + 1), i.checked_sub(width), Some(i + width)]
+                .into_iter()
+                .any(|k| neighbour(k) > EDGE_STEP_M);
+            let r = uniform(word(seed, frame, i as u32, 1));
+            if (edge && r < 0.6) || r < 0.004 {
+                continue;
+            }
+            let n = normal(word(seed, frame, i as u32, 2));
+            let noisy = f64::from(z) + f64::from(n) * 0.0015 * f64::from(z) * f64::from(z);
+            let disparity = (DISPARITY_C / noisy).round().max(1.0);
+            *o = (DISPARITY_C / disparity) as f32;
         }
-        let neighbour = |j: Option<usize>| j.and_then(|j| truth.get(j)).map_or(0.0, |&n| (n - z).abs());
-        let edge = [i.checked_sub(1), Some(i + 1), i.checked_sub(width), Some(i + width)]
-            .into_iter()
-            .any(|j| neighbour(j) > EDGE_STEP_M);
-        let r = uniform(seed, frame, i as u32, 1);
-        if (edge && r < 0.6) || r < 0.004 {
-            continue;
-        }
-        let noisy = f64::from(z) + f64::from(normal(seed, frame, i as u32)) * 0.0015 * f64::from(z) * f64::from(z);
-        let disparity = (DISPARITY_C / noisy).round().max(1.0);
-        *o = (DISPARITY_C / disparity) as f32;
-    }
+    });
     out
 }
 
-/// Gaussian-like pixel noise (σ in grey levels) and an optional 3×3 binomial blur.
+/// Gaussian-like pixel noise (σ in grey levels) and an optional 3×3 binomial blur
+/// (separable: a horizontal [1 2 1] pass, then a vertical one with the noise).
 pub fn camera_image(rgb: &[u8], width: usize, height: usize, sigma: f32, blur: bool, seed: u32, frame: u32) -> Vec<u8> {
-    let src: Vec<u8> = if blur {
-        let mut b = vec![0u8; rgb.len()];
-        for y in 0..height {
-            for x in 0..width {
-                for c in 0..3 {
-                    let mut acc = 0u32;
-                    for (dy, wy) in [(-1i64, 1u32), (0, 2), (1, 1)] {
-                        for (dx, wx) in [(-1i64, 1u32), (0, 2), (1, 1)] {
-                            let yy = (y as i64 + dy).clamp(0, height as i64 - 1) as usize;
-                            let xx = (x as i64 + dx).clamp(0, width as i64 - 1) as usize;
-                            acc += u32::from(rgb.get((yy * width + xx) * 3 + c).copied().unwrap_or(0)) * wy * wx;
+    let stride = width * 3;
+    let mut horizontal = vec![0u16; rgb.len()];
+    if blur {
+        par_rows(&mut horizontal, stride, |row0, chunk| {
+            for (r, line) in chunk.chunks_mut(stride).enumerate() {
+                let src = rgb.get((row0 + r) * stride..(row0 + r + 1) * stride).unwrap_or(&[]);
+                for x in 0..width {
+                    let (xm, xp) = (x.saturating_sub(1), (x + 1).min(width - 1));
+                    for c in 0..3 {
+                        let at = |xx: usize| u16::from(src.get(xx * 3 + c).copied().unwrap_or(0));
+                        if let Some(o) = line.get_mut(x * 3 + c) {
+                            *o = at(xm) + 2 * at(x) + at(xp);
                         }
-                    }
-                    if let Some(p) = b.get_mut((y * width + x) * 3 + c) {
-                        *p = ((acc + 8) / 16) as u8;
                     }
                 }
             }
-        }
-        b
-    } else {
-        rgb.to_vec()
-    };
-    if sigma <= 0.0 {
-        return src;
+        });
     }
-    src.iter()
-        .enumerate()
-        .map(|(i, &v)| (f32::from(v) + normal(seed ^ 0x1a9e, frame, i as u32) * sigma).round().clamp(0.0, 255.0) as u8)
-        .collect()
+    let mut out = vec![0u8; rgb.len()];
+    par_rows(&mut out, stride, |row0, chunk| {
+        for (r, line) in chunk.chunks_mut(stride).enumerate() {
+            let y = row0 + r;
+            let row = |yy: usize| horizontal.get(yy * stride..(yy + 1) * stride).unwrap_or(&[]);
+            let (above, here, below) = (row(y.saturating_sub(1)), row(y), row((y + 1).min(height.saturating_sub(1))));
+            let plain = rgb.get(y * stride..(y + 1) * stride).unwrap_or(&[]);
+            for (i, o) in line.iter_mut().enumerate() {
+                let v = if blur {
+                    let g = |s: &[u16]| u32::from(s.get(i).copied().unwrap_or(0));
+                    ((g(above) + 2 * g(here) + g(below) + 8) / 16) as f32
+                } else {
+                    f32::from(plain.get(i).copied().unwrap_or(0))
+                };
+                let noisy = if sigma > 0.0 {
+                    v + normal(word(seed ^ 0x1a9e, frame, (y * stride + i) as u32, 3)) * sigma
+                } else {
+                    v
+                };
+                *o = noisy.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    });
+    out
 }

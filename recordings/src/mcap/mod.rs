@@ -18,7 +18,7 @@ use std::time::{Duration, Instant};
 use dynaflow_engine::msg::Message;
 use dynaflow_engine::sink::{RunInfo, Sink, SinkError};
 
-use crate::encode::ImageCodec;
+use crate::encode::{EncodeCache, ImageCodec};
 
 /// Default chunk size bound (bytes before compression).
 pub const DEFAULT_CHUNK_SIZE: u64 = 1 << 20;
@@ -35,6 +35,7 @@ pub struct McapSink {
     chunk_size: u64,
     flush_interval: Duration,
     last_flush: Instant,
+    cache: EncodeCache,
 }
 
 impl McapSink {
@@ -49,7 +50,15 @@ impl McapSink {
             chunk_size: DEFAULT_CHUNK_SIZE,
             flush_interval: DEFAULT_FLUSH_INTERVAL,
             last_flush: Instant::now(),
+            cache: EncodeCache::default(),
         }
+    }
+
+    /// Share image encodings with other recorders (the rerun recorder).
+    #[must_use]
+    pub fn with_cache(mut self, cache: EncodeCache) -> Self {
+        self.cache = cache;
+        self
     }
 
     /// Bound chunk size and age (how much a crash can lose).
@@ -116,7 +125,8 @@ impl Sink for McapSink {
 
     fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError> {
         let channel_id = self.channel(node, port, msg)?;
-        let json = schemas::to_json(msg, self.codec).map_err(|e| self.err(format!("encoding {node}/{port}: {e}")))?;
+        let json = schemas::to_json(msg, self.codec, &self.cache)
+            .map_err(|e| self.err(format!("encoding {node}/{port}: {e}")))?;
         let data = serde_json::to_vec(&json).map_err(|e| self.err(e))?;
         let ns = (msg.header.stamp.max(0.0) * 1e9) as u64;
         let header = mcap::records::MessageHeader {

@@ -9,7 +9,7 @@ use base64::Engine as _;
 use dynaflow_engine::msg::{Body, Message, PortType};
 use serde_json::{Value, json};
 
-use crate::encode::{self, ImageCodec};
+use crate::encode::{self, EncodeCache, ImageCodec};
 use crate::payload::payload;
 
 /// The schema name used for a port type.
@@ -85,16 +85,16 @@ fn pose_json(iso: &nalgebra::Isometry3<f64>) -> Value {
 }
 
 /// Encode a message as its Foxglove JSON object.
-pub fn to_json(msg: &Message, codec: ImageCodec) -> Result<Value, String> {
+pub fn to_json(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Result<Value, String> {
     let ts = time(msg.header.stamp);
     let frame_id = &*msg.header.frame_id;
     let mut v = match &msg.body {
         Body::Image(img) => {
-            let e = encode::image(img, codec)?;
+            let e = cache.get_or_encode(msg, 0, || encode::image(img, codec))?;
             json!({"timestamp": ts, "frame_id": frame_id, "data": b64(&e.bytes), "format": e.format})
         }
         Body::Depth(d) => {
-            let e = encode::depth_png_mm(d)?;
+            let e = cache.get_or_encode(msg, 1, || encode::depth_png_mm(d))?;
             json!({"timestamp": ts, "frame_id": frame_id, "data": b64(&e.bytes), "format": "png"})
         }
         Body::Mask(m) => {
