@@ -57,6 +57,26 @@ fn rerun_rrd(rerun: &Path, args: &[&str], file: &Path) -> std::process::Output {
         .unwrap()
 }
 
+/// Check `rrd` with `rerun rrd verify` and read `mcap` end to end with the Python reader (CRCs
+/// validated), when the peers are installed; returns the reader's output.
+fn peers_accept(rrd: &Path, mcap: &Path) -> Option<String> {
+    if let Some(rerun) = peer("rerun") {
+        let out = rerun_rrd(&rerun, &["verify"], rrd);
+        let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
+        assert!(out.status.success(), "rerun rrd verify {}: {log}", rrd.display());
+    }
+    let python = peer("python")?;
+    let out = Command::new(python).arg(common::repo().join("tests/peers/check_mcap.py")).arg(mcap).output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "python mcap reader {}: {stdout}{}",
+        mcap.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    Some(stdout)
+}
+
 #[test]
 fn default_run_writes_complete_rrd_and_mcap() {
     let dir = common::TempDir::new("rec");
@@ -98,28 +118,7 @@ fn default_run_writes_complete_rrd_and_mcap() {
     assert_eq!(n, rec.topics.values().map(|t| t.frames.len()).sum::<usize>());
     let rrd = dir.path().join("engine_smoke.rrd");
     assert!(std::fs::metadata(&rrd).unwrap().len() > 10_000);
-    if let Some(rerun) = peer("rerun") {
-        let out = rerun_rrd(&rerun, &["verify"], &rrd);
-        assert!(
-            out.status.success(),
-            "rerun rrd verify failed: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-    if let Some(python) = peer("python") {
-        let out = Command::new(python)
-            .arg(common::repo().join("tests/peers/check_mcap.py"))
-            .arg(dir.path().join("engine_smoke.mcap"))
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "python mcap reader: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let stdout = String::from_utf8_lossy(&out.stdout);
+    if let Some(stdout) = peers_accept(&rrd, &dir.path().join("engine_smoke.mcap")) {
         assert!(stdout.contains(&format!("messages {n}")), "{stdout}");
     }
 }
@@ -306,28 +305,7 @@ fn default_synthetic_scene_recording_verifies() {
         assert_eq!(rec.topics[topic].schema, schema, "{topic}");
         assert_eq!(rec.topics[topic].frames.len(), 30, "{topic}");
     }
-    if let Some(rerun) = peer("rerun") {
-        let out = rerun_rrd(&rerun, &["verify"], &dir.path().join("default.rrd"));
-        assert!(
-            out.status.success(),
-            "rerun rrd verify: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
-    if let Some(python) = peer("python") {
-        let out = Command::new(python)
-            .arg(common::repo().join("tests/peers/check_mcap.py"))
-            .arg(dir.path().join("default.mcap"))
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "python mcap reader: {}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        );
-    }
+    peers_accept(&dir.path().join("default.rrd"), &dir.path().join("default.mcap"));
 }
 
 #[test]
