@@ -26,7 +26,8 @@ pub use tum::{WriteOptions, write_tum};
 use nalgebra::{Isometry3, Point3};
 
 /// TUM fr3 intrinsics: what the generated camera uses, so `tum_rgbd` reads it back with `fr3`.
-pub const FR3: Intrinsics = Intrinsics { width: 640, height: 480, fx: 535.4, fy: 539.2, cx: 320.1, cy: 247.6 };
+pub const FR3: Intrinsics =
+    Intrinsics { width: 640, height: 480, fx: 535.4, fy: 539.2, cx: 320.1, cy: 247.6, distortion: [0.0; 5] };
 /// First timestamp (seconds), in the range of TUM's Unix-time stamps.
 pub const STAMP_BASE: f64 = 1_700_000_000.0;
 
@@ -79,6 +80,7 @@ pub fn scaled_fr3(width: u32, height: u32) -> Intrinsics {
         fy: FR3.fy * sy,
         cx: (FR3.cx + 0.5) * sx - 0.5,
         cy: (FR3.cy + 0.5) * sy - 0.5,
+        distortion: [0.0; 5],
     }
 }
 

@@ -2,9 +2,7 @@
 
 use std::sync::Arc;
 
-use dynaflow_engine::msg::{
-    Body, CameraInfo, DepthImage, Header, Image, PixelFormat, PortType, Pose, SegmentationMask,
-};
+use dynaflow_engine::msg::{Body, DepthImage, Header, Image, PixelFormat, PortType, Pose, SegmentationMask};
 use dynaflow_engine::op::{
     Context, Default, Instance, OpError, OpKind, OpSpec, Outputs, ParamSpec, ParamType, Params, PortSpec, Source,
 };
@@ -141,18 +139,10 @@ impl Source for SynthSource {
             return Ok(None);
         }
         let f = self.generator.frame(seq, false);
-        let k = self.generator.config().intrinsics;
+        let k = &self.generator.config().intrinsics;
         let header = Header { seq, stamp: f.stamp, frame_id: self.frame_id.clone() };
         let world = Header { frame_id: "world".into(), ..header.clone() };
-        let info = CameraInfo {
-            width: k.width,
-            height: k.height,
-            fx: k.fx,
-            fy: k.fy,
-            cx: k.cx,
-            cy: k.cy,
-            distortion: [0.0; 5],
-        };
+        let info = k.clone();
         let mask = SegmentationMask {
             width: k.width,
             height: k.height,

@@ -8,22 +8,8 @@ use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 use super::scene::{Kind, Part, ROOM_HALF_DEPTH, ROOM_HALF_WIDTH, ROOM_HEIGHT, Scene};
 use super::texture::Texture;
 
-/// Pinhole intrinsics of the rendered camera (no distortion).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Intrinsics {
-    /// Width in pixels.
-    pub width: u32,
-    /// Height in pixels.
-    pub height: u32,
-    /// Focal length x.
-    pub fx: f64,
-    /// Focal length y.
-    pub fy: f64,
-    /// Principal point x.
-    pub cx: f64,
-    /// Principal point y.
-    pub cy: f64,
-}
+/// The rendered camera: a pinhole without distortion.
+pub type Intrinsics = dynaflow_engine::msg::CameraInfo;
 
 /// What a pixel's ray hit, for ground-truth flow.
 #[derive(Clone, Copy, Debug, Default)]

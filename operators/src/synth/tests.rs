@@ -19,7 +19,7 @@ fn small(motion: Motion, noise: bool) -> Generator {
 /// must agree with frame k + 5's depth on static pixels.
 fn reprojection_errors(g: &Generator, k: u64, step: u64) -> Vec<f64> {
     let (a, b) = (g.frame(k, false), g.frame(k + step, false));
-    let c = g.config().intrinsics;
+    let c = &g.config().intrinsics;
     let (w, h) = (c.width as usize, c.height as usize);
     let cam_b_from_cam_a = b.world_from_cam.inverse() * a.world_from_cam;
     let mut errors = Vec::new();
@@ -72,7 +72,7 @@ fn static_flow_matches_reprojection_and_people_move() {
     let g = small(Motion::Xyz, false);
     let f = g.frame(30, true);
     let flow = f.flow.as_ref().unwrap();
-    let c = g.config().intrinsics;
+    let c = &g.config().intrinsics;
     let next = g.pose(31).inverse() * g.pose(30);
     let (mut checked, mut person_moving) = (0, 0);
     for (i, fl) in flow.iter().enumerate() {

@@ -94,7 +94,7 @@ fn write_frame(dir: &Path, f: &Frame, w: u32, h: u32) -> Result<(), WriteError> 
 /// Write `opts.frames` frames of `generator` to `dir` in the TUM layout.
 pub fn write_tum(generator: &Generator, dir: &Path, opts: &WriteOptions) -> Result<(), WriteError> {
     let c = generator.config();
-    let k = c.intrinsics;
+    let k = &c.intrinsics;
     for sub in ["rgb", "depth", "mask", "instance"].iter().chain(opts.flow.then_some(&"flow")) {
         fs::create_dir_all(dir.join(sub)).map_err(|e| err(&dir.join(sub), e))?;
     }
