@@ -199,8 +199,8 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     drop(tap_tx);
 
     let mut node_metrics = Vec::new();
-    for (task, node) in tasks.into_iter().zip(&graph.nodes) {
-        match task.await {
+    for (joined, node) in futures::future::join_all(tasks).await.into_iter().zip(&graph.nodes) {
+        match joined {
             Ok(m) => node_metrics.push(m),
             Err(e) => {
                 failures
