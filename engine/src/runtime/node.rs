@@ -42,6 +42,11 @@ struct Slot {
     frontier: Option<u64>,
 }
 
+/// A caught panic as an operator error.
+fn caught<R>(r: std::thread::Result<Result<R, OpError>>) -> Result<R, OpError> {
+    r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p)))))
+}
+
 fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
     payload
         .downcast_ref::<&str>()
@@ -74,27 +79,42 @@ impl NodeTask {
 
     async fn call_source(
         &mut self,
-        mut src: Box<dyn Source>,
+        src: Box<dyn Source>,
         seq: u64,
     ) -> (Box<dyn Source>, Result<Option<OpOutputs>, OpError>) {
-        if self.node.op.cpu_heavy {
-            let stand_in = placeholder_ctx(&self.ctx);
-            let mut ctx = std::mem::replace(&mut self.ctx, stand_in);
-            let joined = tokio::task::spawn_blocking(move || {
-                let r = std::panic::catch_unwind(AssertUnwindSafe(|| src.next(&mut ctx, seq)));
-                (src, ctx, r)
-            })
-            .await;
-            match joined {
-                Ok((src, ctx, r)) => {
-                    self.ctx = ctx;
-                    (src, r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p))))))
-                }
-                Err(e) => (Box::new(Ended), Err(OpError::Failed(format!("task failed: {e}")))),
+        let (back, r) = self.invoke(src, move |s, ctx| s.next(ctx, seq)).await;
+        (back.unwrap_or_else(|| Box::new(Ended)), r)
+    }
+
+    /// Call `f` on the operator: inline, or on the blocking pool when the op is CPU-heavy (the
+    /// operator and its context travel there and back). Panics become errors; the operator is
+    /// `None` only if its blocking task was lost.
+    async fn invoke<T, R>(
+        &mut self,
+        mut obj: T,
+        f: impl FnOnce(&mut T, &mut Context) -> Result<R, OpError> + Send + 'static,
+    ) -> (Option<T>, Result<R, OpError>)
+    where
+        T: Send + 'static,
+        R: Send + 'static,
+    {
+        if !self.node.op.cpu_heavy {
+            let r = std::panic::catch_unwind(AssertUnwindSafe(|| f(&mut obj, &mut self.ctx)));
+            return (Some(obj), caught(r));
+        }
+        let stand_in = placeholder_ctx(&self.ctx);
+        let mut ctx = std::mem::replace(&mut self.ctx, stand_in);
+        let joined = tokio::task::spawn_blocking(move || {
+            let r = std::panic::catch_unwind(AssertUnwindSafe(|| f(&mut obj, &mut ctx)));
+            (obj, ctx, r)
+        })
+        .await;
+        match joined {
+            Ok((obj, ctx, r)) => {
+                self.ctx = ctx;
+                (Some(obj), caught(r))
             }
-        } else {
-            let r = std::panic::catch_unwind(AssertUnwindSafe(|| src.next(&mut self.ctx, seq)));
-            (src, r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p))))))
+            Err(e) => (None, Err(OpError::Failed(format!("task failed: {e}")))),
         }
     }
 
@@ -272,27 +292,9 @@ impl NodeTask {
         op: Option<Box<dyn Operator>>,
         inputs: Inputs,
     ) -> (Option<Box<dyn Operator>>, Result<OpOutputs, OpError>) {
-        let Some(mut op) = op else {
-            return (None, Ok(OpOutputs::new()));
-        };
-        if self.node.op.cpu_heavy {
-            let stand_in = placeholder_ctx(&self.ctx);
-            let mut ctx = std::mem::replace(&mut self.ctx, stand_in);
-            let joined = tokio::task::spawn_blocking(move || {
-                let r = std::panic::catch_unwind(AssertUnwindSafe(|| op.process(&mut ctx, &inputs)));
-                (op, ctx, r)
-            })
-            .await;
-            match joined {
-                Ok((op, ctx, r)) => {
-                    self.ctx = ctx;
-                    (Some(op), r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p))))))
-                }
-                Err(e) => (None, Err(OpError::Failed(format!("task failed: {e}")))),
-            }
-        } else {
-            let r = std::panic::catch_unwind(AssertUnwindSafe(|| op.process(&mut self.ctx, &inputs)));
-            (Some(op), r.unwrap_or_else(|p| Err(OpError::Failed(format!("panicked: {}", panic_message(&*p))))))
+        match op {
+            Some(op) => self.invoke(op, move |o, ctx| o.process(ctx, &inputs)).await,
+            None => (None, Ok(OpOutputs::new())),
         }
     }
 
