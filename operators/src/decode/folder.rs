@@ -9,7 +9,7 @@ use dynaflow_engine::op::{
     Context, Default, Instance, OpError, OpKind, OpSpec, Outputs, ParamSpec, ParamType, Params, PortSpec, Source,
 };
 
-use super::intrinsics::Intrinsics;
+use super::intrinsics::{Intrinsics, read_calibration};
 use super::png::{load_depth, load_rgb};
 
 #[derive(Debug, serde::Deserialize)]
@@ -123,17 +123,15 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         Some(d)
     };
     let intrinsics = if c.intrinsics == "auto" {
-        let calib = dir.join("calibration.txt");
-        let text = std::fs::read_to_string(&calib).map_err(|_| OpError::Config {
-            key: "intrinsics".into(),
-            message: format!(
-                "{}: no calibration.txt; set `intrinsics: fx,fy,cx,cy` (or `--intrinsics`)",
-                dir.display()
-            ),
-        })?;
-        let line = text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#')).unwrap_or("");
-        Intrinsics::parse(line)
-            .map_err(|e| OpError::Config { key: "intrinsics".into(), message: format!("{}: {e}", calib.display()) })?
+        read_calibration(&dir).unwrap_or_else(|| {
+            Err(OpError::Config {
+                key: "intrinsics".into(),
+                message: format!(
+                    "{}: no calibration.txt; set `intrinsics: fx,fy,cx,cy` (or `--intrinsics`)",
+                    dir.display()
+                ),
+            })
+        })?
     } else {
         Intrinsics::parse(&c.intrinsics).map_err(|e| OpError::Config { key: "intrinsics".into(), message: e })?
     };

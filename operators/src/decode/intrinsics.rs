@@ -70,3 +70,22 @@ pub fn preset_for_folder(dir: &Path) -> Option<Intrinsics> {
         None
     }
 }
+
+/// The intrinsics in `dir/calibration.txt` (first non-comment line, as [`Intrinsics::parse`]
+/// reads it), or `None` when the folder has no such file.
+pub fn read_calibration(dir: &Path) -> Option<Result<Intrinsics, dynaflow_engine::op::OpError>> {
+    use dynaflow_engine::op::OpError;
+    let calib = dir.join("calibration.txt");
+    if !calib.is_file() {
+        return None;
+    }
+    let text = match std::fs::read_to_string(&calib) {
+        Ok(t) => t,
+        Err(source) => return Some(Err(OpError::Io { path: calib, source })),
+    };
+    let line = text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#')).unwrap_or("");
+    Some(
+        Intrinsics::parse(line)
+            .map_err(|e| OpError::Config { key: "intrinsics".into(), message: format!("{}: {e}", calib.display()) }),
+    )
+}

@@ -10,7 +10,7 @@ use dynaflow_engine::op::{
 use nalgebra::Isometry3;
 
 use super::index::{Associated, associate, interpolate_pose, read_index, read_trajectory};
-use super::intrinsics::{Intrinsics, preset_for_folder};
+use super::intrinsics::{Intrinsics, preset_for_folder, read_calibration};
 use super::png::{load_depth, load_rgb};
 
 /// Ground truth may end this long before/after a frame and still be used (TUM's mocap runs at
@@ -94,11 +94,8 @@ fn resolve_intrinsics(dir: &Path, spec: &str) -> Result<Intrinsics, OpError> {
     if let Some(preset) = preset_for_folder(dir) {
         return Ok(preset);
     }
-    let calib = dir.join("calibration.txt");
-    if calib.is_file() {
-        let text = std::fs::read_to_string(&calib).map_err(|source| OpError::Io { path: calib.clone(), source })?;
-        let line = text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#')).unwrap_or("");
-        return Intrinsics::parse(line).map_err(|e| config(format!("{}: {e}", calib.display())));
+    if let Some(calibrated) = read_calibration(dir) {
+        return calibrated;
     }
     Err(config(format!(
         "{}: cannot tell the camera: the folder is not named `rgbd_dataset_freiburgN_*` and has no calibration.txt; set `intrinsics: fr1|fr2|fr3|fx,fy,cx,cy` (or `--intrinsics`)",
