@@ -110,8 +110,8 @@ pub struct RunArgs {
     /// Pace sources at sensor rate; `latest` joins take what has arrived.
     #[arg(long)]
     pub realtime: bool,
-    /// Stop after this many frames.
-    #[arg(long)]
+    /// Stop after this many frames (at least 1).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub frames: Option<u64>,
     /// Recorders (comma-separated): `rrd` (rerun), `mcap`, `jsonl` (message log); `none` records nothing.
     #[arg(long, default_value = "rrd,mcap", value_delimiter = ',')]
@@ -143,6 +143,12 @@ enum GraphFormat {
     Dot,
 }
 
+/// Colour only on a terminal, and never when `NO_COLOR` is set to anything (no-color.org).
+fn colour_on_stderr() -> bool {
+    use std::io::IsTerminal;
+    std::io::stderr().is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
+}
+
 fn init_logging(verbose: u8, quiet: bool) {
     let default = match (quiet, verbose) {
         (true, _) => "warn",
@@ -155,6 +161,7 @@ fn init_logging(verbose: u8, quiet: bool) {
     tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(colour_on_stderr())
         .with_target(false)
         .without_time()
         .init();

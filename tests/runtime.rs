@@ -190,7 +190,10 @@ nodes:
     let (report, sink) = run_with(&g, RunOptions { realtime: true, ..RunOptions::default() });
     assert_eq!(report.status, RunStatus::Completed);
     let fuse = sink.port("fuse", "sum");
-    assert_eq!(fuse.len(), 40);
+    // Tracking is fast, but in real time even it drops (and counts) a frame it was too late
+    // for, e.g. on a loaded machine.
+    let fuse_node = report.nodes.iter().find(|n| n.node == "fuse").unwrap();
+    assert_eq!(fuse.len() as u64 + fuse_node.dropped, 40);
     // The detector could not keep up, so its input dropped frames (counted) and tracking saw
     // stale detector values rather than waiting.
     let det = report.nodes.iter().find(|n| n.node == "detector").unwrap();

@@ -7,7 +7,6 @@ mod common;
 use dynaflow_engine::diag::Severity;
 use dynaflow_engine::yaml::line_col;
 use dynaflow_engine::{LoadRequest, load_str};
-use proptest::prelude::*;
 
 /// `(line, col, code, text the message or hint must contain)`.
 type Expect = (usize, usize, &'static str, &'static str);
@@ -200,29 +199,89 @@ fn assert_sane(text: &str) {
     assert_eq!(loaded.graph.is_some(), !loaded.has_errors());
 }
 
-proptest! {
-    #![proptest_config(ProptestConfig { cases: 256, ..ProptestConfig::default() })]
+/// Random inputs drawn from a seeded generator (reproducible; the failing case is printed).
+const CASES: u64 = 256;
 
-    /// Arbitrary text never panics the validator and every span lies inside the text.
-    #[test]
-    fn arbitrary_text_never_panics(text in "\\PC{0,200}") {
+/// Arbitrary text never panics the validator and every span lies inside the text.
+#[test]
+fn arbitrary_text_never_panics() {
+    for case in 0..CASES {
+        let mut rng = common::Rng::new(case);
+        let len = rng.below(201);
+        let text: String = (0..len)
+            .map(|_| match rng.below(4) {
+                // Mostly printable ASCII, some multi-byte text, some whitespace.
+                0..=1 => char::from(0x20 + rng.below(0x5f) as u8),
+                2 => char::from_u32(0xa0 + rng.below(0x2f00) as u32).unwrap_or('é'),
+                _ => *rng.pick(&['\n', '\t', ' ', ':', '-']),
+            })
+            .collect();
         assert_sane(&text);
     }
+}
 
-    /// YAML-ish token soup: structure characters, keys the schema knows, odd values.
-    #[test]
-    fn token_soup_never_panics(tokens in proptest::collection::vec(prop::sample::select(vec![
-        "name: g\n", "nodes:\n", "  a: ", "  b: ", "{ op: test_pattern }", "{ op: passthrough, in: { input: a.image } }",
-        "op: ", "in: ", "params: ", "{", "}", "[", "]", ": ", ", ", "\n", "    ", "- ", "&x ", "*x", "~", "'q'", "\"d\"",
-        "1e999", "-1", ".nan", "delay: 1", "join: latest", "queue: { drop_oldest: 2 }", "variants:\n", "  v: { a: { disabled: true } }",
-        "a.tick", "a.image", "b.output", "record: every 2", "é", "\t", "---\n", "...\n", "!!str ", "? ", "|\n",
-    ]), 0..40)) {
-        assert_sane(&tokens.concat());
+/// YAML-ish token soup: structure characters, keys the schema knows, odd values.
+#[test]
+fn token_soup_never_panics() {
+    const TOKENS: &[&str] = &[
+        "name: g\n",
+        "nodes:\n",
+        "  a: ",
+        "  b: ",
+        "{ op: test_pattern }",
+        "{ op: passthrough, in: { input: a.image } }",
+        "op: ",
+        "in: ",
+        "params: ",
+        "{",
+        "}",
+        "[",
+        "]",
+        ": ",
+        ", ",
+        "\n",
+        "    ",
+        "- ",
+        "&x ",
+        "*x",
+        "~",
+        "'q'",
+        "\"d\"",
+        "1e999",
+        "-1",
+        ".nan",
+        "delay: 1",
+        "join: latest",
+        "queue: { drop_oldest: 2 }",
+        "variants:\n",
+        "  v: { a: { disabled: true } }",
+        "a.tick",
+        "a.image",
+        "b.output",
+        "record: every 2",
+        "é",
+        "\t",
+        "---\n",
+        "...\n",
+        "!!str ",
+        "? ",
+        "|\n",
+    ];
+    for case in 0..CASES {
+        let mut rng = common::Rng::new(1000 + case);
+        let n = rng.below(40);
+        let text: String = (0..n).map(|_| *rng.pick(TOKENS)).collect();
+        assert_sane(&text);
     }
+}
 
-    /// Single-character mutations of a valid graph.
-    #[test]
-    fn mutated_valid_graph_never_panics(pos in 0usize..VALID.len(), ch in prop::sample::select(vec![' ', ':', '{', '}', '-', '\n', 'x', '.', '#', '"'])) {
+/// Single-character mutations of a valid graph.
+#[test]
+fn mutated_valid_graph_never_panics() {
+    for case in 0..CASES {
+        let mut rng = common::Rng::new(2000 + case);
+        let pos = rng.below(VALID.len() as u64) as usize;
+        let ch = *rng.pick(&[' ', ':', '{', '}', '-', '\n', 'x', '.', '#', '"']);
         let mut text = VALID.to_owned();
         if text.is_char_boundary(pos) {
             text.insert(pos, ch);

@@ -143,7 +143,10 @@ pub fn load_str(
         let mut spec = base_spec.clone();
         if let Some(v) = &req.variant {
             match spec::apply_variant(&base_spec, v) {
-                Ok(s) => spec = s,
+                Ok((s, d)) => {
+                    spec = s;
+                    diags.extend(d);
+                }
                 Err(d) => diags.extend(d),
             }
         }
@@ -160,7 +163,10 @@ pub fn load_str(
                     continue;
                 }
                 let extra = match spec::apply_variant(&base_spec, &variant.name) {
-                    Ok(s) => spec::validate(&s, registry, &cx).1,
+                    Ok((s, mut d)) => {
+                        d.extend(spec::validate(&s, registry, &cx).1);
+                        d
+                    }
                     Err(d) => d,
                 };
                 for mut d in extra {

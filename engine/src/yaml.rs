@@ -138,6 +138,10 @@ fn resolve_plain(text: &str) -> serde_json::Value {
     if is_int && let Ok(i) = text.parse::<i64>() {
         return Value::from(i);
     }
+    // Seeds and other unsigned values up to u64::MAX.
+    if is_int && let Ok(u) = text.strip_prefix('+').unwrap_or(text).parse::<u64>() {
+        return Value::from(u);
+    }
     let looks_float = text.bytes().any(|b| b.is_ascii_digit())
         && text.bytes().all(|b| b.is_ascii_digit() || matches!(b, b'-' | b'+' | b'.' | b'e' | b'E'));
     if looks_float
@@ -164,14 +168,24 @@ impl CharToByte {
     }
 }
 
+/// Deepest nesting of collections accepted. Graphs need a handful of levels; the limit keeps
+/// recursive walks of the tree (and dropping it) far from the stack's end.
+pub const MAX_DEPTH: usize = 64;
+/// Most nodes a document may expand to, aliases counted at their expanded size. Real graphs
+/// have a few thousand; the bound stops "billion laughs" alias bombs before they take memory.
+pub const MAX_NODES: usize = 1_000_000;
+
 /// Parse one YAML document into a spanned tree.
 ///
-/// Anchors/aliases are resolved by copying the anchored node. An empty document yields a null
-/// scalar. Several documents in one file are an error: a graph is one document.
+/// Anchors/aliases are resolved by copying the anchored node, within [`MAX_NODES`]; nesting
+/// is limited to [`MAX_DEPTH`]. An empty document yields a null scalar. Several documents in
+/// one file are an error: a graph is one document.
 pub fn parse(src: &str) -> Result<Yaml, SyntaxError> {
     let map = CharToByte::new(src);
     let mut stack: Vec<Frame> = Vec::new();
-    let mut anchors: std::collections::HashMap<usize, Yaml> = std::collections::HashMap::new();
+    // Anchored nodes with their expanded size.
+    let mut anchors: std::collections::HashMap<usize, (Yaml, usize)> = std::collections::HashMap::new();
+    let mut total_nodes = 0usize;
     let mut root: Option<Yaml> = None;
     let mut documents = 0usize;
     for item in Parser::new_from_str(src) {
@@ -182,7 +196,7 @@ pub fn parse(src: &str) -> Result<Yaml, SyntaxError> {
         let start = map.byte(span.start.index());
         let end = map.byte(span.end.index()).max(start);
         let here = Span::new(start, end - start);
-        let finished: Option<(Yaml, usize)> = match event {
+        let finished: Option<(Yaml, usize, usize)> = match event {
             Event::DocumentStart(_) => {
                 documents += 1;
                 if documents > 1 {
@@ -195,18 +209,39 @@ pub fn parse(src: &str) -> Result<Yaml, SyntaxError> {
             }
             Event::Scalar(text, style, anchor, _tag) => {
                 let quoted = !matches!(style, ScalarStyle::Plain);
-                Some((Yaml { kind: YamlKind::Scalar { text: text.into_owned(), quoted }, span: here }, anchor))
+                total_nodes += 1;
+                Some((Yaml { kind: YamlKind::Scalar { text: text.into_owned(), quoted }, span: here }, anchor, 1))
             }
             Event::Alias(id) => match anchors.get(&id) {
-                Some(node) => Some((Yaml { kind: node.kind.clone(), span: here }, 0)),
+                Some((node, size)) => {
+                    // Check before copying: the copy is what would exhaust memory.
+                    if total_nodes.saturating_add(*size) > MAX_NODES {
+                        return Err(SyntaxError {
+                            message: format!(
+                                "aliases expand this document beyond {MAX_NODES} nodes; a graph needs far fewer (is this an alias bomb?)"
+                            ),
+                            span: here,
+                        });
+                    }
+                    total_nodes += size;
+                    Some((Yaml { kind: node.kind.clone(), span: here }, 0, *size))
+                }
                 None => return Err(SyntaxError { message: "alias to an unknown anchor".into(), span: here }),
             },
-            Event::SequenceStart(anchor, _) => {
-                stack.push(Frame { kind: FrameKind::Seq(Vec::new()), start, anchor, pending_key: None });
-                None
-            }
-            Event::MappingStart(anchor, _) => {
-                stack.push(Frame { kind: FrameKind::Map(Vec::new()), start, anchor, pending_key: None });
+            Event::SequenceStart(anchor, _) | Event::MappingStart(anchor, _) => {
+                if stack.len() >= MAX_DEPTH {
+                    return Err(SyntaxError {
+                        message: format!("collections nested deeper than {MAX_DEPTH} levels"),
+                        span: here,
+                    });
+                }
+                let kind = if matches!(event, Event::SequenceStart(..)) {
+                    FrameKind::Seq(Vec::new())
+                } else {
+                    FrameKind::Map(Vec::new())
+                };
+                total_nodes += 1;
+                stack.push(Frame { kind, start, anchor, pending_key: None, size: 1 });
                 None
             }
             Event::SequenceEnd | Event::MappingEnd => match stack.pop() {
@@ -215,19 +250,26 @@ pub fn parse(src: &str) -> Result<Yaml, SyntaxError> {
                         FrameKind::Seq(items) => YamlKind::Seq(items),
                         FrameKind::Map(entries) => YamlKind::Map(entries),
                     };
-                    Some((Yaml { kind, span: Span::new(frame.start, end.saturating_sub(frame.start)) }, frame.anchor))
+                    Some((
+                        Yaml { kind, span: Span::new(frame.start, end.saturating_sub(frame.start)) },
+                        frame.anchor,
+                        frame.size,
+                    ))
                 }
                 None => return Err(SyntaxError { message: "unbalanced collection end".into(), span: here }),
             },
             Event::StreamStart | Event::StreamEnd | Event::DocumentEnd | Event::Nothing => None,
         };
-        if let Some((node, anchor)) = finished {
+        if let Some((node, anchor, size)) = finished {
             if anchor != 0 {
-                anchors.insert(anchor, node.clone());
+                anchors.insert(anchor, (node.clone(), size));
             }
             match stack.last_mut() {
                 None => root = Some(node),
-                Some(frame) => frame.push(node)?,
+                Some(frame) => {
+                    frame.size = frame.size.saturating_add(size);
+                    frame.push(node)?;
+                }
             }
         }
     }
@@ -239,6 +281,8 @@ struct Frame {
     start: usize,
     anchor: usize,
     pending_key: Option<Key>,
+    /// Nodes in this collection so far, itself included.
+    size: usize,
 }
 
 enum FrameKind {
@@ -322,5 +366,43 @@ mod tests {
         let doc = parse(src).unwrap();
         let b = doc.get("b").unwrap();
         assert_eq!(&src[b.span.offset..b.span.offset + b.span.len], "x");
+    }
+
+    #[test]
+    fn alias_bomb_is_refused_with_a_position_before_it_takes_memory() {
+        // Nine levels of ten aliases each: 10^9 nodes if expanded.
+        let mut src = String::from("x0: &a0 [lol]\n");
+        for i in 1..10 {
+            let refs = vec![format!("*a{}", i - 1); 10].join(",");
+            src.push_str(&format!("x{i}: &a{i} [{refs}]\n"));
+        }
+        let t = std::time::Instant::now();
+        let err = parse(&src).unwrap_err();
+        assert!(err.message.contains("alias bomb"), "{err:?}");
+        assert!(line_col(&src, err.span.offset).0 >= 6, "{err:?}");
+        // Refused early, not after expanding: well under a second even in a debug build.
+        assert!(t.elapsed() < std::time::Duration::from_secs(5));
+        // Ordinary alias use is fine.
+        assert!(parse("a: &x {k: 1}\nb: *x\n").is_ok());
+    }
+
+    #[test]
+    fn deep_nesting_is_an_error_in_block_and_flow_style() {
+        let block = format!("frames:\n{}1\n", "- ".repeat(50_000));
+        let err = parse(&block).unwrap_err();
+        assert!(err.message.contains("nested deeper"), "{err:?}");
+        let flow = format!("frames: {}1{}\n", "[".repeat(50_000), "]".repeat(50_000));
+        assert!(parse(&flow).is_err());
+        let ok = format!("frames: {}1{}\n", "[".repeat(MAX_DEPTH - 2), "]".repeat(MAX_DEPTH - 2));
+        assert!(parse(&ok).is_ok());
+    }
+
+    #[test]
+    fn unsigned_integers_up_to_u64_max_stay_integers() {
+        let doc = parse("a: 18446744073709551615\nb: 18446744073709551616\nc: -9223372036854775808\n").unwrap();
+        let j = doc.to_json();
+        assert_eq!(j["a"].as_u64(), Some(u64::MAX));
+        assert_eq!(j["b"].as_u64(), None, "beyond u64 is a float");
+        assert_eq!(j["c"].as_i64(), Some(i64::MIN));
     }
 }

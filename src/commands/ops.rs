@@ -45,6 +45,9 @@ fn port_type(p: &PortSpec) -> String {
 }
 
 fn default(p: &ParamSpec) -> String {
+    if matches!(p.default, dynaflow_engine::op::Default::FromGraphSeed) {
+        return "(from the graph seed)".to_owned();
+    }
     p.default.to_json().map_or_else(|| "(required)".to_owned(), |v| v.to_string())
 }
 

@@ -51,6 +51,20 @@ pub fn run(args: &RunArgs) -> u8 {
         None => graph.name.clone(),
     };
 
+    // Each recorder once: two sinks on one file would interleave into a corrupt file.
+    let mut recorders: Vec<&str> = Vec::new();
+    for r in args.record.iter().map(|r| r.trim()) {
+        if recorders.contains(&r) {
+            eprintln!("error: `--record {}` names `{r}` twice; each recorder writes one file", args.record.join(","));
+            return EXIT_BAD_INPUT;
+        }
+        recorders.push(r);
+    }
+    if recorders.contains(&"none") && recorders.len() > 1 {
+        eprintln!("error: `--record none` cannot be combined with other recorders");
+        return EXIT_BAD_INPUT;
+    }
+
     let codec = if args.image_format == "png" { ImageCodec::Png } else { ImageCodec::Jpeg(90) };
     let image_recorders = args.record.iter().filter(|r| matches!(r.trim(), "rrd" | "mcap")).count();
     let cache = EncodeCache::new(image_recorders);
@@ -103,6 +117,9 @@ pub fn run(args: &RunArgs) -> u8 {
         }
         result
     });
+    // An operator cancelled after a stop may still be inside a blocking call; do not wait
+    // for it, the recordings are closed already.
+    rt.shutdown_timeout(Duration::from_millis(500));
     let report = match result {
         Ok(r) => r,
         Err(e) => {

@@ -100,6 +100,9 @@ impl ParamType {
 pub enum Default {
     /// The parameter must be given.
     Required,
+    /// Unset unless given: the operator derives the value from its node's seed (the graph
+    /// seed mixed with the node id), so `--seed` changes it.
+    FromGraphSeed,
     /// Boolean default.
     Bool(bool),
     /// Integer default.
@@ -114,7 +117,7 @@ impl Default {
     /// As JSON, `None` when required.
     pub fn to_json(self) -> Option<serde_json::Value> {
         match self {
-            Default::Required => None,
+            Default::Required | Default::FromGraphSeed => None,
             Default::Bool(b) => Some(b.into()),
             Default::Int(i) => Some(i.into()),
             Default::Float(f) => Some(f.into()),

@@ -24,7 +24,7 @@ mod node;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use rand_core::SeedableRng;
 use tokio::sync::Notify;
@@ -52,7 +52,13 @@ pub struct RunOptions {
     pub progress: Arc<AtomicU64>,
     /// Length of the longest source, if known, set once sources are built.
     pub total_frames: Arc<AtomicU64>,
+    /// After a stop request, how long nodes may take to finish their in-flight frames before
+    /// they are cancelled (default [`DEFAULT_STOP_GRACE`]). Recordings are closed either way.
+    pub stop_grace: Option<Duration>,
 }
+
+/// How long a stopped run waits for in-flight frames before cancelling the nodes.
+pub const DEFAULT_STOP_GRACE: Duration = Duration::from_secs(10);
 
 /// Shared flag to stop a run gracefully: sources stop producing, in-flight frames finish,
 /// sinks close.
@@ -152,7 +158,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
         graph.nodes.iter().map(|n| n.inputs.iter().map(|_| None).collect()).collect();
     let mut probes = Vec::new();
     for e in &graph.edges {
-        let (tx, rx, probe) = edge::edge(e.queue, e.delay);
+        let (tx, rx, probe) = edge::edge(e.effective_queue(options.realtime), e.delay);
         if let Some(slot) = senders.get_mut(e.from_node).and_then(|s| s.get_mut(e.from_port)) {
             slot.push(tx);
         }
@@ -198,10 +204,31 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     }
     drop(tap_tx);
 
+    // A stop request lets sources end and in-flight frames drain. Should a node still not
+    // finish (an operator stuck in a long call), cancel the rest after a grace period: the
+    // first Ctrl-C always ends the run, and the recorders still close their files.
+    let aborts: Vec<tokio::task::AbortHandle> = tasks.iter().map(tokio::task::JoinHandle::abort_handle).collect();
+    let all = futures::future::join_all(tasks);
+    tokio::pin!(all);
+    let grace = options.stop_grace.unwrap_or(DEFAULT_STOP_GRACE);
+    let results = tokio::select! {
+        r = &mut all => r,
+        () = async { options.stop.wait().await; tokio::time::sleep(grace).await } => {
+            tracing::warn!("nodes still busy {:.1} s after the stop request: cancelling them", grace.as_secs_f64());
+            for a in &aborts {
+                a.abort();
+            }
+            all.await
+        }
+    };
     let mut node_metrics = Vec::new();
-    for (joined, node) in futures::future::join_all(tasks).await.into_iter().zip(&graph.nodes) {
+    for (joined, node) in results.into_iter().zip(&graph.nodes) {
         match joined {
             Ok(m) => node_metrics.push(m),
+            Err(e) if e.is_cancelled() => {
+                tracing::warn!(node = %node.id, "cancelled before finishing its in-flight frames");
+                node_metrics.push(metrics::NodeMetrics::default());
+            }
             Err(e) => {
                 failures
                     .lock()
@@ -245,8 +272,8 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
                 op: n.op.name.to_owned(),
                 frames: m.frames,
                 skipped: m.skipped,
-                latency: LatencyStats::from_us(&m.latency_us),
-                age: LatencyStats::from_us(&m.age_us),
+                latency: m.latency.stats(),
+                age: m.age.stats(),
                 busy_s: m.busy.as_secs_f64(),
                 max_queue,
                 dropped,

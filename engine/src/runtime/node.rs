@@ -164,8 +164,8 @@ impl NodeTask {
                 metrics.frames += 1;
             }
             metrics.busy += busy;
-            metrics.latency_us.push(busy.as_secs_f32() * 1e6);
-            metrics.age_us.push(0.0);
+            metrics.latency.record(busy);
+            metrics.age.record(Duration::ZERO);
             self.options.progress.fetch_max(seq + 1, std::sync::atomic::Ordering::Relaxed);
             seq += 1;
         }
@@ -190,6 +190,10 @@ impl NodeTask {
             })
             .collect();
         let deterministic = !self.options.realtime;
+        // The last frame this node emitted (fired or skipped), and whether it ended because its
+        // inputs did (rather than on an error).
+        let mut last_frame: Option<u64> = None;
+        let mut completed = true;
         loop {
             // 1. Every open lockstep input needs a head: driving ones first, because the node
             // ends when they all have.
@@ -217,6 +221,17 @@ impl NodeTask {
             else {
                 break;
             };
+            // Frames between the last one and k were lost upstream to a dropping queue (every
+            // lockstep input has moved past them), so this node will never run them. Say so
+            // downstream at once: a consumer in a feedback loop may be waiting on exactly
+            // those frames before it can produce the input that decides ours.
+            if k > last_frame.map_or(0, |l| l + 1)
+                && let Err(e) = self.emit(k - 1, OpOutputs::new(), Instant::now()).await
+            {
+                self.fail(e.to_string());
+                completed = false;
+                break;
+            }
             // 3. Bring `latest` inputs up to frame k.
             for s in slots.iter_mut().filter(|s| s.join == Join::Latest) {
                 advance_latest(s, k, deterministic).await;
@@ -256,6 +271,7 @@ impl NodeTask {
                         Ok(out) => out,
                         Err(e) => {
                             self.fail(e.to_string());
+                            completed = false;
                             break;
                         }
                     }
@@ -269,17 +285,28 @@ impl NodeTask {
             let busy = t0.elapsed();
             if let Err(e) = self.emit(k, out, born).await {
                 self.fail(e.to_string());
+                completed = false;
                 break;
             }
+            last_frame = Some(k);
             if fired {
                 metrics.frames += 1;
                 metrics.busy += busy;
-                metrics.latency_us.push(t0.elapsed().as_secs_f32() * 1e6);
-                metrics.age_us.push(born.elapsed().as_secs_f32() * 1e6);
+                metrics.latency.record(t0.elapsed());
+                metrics.age.record(born.elapsed());
             }
         }
-        // Dropping the slots closes our inputs: producers stop waiting on us.
-        drop(slots);
+        // Closing our inputs lets producers stop waiting on us. After a clean end, what is
+        // left belongs to frames after our last one (a delay's tail) and is not lost.
+        for slot in slots {
+            if let Some(rx) = slot.rx {
+                if completed {
+                    rx.complete(last_frame);
+                } else {
+                    drop(rx);
+                }
+            }
+        }
         if let Some(o) = op.as_mut()
             && let Err(e) = o.stop(&mut self.ctx)
         {

@@ -139,6 +139,12 @@ pub struct InputSpec {
     pub delay: u32,
     /// Queue policy.
     pub queue: QueuePolicy,
+    /// Whether `queue:` or `capacity:` was written. Without either, offline runs use `block`
+    /// and `--realtime` runs `latest`, so a slow node never throttles its sources.
+    pub queue_explicit: bool,
+    /// False when `delay:` was written but invalid (already reported): the edge is then left
+    /// out of the cycle check instead of raising a second, spurious error.
+    pub delay_valid: bool,
 }
 
 /// Which messages of an output port go to the recorders.

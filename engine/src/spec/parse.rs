@@ -17,6 +17,19 @@ const MAX_DELAY: u32 = 64;
 /// Longest allowed queue.
 const MAX_CAPACITY: usize = 1 << 20;
 
+/// Longest graph name: it becomes a file name (`<name>-<variant>.summary.json`).
+const MAX_NAME_LEN: usize = 100;
+
+/// Whether `name` is a valid graph name: it becomes the stem of the files a run writes in
+/// `--out`, so it must stay one plain file name there: ASCII letters, digits, `_`, `-` and
+/// `.`, starting with a letter, digit or `_` (no hidden files, no `..`, no path separators).
+pub fn valid_graph_name(name: &str) -> bool {
+    let mut chars = name.chars();
+    name.len() <= MAX_NAME_LEN
+        && matches!(chars.next(), Some(c) if c.is_ascii_alphanumeric() || c == '_')
+        && chars.all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
+}
+
 /// Whether `id` is a valid node or port id.
 pub fn valid_id(id: &str) -> bool {
     let mut chars = id.chars();
@@ -51,9 +64,10 @@ fn entries<'a>(
         return Vec::new();
     };
     let mut out: Vec<&(Key, Yaml)> = Vec::new();
+    let mut seen: std::collections::HashSet<&str> = std::collections::HashSet::new();
     for entry in list {
         let key = &entry.0;
-        if out.iter().any(|(k, _)| k.text == key.text) {
+        if !seen.insert(key.text.as_str()) {
             let (code, message) = if what == "`nodes`" {
                 ("duplicate-id", format!("duplicate node id `{}`", key.text))
             } else {
@@ -152,6 +166,14 @@ pub fn parse_graph(doc: &Yaml) -> (GraphSpec, Vec<Diagnostic>) {
             "name" => {
                 seen_name = true;
                 if let Some(name) = string(value, "`name`", &mut diags) {
+                    if !valid_graph_name(&name) {
+                        diags.push(
+                            Diagnostic::error("bad-name", value.span, format!("invalid graph name `{name}`"))
+                                .with_hint(format!(
+                                    "the name becomes the file names of the run's outputs: use letters, digits, `_`, `-` and `.` (at most {MAX_NAME_LEN}), starting with a letter, digit or `_`"
+                                )),
+                        );
+                    }
                     spec.name = name;
                 }
             }
@@ -304,6 +326,8 @@ fn parse_inputs(node: &str, value: &Yaml, diags: &mut Vec<Diagnostic>) -> Vec<In
             join: Join::Lockstep,
             delay: 0,
             queue: QueuePolicy::Block { capacity: DEFAULT_CAPACITY },
+            queue_explicit: false,
+            delay_valid: true,
         };
         if matches!(body.kind, YamlKind::Scalar { .. }) {
             input.from = parse_port_ref(body, node, &port.text, diags);
@@ -331,16 +355,18 @@ fn parse_inputs(node: &str, value: &Yaml, diags: &mut Vec<Diagnostic>) -> Vec<In
                         .with_opt_hint(v.as_str().and_then(|s| did_you_mean(s, ["lockstep", "latest"]))),
                     ),
                 },
-                "delay" => {
-                    input.delay =
-                        unsigned(v, &format!("{what}: `delay`"), u64::from(MAX_DELAY), diags).unwrap_or(0) as u32;
-                }
+                "delay" => match unsigned(v, &format!("{what}: `delay`"), u64::from(MAX_DELAY), diags) {
+                    Some(d) => input.delay = u32::try_from(d).unwrap_or(MAX_DELAY),
+                    None => input.delay_valid = false,
+                },
                 "queue" => {
+                    input.queue_explicit = true;
                     if let Some(q) = parse_queue(v, &what, diags) {
                         input.queue = q;
                     }
                 }
                 "capacity" => {
+                    input.queue_explicit = true;
                     if let Some(c) = unsigned(v, &format!("{what}: `capacity`"), MAX_CAPACITY as u64, diags) {
                         if c == 0 {
                             diags.push(Diagnostic::error(

@@ -82,8 +82,20 @@ pub struct ResolvedEdge {
     pub join: Join,
     /// Frames of delay.
     pub delay: u32,
-    /// Queue policy.
+    /// Queue policy as written (or the default, `block`).
     pub queue: QueuePolicy,
+    /// Whether the queue policy was written; if not, `--realtime` runs use `latest`.
+    pub queue_explicit: bool,
+}
+
+impl ResolvedEdge {
+    /// The queue policy in effect: an input without a written policy blocks offline (nothing
+    /// is lost, runs are reproducible) and keeps only the newest message in real time (a slow
+    /// consumer drops, and counts, what it cannot keep up with instead of stalling the
+    /// sensor).
+    pub fn effective_queue(&self, realtime: bool) -> QueuePolicy {
+        if realtime && !self.queue_explicit { QueuePolicy::DropOldest { capacity: 1 } } else { self.queue }
+    }
 }
 
 impl ResolvedGraph {

@@ -65,6 +65,25 @@ pub fn validate(
             .with_hint("add a source such as `synth` or `test_pattern`; `dynaflow ops` marks sources"),
         );
     }
+    let sources: Vec<&NodeSpec> = spec
+        .nodes
+        .iter()
+        .zip(&ops)
+        .filter(|(_, op)| op.is_some_and(|op| op.kind == OpKind::Source))
+        .map(|(n, _)| n)
+        .collect();
+    if !sources.is_empty() && sources.iter().all(|n| n.disabled) {
+        let names: Vec<String> = sources.iter().map(|n| format!("`{}`", n.id)).collect();
+        let what = cx.variant.as_ref().map_or_else(String::new, |v| format!(" (with variant `{v}`)"));
+        diags.push(
+            Diagnostic::error(
+                "no-enabled-source",
+                sources.first().map(|n| n.id_span),
+                format!("every source is disabled{what}: {}; the run would produce no frame", names.join(", ")),
+            )
+            .with_hint("keep at least one source enabled; disable the nodes that consume it instead"),
+        );
+    }
     if spec.nodes.is_empty() {
         diags.push(
             Diagnostic::error("no-nodes", spec.nodes_span, "the graph has no nodes")
@@ -72,6 +91,8 @@ pub fn validate(
         );
     }
 
+    let edge_of: HashMap<(usize, usize), usize> =
+        edges.iter().enumerate().map(|(e, se)| ((se.edge.to_node, se.edge.to_port), e)).collect();
     let mut nodes = Vec::new();
     for (i, (n, op)) in spec.nodes.iter().zip(&ops).enumerate() {
         let Some(op) = op else { continue };
@@ -105,7 +126,7 @@ pub fn validate(
                 name: p.name,
                 ty: p.ty,
                 required: p.required,
-                edge: edges.iter().position(|e| e.edge.to_node == i && e.edge.to_port == j),
+                edge: edge_of.get(&(i, j)).copied(),
             })
             .collect();
         nodes.push(ResolvedNode {
@@ -195,7 +216,10 @@ fn check_params(n: &NodeSpec, op: &OpSpec, cx: &ResolveContext, diags: &mut Vec<
         }
     }
     for p in op.params {
-        if values.contains_key(p.name) || n.params.iter().any(|(k, _)| k.text == p.name) {
+        if values.contains_key(p.name)
+            || n.params.iter().any(|(k, _)| k.text == p.name)
+            || matches!(p.default, crate::op::Default::FromGraphSeed)
+        {
             continue;
         }
         match p.default.to_json() {
@@ -298,47 +322,120 @@ fn check_value(n: &NodeSpec, p: &ParamSpec, value: &Yaml, diags: &mut Vec<Diagno
     }
 }
 
-/// Output types, with `same_as` outputs following what is wired into their input.
+/// Output types, with `same_as` outputs following what is wired into their input (through
+/// chains of pass-through nodes, in any file order: linear time, iterative).
 fn resolve_output_types(spec: &GraphSpec, ops: &[Option<&OpSpec>], index: &HashMap<&str, usize>) -> Vec<Vec<PortType>> {
+    #[derive(Clone, Copy, PartialEq)]
+    enum State {
+        Todo,
+        Busy,
+        Done,
+    }
     let mut types: Vec<Vec<PortType>> =
         ops.iter().map(|op| op.map_or_else(Vec::new, |op| op.outputs.iter().map(|p| p.ty).collect())).collect();
-    // Each pass resolves at least one more link of a pass-through chain; a chain cannot be
-    // longer than the node count.
-    for _ in 0..spec.nodes.len() {
-        let mut changed = false;
-        for (i, (n, op)) in spec.nodes.iter().zip(ops).enumerate() {
-            let Some(op) = op else { continue };
-            for (j, out) in op.outputs.iter().enumerate() {
-                let Some(input) = out.same_as else { continue };
-                let upstream = n
-                    .inputs
-                    .iter()
-                    .find(|inp| inp.port == input)
-                    .and_then(|inp| inp.from.as_ref())
-                    .and_then(|r| {
-                        let k = *index.get(r.node.as_str())?;
-                        let port = ops.get(k).copied().flatten()?.outputs.iter().position(|p| p.name == r.port)?;
-                        types.get(k)?.get(port).copied()
-                    })
-                    .unwrap_or(PortType::Any);
-                if let Some(slot) = types.get_mut(i).and_then(|t| t.get_mut(j))
-                    && *slot != upstream
-                {
-                    *slot = upstream;
-                    changed = true;
+    let mut state: Vec<Vec<State>> = ops
+        .iter()
+        .map(|op| {
+            op.map_or_else(Vec::new, |op| {
+                op.outputs.iter().map(|p| if p.same_as.is_some() { State::Todo } else { State::Done }).collect()
+            })
+        })
+        .collect();
+    // The output that `same_as` output (i, j) copies its type from.
+    let upstream = |i: usize, j: usize| -> Option<(usize, usize)> {
+        let op = ops.get(i).copied().flatten()?;
+        let input = op.outputs.get(j)?.same_as?;
+        let r = spec.nodes.get(i)?.inputs.iter().find(|inp| inp.port == input)?.from.as_ref()?;
+        let k = *index.get(r.node.as_str())?;
+        let port = ops.get(k).copied().flatten()?.outputs.iter().position(|p| p.name == r.port)?;
+        Some((k, port))
+    };
+    let get = |st: &Vec<Vec<State>>, (i, j): (usize, usize)| st.get(i).and_then(|s| s.get(j)).copied();
+    for i in 0..state.len() {
+        for j in 0..state.get(i).map_or(0, Vec::len) {
+            if get(&state, (i, j)) != Some(State::Todo) {
+                continue;
+            }
+            let mut stack = vec![(i, j)];
+            while let Some(&at) = stack.last() {
+                if let Some(s) = state.get_mut(at.0).and_then(|s| s.get_mut(at.1)) {
+                    *s = State::Busy;
+                }
+                let resolved = match upstream(at.0, at.1) {
+                    // Unwired, or a pass-through loop (closed by a delay): nothing to copy.
+                    None => Some(PortType::Any),
+                    Some(up) => match get(&state, up) {
+                        Some(State::Done) => types.get(up.0).and_then(|t| t.get(up.1)).copied(),
+                        Some(State::Todo) => {
+                            stack.push(up);
+                            None
+                        }
+                        Some(State::Busy) | None => Some(PortType::Any),
+                    },
+                };
+                if let Some(ty) = resolved {
+                    if let Some(t) = types.get_mut(at.0).and_then(|t| t.get_mut(at.1)) {
+                        *t = ty;
+                    }
+                    if let Some(s) = state.get_mut(at.0).and_then(|s| s.get_mut(at.1)) {
+                        *s = State::Done;
+                    }
+                    stack.pop();
                 }
             }
-        }
-        if !changed {
-            break;
         }
     }
     types
 }
 
+/// The producer node and output index of `from`, reporting an unknown node or port. `None`
+/// without a diagnostic when the producer's op is unknown (reported at the producer).
+fn resolve_ref(
+    spec: &GraphSpec,
+    ops: &[Option<&OpSpec>],
+    index: &HashMap<&str, usize>,
+    n: &NodeSpec,
+    port: &str,
+    from: &super::PortRef,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<(usize, usize)> {
+    let Some(&k) = index.get(from.node.as_str()) else {
+        let hint = did_you_mean(&from.node, spec.nodes.iter().map(|n| n.id.as_str())).unwrap_or_else(|| {
+            let ids: Vec<&str> = spec.nodes.iter().map(|n| n.id.as_str()).take(20).collect();
+            format!("nodes: {}", ids.join(", "))
+        });
+        diags.push(
+            Diagnostic::error(
+                "unknown-node",
+                from.span,
+                format!("input `{}/{port}` refers to unknown node `{}`", n.id, from.node),
+            )
+            .with_hint(hint),
+        );
+        return None;
+    };
+    let producer = ops.get(k).copied().flatten()?;
+    let Some(p) = producer.outputs.iter().position(|o| o.name == from.port) else {
+        diags.push(
+            Diagnostic::error(
+                "unknown-port",
+                from.span,
+                format!(
+                    "input `{}/{port}`: node `{}` (op `{}`) has no output `{}`",
+                    n.id, from.node, producer.name, from.port
+                ),
+            )
+            .with_hint(port_hint(&from.port, producer.outputs.iter().map(|o| o.name))),
+        );
+        return None;
+    };
+    Some((k, p))
+}
+
 struct SpannedEdge {
     edge: ResolvedEdge,
     span: crate::yaml::Span,
+    delay_valid: bool,
 }
 
 fn check_inputs(
@@ -350,7 +447,16 @@ fn check_inputs(
 ) -> Vec<SpannedEdge> {
     let mut edges = Vec::new();
     for (i, (n, op)) in spec.nodes.iter().zip(ops).enumerate() {
-        let Some(op) = op else { continue };
+        let Some(op) = op else {
+            // The op is unknown (reported), but where its inputs come from is independent of
+            // it: report references to unknown nodes and ports too.
+            for input in &n.inputs {
+                if let Some(from) = &input.from {
+                    resolve_ref(spec, ops, index, n, &input.port, from, diags);
+                }
+            }
+            continue;
+        };
         if op.kind == OpKind::Source && !n.inputs.is_empty() {
             let span = n.inputs.first().map_or(n.id_span, |i| i.port_span);
             diags.push(
@@ -378,35 +484,7 @@ fn check_inputs(
             };
             seen_ports.push(op.inputs.get(j).map_or("", |p| p.name));
             let Some(from) = &input.from else { continue };
-            let Some(&k) = index.get(from.node.as_str()) else {
-                let hint = did_you_mean(&from.node, spec.nodes.iter().map(|n| n.id.as_str())).unwrap_or_else(|| {
-                    format!("nodes: {}", spec.nodes.iter().map(|n| n.id.as_str()).collect::<Vec<_>>().join(", "))
-                });
-                diags.push(
-                    Diagnostic::error(
-                        "unknown-node",
-                        from.span,
-                        format!("input `{}/{}` refers to unknown node `{}`", n.id, input.port, from.node),
-                    )
-                    .with_hint(hint),
-                );
-                continue;
-            };
-            let Some(producer) = ops.get(k).copied().flatten() else { continue };
-            let Some(p) = producer.outputs.iter().position(|o| o.name == from.port) else {
-                diags.push(
-                    Diagnostic::error(
-                        "unknown-port",
-                        from.span,
-                        format!(
-                            "input `{}/{}`: node `{}` (op `{}`) has no output `{}`",
-                            n.id, input.port, from.node, producer.name, from.port
-                        ),
-                    )
-                    .with_hint(port_hint(&from.port, producer.outputs.iter().map(|o| o.name))),
-                );
-                continue;
-            };
+            let Some((k, p)) = resolve_ref(spec, ops, index, n, &input.port, from, diags) else { continue };
             let produced = out_types.get(k).and_then(|t| t.get(p)).copied().unwrap_or(PortType::Any);
             let wanted = op.inputs.get(j).map_or(PortType::Any, |p| p.ty);
             if produced != PortType::Any && !produced.feeds(wanted) {
@@ -469,7 +547,9 @@ fn check_inputs(
                     join: input.join,
                     delay: input.delay,
                     queue: input.queue,
+                    queue_explicit: input.queue_explicit,
                 },
+                delay_valid: input.delay_valid,
                 span: from.span,
             });
         }
@@ -524,7 +604,9 @@ fn check_inputs(
 fn check_cycles(spec: &GraphSpec, edges: &[SpannedEdge], diags: &mut Vec<Diagnostic>) {
     let n = spec.nodes.len();
     let mut adj: Vec<Vec<usize>> = vec![Vec::new(); n];
-    for e in edges.iter().filter(|e| e.edge.delay == 0) {
+    // An edge whose `delay:` did not parse was reported already; leaving it out avoids a
+    // second, spurious "cycle without a delay" error.
+    for e in edges.iter().filter(|e| e.edge.delay == 0 && e.delay_valid) {
         if let Some(list) = adj.get_mut(e.edge.from_node) {
             list.push(e.edge.to_node);
         }
@@ -637,12 +719,14 @@ fn tarjan(adj: &[Vec<usize>]) -> Vec<Vec<usize>> {
 }
 
 fn check_unused_outputs(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge], diags: &mut Vec<Diagnostic>) {
+    let consumed: std::collections::HashSet<(usize, usize)> =
+        edges.iter().map(|e| (e.edge.from_node, e.edge.from_port)).collect();
     for (i, node) in nodes.iter().enumerate() {
         if node.disabled {
             continue;
         }
         for (j, out) in node.outputs.iter().enumerate() {
-            let consumed = edges.iter().any(|e| e.edge.from_node == i && e.edge.from_port == j);
+            let consumed = consumed.contains(&(i, j));
             if !consumed && out.record == RecordPolicy::None {
                 let span = spec.nodes.get(i).map(|n| n.id_span);
                 diags.push(

@@ -61,8 +61,10 @@ fn apply_patch(spec: &mut GraphSpec, patch: &NodePatch) -> bool {
     true
 }
 
-/// Apply the variant `name`. Unknown variants and patches of unknown nodes are errors.
-pub fn apply_variant(spec: &GraphSpec, name: &str) -> Result<GraphSpec, Vec<Diagnostic>> {
+/// Apply the variant `name`. An unknown variant is an `Err`. Patches of unknown nodes are
+/// errors too, returned beside the spec with the other patches applied, so validation of the
+/// rest still runs and reports everything else at once.
+pub fn apply_variant(spec: &GraphSpec, name: &str) -> Result<(GraphSpec, Vec<Diagnostic>), Vec<Diagnostic>> {
     let Some(variant) = spec.variants.iter().find(|v| v.name == name) else {
         let hint = did_you_mean(name, spec.variants.iter().map(|v| v.name.as_str())).unwrap_or_else(|| {
             if spec.variants.is_empty() {
@@ -89,7 +91,7 @@ pub fn apply_variant(spec: &GraphSpec, name: &str) -> Result<GraphSpec, Vec<Diag
             );
         }
     }
-    if diags.is_empty() { Ok(out) } else { Err(diags) }
+    Ok((out, diags))
 }
 
 /// Apply `--set` overrides. The value's span is moved onto the node id so diagnostics point

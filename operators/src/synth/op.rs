@@ -19,7 +19,8 @@ struct Config {
     width: u32,
     height: u32,
     rate_hz: f64,
-    seed: u64,
+    #[serde(default)]
+    seed: Option<u64>,
     depth_noise: bool,
     image_noise: f64,
     blur: bool,
@@ -84,8 +85,8 @@ pub(crate) const SYNTH: OpSpec = OpSpec {
         ParamSpec {
             name: "seed",
             ty: ParamType::Int { min: 0, max: i64::MAX },
-            default: Default::Int(0),
-            doc: "scene and noise seed",
+            default: Default::FromGraphSeed,
+            doc: "scene and noise seed; unset, it derives from the graph seed (`--seed`) and the node id",
         },
         ParamSpec {
             name: "depth_noise",
@@ -113,7 +114,8 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         motion,
         people: c.people as usize,
         mode: if c.sitting { PeopleMode::Sitting } else { PeopleMode::Walking },
-        seed: c.seed,
+        // Replaced in `start` by the node's seed when the graph sets none.
+        seed: c.seed.unwrap_or(0),
         rate_hz: c.rate_hz,
         intrinsics: scaled_fr3(c.width, c.height),
         depth_noise: c.depth_noise,
@@ -122,6 +124,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
     };
     Ok(Instance::Source(Box::new(SynthSource {
         generator: Generator::new(config),
+        seeded: c.seed.is_some(),
         frames: c.frames,
         frame_id: "camera".into(),
     })))
@@ -129,11 +132,22 @@ fn build(params: &Params) -> Result<Instance, OpError> {
 
 struct SynthSource {
     generator: Generator,
+    /// Whether the graph gave `seed`; otherwise the node's seed is used.
+    seeded: bool,
     frames: u64,
     frame_id: Arc<str>,
 }
 
 impl Source for SynthSource {
+    fn start(&mut self, ctx: &mut Context) -> Result<(), OpError> {
+        if !self.seeded {
+            let mut config = self.generator.config().clone();
+            config.seed = ctx.seed;
+            self.generator = Generator::new(config);
+        }
+        Ok(())
+    }
+
     fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
         if seq >= self.frames {
             return Ok(None);

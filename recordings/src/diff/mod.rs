@@ -20,7 +20,7 @@ use nalgebra::Vector3;
 use serde::Serialize;
 
 pub use overlay::write_overlay;
-pub use read::{Recording, Topic, read_mcap};
+pub use read::{Recording, Topic, read_mcap, read_mcap_bytes};
 
 /// Why a diff could not be computed.
 #[derive(Debug, thiserror::Error)]

@@ -1,0 +1,409 @@
+//! Issue 7's reproductions, one test each: the defects an adversarial pass over the engine
+//! found (a deadlock, lost delayed frames, YAML bombs, escaping names, …).
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+mod common;
+
+use std::time::{Duration, Instant};
+
+use dynaflow_engine::msg::{Body, Message};
+use dynaflow_engine::runtime::{self, RunOptions, RunReport, RunStatus};
+use dynaflow_engine::sink::{MemorySink, Sink};
+use dynaflow_engine::spec::ResolvedGraph;
+use dynaflow_engine::{LoadRequest, load_str};
+
+/// Run on its own thread and runtime; fail the test (instead of hanging CI) if the run does
+/// not end within `limit`.
+fn run_within(graph: &ResolvedGraph, options: RunOptions, limit: Duration) -> (RunReport, MemorySink) {
+    let sink = MemorySink::default();
+    let (tx, rx) = std::sync::mpsc::channel();
+    let (g, s) = (graph.clone(), sink.clone());
+    std::thread::Builder::new()
+        .name("run".into())
+        .spawn(move || {
+            let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+            let sinks: Vec<Box<dyn Sink>> = vec![Box::new(s)];
+            let report = rt.block_on(runtime::run(&g, options, sinks)).unwrap();
+            let _ = tx.send(report);
+            // An operator cancelled after a stop may still sleep on the blocking pool.
+            rt.shutdown_background();
+        })
+        .unwrap();
+    let report = rx.recv_timeout(limit).unwrap_or_else(|_| panic!("the run did not end within {limit:?}: hang"));
+    (report, sink)
+}
+
+fn run(graph: &ResolvedGraph) -> (RunReport, MemorySink) {
+    run_within(graph, RunOptions::default(), Duration::from_secs(60))
+}
+
+fn scalar(m: &Message, key: &str) -> f64 {
+    match &m.body {
+        Body::Scalars(s) => s.get(key).unwrap(),
+        other => panic!("not scalars: {other:?}"),
+    }
+}
+
+fn edge<'a>(report: &'a RunReport, label: &str) -> &'a dynaflow_engine::runtime::EdgeStats {
+    &report
+        .edges
+        .iter()
+        .find(|e| e.edge == label)
+        .unwrap_or_else(|| panic!("no edge {label}: {:?}", report.edges))
+        .stats
+}
+
+fn diagnostics(text: &str) -> Vec<String> {
+    let loaded = load_str("test.yaml", text, None, &dynaflow::registry(), &LoadRequest::default());
+    loaded.diagnostics.iter().map(|d| loaded.source.plain(d)).collect()
+}
+
+// --- 1. deadlock: a dropping queue into a feedback loop with a `latest` join ---------------
+
+#[test]
+fn dropping_queue_into_a_feedback_loop_with_a_latest_join_never_hangs() {
+    let hang2 = r"
+name: hang2
+nodes:
+  cam: { op: test_pattern, params: { frames: 100 } }
+  acc:
+    op: scalar_sum
+    in:
+      a: { from: cam.tick, queue: latest }
+      b: { from: acc.sum, join: latest, delay: 1 }
+";
+    let two_nodes = r"
+name: hang2b
+nodes:
+  cam: { op: test_pattern, params: { frames: 100 } }
+  a: { op: scalar_sum, in: { a: cam.tick, b: { from: b.sum, delay: 1 } } }
+  b: { op: scalar_sum, in: { a: { from: cam.tick, queue: latest }, b: { from: a.sum, join: latest } } }
+";
+    for text in [hang2, two_nodes] {
+        for _ in 0..5 {
+            let (report, _) = run(&common::graph(text));
+            assert_eq!(report.status, RunStatus::Completed);
+        }
+    }
+}
+
+#[test]
+fn slow_node_inside_the_loop_drops_frames_and_the_loop_still_runs() {
+    // `acc` waits for the slow node's frontier; meanwhile its camera input drops frames. The
+    // frames it never runs must still reach the loop as watermarks, or both wait forever
+    // (the old engine hung here every time).
+    let text = r"
+name: loop
+nodes:
+  cam: { op: test_pattern, params: { frames: 100 } }
+  acc:
+    op: scalar_sum
+    in:
+      a: { from: cam.tick, queue: latest }
+      b: { from: slow.output, join: latest, delay: 1 }
+  slow: { op: simulate_work, in: { input: acc.sum }, params: { work_us: 2000 } }
+";
+    let (report, sink) = run(&common::graph(text));
+    assert_eq!(report.status, RunStatus::Completed);
+    let a = edge(&report, "cam.tick -> acc/a");
+    let acc = sink.port("acc", "sum");
+    assert_eq!(a.sent, 100);
+    assert!(a.dropped > 0, "the loop was not slow enough to drop: {a:?}");
+    // Every message is accounted for: run by `acc`, or dropped (and counted).
+    assert_eq!(acc.len() as u64, a.delivered);
+    assert_eq!(a.delivered + a.dropped, a.sent);
+    // `b` holds the newest output of `slow` at or before the previous frame.
+    let slow = sink.port("slow", "output");
+    for m in &acc {
+        let k = m.header.seq;
+        let want = slow.iter().rev().find(|s| s.header.seq < k).map_or(-1.0, |s| s.header.seq as f64);
+        assert_eq!(scalar(m, "b_seq"), want, "frame {k}");
+    }
+}
+
+#[test]
+fn first_stop_request_ends_a_run_whose_operator_is_stuck() {
+    // An operator stuck in a 30 s call: after the grace period it is cancelled, the sinks
+    // close and the run reports itself interrupted.
+    let text = r"
+name: stuck
+nodes:
+  cam: { op: test_pattern, params: { frames: 1000, rate_hz: 1000 } }
+  stuck: { op: simulate_work, in: { input: cam.tick }, params: { work_us: 30000000 } }
+";
+    let options = RunOptions { stop_grace: Some(Duration::from_millis(300)), ..RunOptions::default() };
+    let stop = options.stop.clone();
+    std::thread::Builder::new()
+        .name("stopper".into())
+        .spawn(move || {
+            std::thread::sleep(Duration::from_millis(300));
+            stop.request();
+        })
+        .unwrap();
+    let t = Instant::now();
+    let (report, sink) = run_within(&common::graph(text), options, Duration::from_secs(20));
+    assert!(t.elapsed() < Duration::from_secs(20));
+    assert_eq!(report.status, RunStatus::Interrupted);
+    assert!(*sink.closed.lock().unwrap(), "recordings not closed");
+}
+
+// --- 2. delay + dropping queue on one edge ------------------------------------------------
+
+#[test]
+fn delayed_edge_with_a_dropping_queue_keeps_every_delayed_frame() {
+    let text = r"
+name: d3
+nodes:
+  cam: { op: test_pattern, params: { frames: 12 } }
+  acc:
+    op: scalar_sum
+    in:
+      a: cam.tick
+      b: { from: acc.sum, delay: 3, queue: latest }
+";
+    let (report, sink) = run(&common::graph(text));
+    let acc = sink.port("acc", "sum");
+    assert_eq!(acc.len(), 12);
+    for (k, m) in acc.iter().enumerate() {
+        assert_eq!(scalar(m, "b_present"), if k >= 3 { 1.0 } else { 0.0 }, "frame {k}");
+        assert_eq!(scalar(m, "b_seq"), if k >= 3 { (k - 3) as f64 } else { -1.0 }, "frame {k}");
+    }
+    let b = edge(&report, "acc.sum -> acc/b");
+    assert_eq!((b.dropped, b.discarded, b.max_depth), (0, 0, 0), "{b:?}");
+    assert_eq!(report.dropped, 0);
+    // The last three outputs are for frames 12..=14, which never run: not lost.
+    assert_eq!(b.sent - b.delivered, 3);
+}
+
+// --- 3. and 5. YAML bombs -------------------------------------------------------------------
+
+#[test]
+fn alias_bomb_and_deep_nesting_are_located_errors() {
+    let mut bomb = String::from("name: bomb\nx0: &a0 [lol]\n");
+    for i in 1..10 {
+        bomb.push_str(&format!("x{i}: &a{i} [{}]\n", vec![format!("*a{}", i - 1); 10].join(",")));
+    }
+    let d = diagnostics(&bomb);
+    assert!(d.len() == 1 && d[0].contains("test.yaml:") && d[0].contains("alias bomb"), "{d:?}");
+
+    let deep = format!(
+        "name: deep\nnodes:\n  cam:\n    op: test_pattern\n    params:\n      frames:\n        {}1\n",
+        "- ".repeat(50_000)
+    );
+    let d = diagnostics(&deep);
+    assert!(d.len() == 1 && d[0].contains("test.yaml:7:") && d[0].contains("nested deeper"), "{d:?}");
+}
+
+// --- 4. names that escape `--out` ------------------------------------------------------------
+
+#[test]
+fn graph_names_must_be_plain_file_names() {
+    for bad in ["../escaped", "/tmp/abs", "\"\"", "a/b", ".hidden", "'a\\b'", "'sp ace'"] {
+        let d = diagnostics(&format!("name: {bad}\nnodes:\n  cam: {{ op: test_pattern }}\n"));
+        assert!(d.iter().any(|m| m.contains("invalid graph name")), "`{bad}` accepted: {d:?}");
+    }
+    for good in ["default", "mg_slam-v2", "run.3", "_x"] {
+        let d = diagnostics(&format!("name: {good}\nnodes:\n  cam: {{ op: test_pattern }}\n"));
+        assert!(d.is_empty(), "`{good}` rejected: {d:?}");
+    }
+}
+
+// --- 6. drop counts, discards and depths count messages, not watermarks ---------------------
+
+#[test]
+fn drop_counts_are_lost_messages_not_watermarks() {
+    let text = r"
+name: gated
+nodes:
+  cam: { op: test_pattern, params: { frames: 200 } }
+  key: { op: gate, in: { input: cam.tick }, params: { every: 5 } }
+  slow: { op: simulate_work, in: { input: { from: key.output, queue: latest } }, params: { work_us: 3000 } }
+";
+    let (report, sink) = run(&common::graph(text));
+    let sent = sink.port("key", "output").len() as u64;
+    let received = sink.port("slow", "output").len() as u64;
+    assert_eq!(sent, 40);
+    let e = edge(&report, "key.output -> slow/input");
+    assert_eq!(e.sent, sent);
+    assert_eq!(e.dropped, sent - received, "{e:?}");
+    assert_eq!(report.dropped, sent - received);
+    assert_eq!(e.delivered, received);
+}
+
+#[test]
+fn completed_runs_with_delays_discard_nothing_and_report_no_reserved_depth() {
+    let text = graph_text("smooth", "{ from: smooth.sum, delay: 2 }");
+    let (report, _) = run(&common::graph(&text));
+    assert_eq!(report.status, RunStatus::Completed);
+    for e in &report.edges {
+        assert_eq!(e.stats.discarded, 0, "{e:?}");
+    }
+    assert_eq!(edge(&report, "smooth.sum -> smooth/b").max_depth, 0);
+}
+
+fn graph_text(name: &str, b: &str) -> String {
+    format!(
+        "name: {name}\nnodes:\n  cam: {{ op: test_pattern, params: {{ frames: 50 }} }}\n  smooth: {{ op: scalar_sum, in: {{ a: cam.tick, b: {b} }} }}\n"
+    )
+}
+
+// --- 10. `--realtime`: a slow node never throttles the camera --------------------------------
+
+#[test]
+fn realtime_slow_node_drops_instead_of_throttling_the_camera() {
+    // 50 frames at 100 Hz is 0.5 s of data; a 200 ms node behind a blocking queue would
+    // stretch the run past 8 s. With no `queue:` written, real time drops (and counts).
+    let text = r"
+name: rt
+nodes:
+  cam: { op: test_pattern, params: { frames: 50, rate_hz: 100 } }
+  slow: { op: simulate_work, in: { input: cam.tick }, params: { work_us: 200000 } }
+";
+    let t = Instant::now();
+    let (report, sink) = run_within(
+        &common::graph(text),
+        RunOptions { realtime: true, ..RunOptions::default() },
+        Duration::from_secs(60),
+    );
+    let wall = t.elapsed();
+    assert_eq!(report.status, RunStatus::Completed);
+    let e = edge(&report, "cam.tick -> slow/input");
+    let ran = sink.port("slow", "output").len() as u64;
+    assert!(e.dropped > 0, "{e:?}");
+    assert_eq!(ran + e.dropped, 50, "{e:?}");
+    // The source's stamps were met: the camera kept its rate. Only the slow node's last
+    // in-flight frame (200 ms) may trail the half second of data.
+    assert!(wall < Duration::from_secs(4), "the slow node throttled the camera: {wall:?}");
+
+    // Offline (no --realtime) the same graph loses nothing.
+    let text = text.replace("work_us: 200000", "work_us: 100");
+    let (report, sink) = run(&common::graph(&text));
+    assert_eq!(sink.port("slow", "output").len(), 50);
+    assert_eq!(report.dropped, 0);
+}
+
+// --- 11. the smaller ones ---------------------------------------------------------------------
+
+#[test]
+fn seed_accepts_the_whole_u64_range_in_yaml_like_the_flag() {
+    let g = common::graph("name: s\nseed: 18446744073709551615\nnodes:\n  cam: { op: test_pattern }\n");
+    assert_eq!(g.seed, u64::MAX);
+    let d = diagnostics("name: s\nseed: 18446744073709551616\nnodes:\n  cam: { op: test_pattern }\n");
+    assert!(d.iter().any(|m| m.contains("`seed` must be an integer")), "{d:?}");
+}
+
+#[test]
+fn variant_patching_an_unknown_node_still_reports_its_other_errors() {
+    let text = r"
+name: v
+nodes:
+  cam: { op: test_pattern }
+variants:
+  bad:
+    ghost: { disabled: true }
+    cam: { params: { frames: -3 } }
+";
+    let req = LoadRequest { variant: Some("bad".into()), ..LoadRequest::default() };
+    let loaded = load_str("test.yaml", text, None, &dynaflow::registry(), &req);
+    let codes: Vec<&str> = loaded.diagnostics.iter().map(|d| d.code).collect();
+    assert!(codes.contains(&"unknown-node") && codes.contains(&"param-range"), "{codes:?}");
+}
+
+#[test]
+fn invalid_delay_is_one_error_not_also_a_cycle() {
+    let d = diagnostics(&graph_text("bad_delay", "{ from: smooth.sum, delay: -1 }"));
+    assert_eq!(d.len(), 1, "{d:?}");
+    assert!(d[0].contains("`delay` must be an integer"), "{d:?}");
+}
+
+#[test]
+fn variant_disabling_the_only_source_is_an_error() {
+    let text = "name: v\nnodes:\n  cam: { op: test_pattern }\nvariants:\n  off: { cam: { disabled: true } }\n";
+    let req = LoadRequest { variant: Some("off".into()), ..LoadRequest::default() };
+    let loaded = load_str("test.yaml", text, None, &dynaflow::registry(), &req);
+    assert!(loaded.graph.is_none());
+    let msgs: Vec<String> = loaded.diagnostics.iter().map(|d| loaded.source.plain(d)).collect();
+    assert!(msgs.iter().any(|m| m.contains("every source is disabled (with variant `off`)")), "{msgs:?}");
+}
+
+#[test]
+fn validation_is_linear_in_a_reversed_chain() {
+    // A pass-through chain written last-to-first: each node's type depends on the next line.
+    // The old validator took 15.6 s for 20k nodes (quadratic); the ratio of two sizes tells
+    // linear from quadratic without depending on the machine's speed.
+    fn chain(n: usize) -> String {
+        let mut s = String::from("name: chain\nnodes:\n");
+        for i in (1..n).rev() {
+            s.push_str(&format!("  p{i}: {{ op: passthrough, in: {{ input: p{}.output }} }}\n", i - 1));
+        }
+        s.push_str("  p0: { op: passthrough, in: { input: cam.tick } }\n  cam: { op: test_pattern }\n");
+        s
+    }
+    let time = |n: usize| {
+        let text = chain(n);
+        (0..3)
+            .map(|_| {
+                let t = Instant::now();
+                let loaded = load_str("c.yaml", &text, None, &dynaflow::registry(), &LoadRequest::default());
+                assert!(loaded.graph.is_some());
+                t.elapsed().as_secs_f64()
+            })
+            .fold(f64::INFINITY, f64::min)
+    };
+    let (small, large) = (time(5_000), time(20_000));
+    // Linear: 4x; quadratic: 16x.
+    assert!(large / small < 9.0, "5k nodes {small:.3} s, 20k nodes {large:.3} s");
+}
+
+// --- a realistic check that nothing above broke plain runs ------------------------------------
+
+#[test]
+fn lockstep_feedback_with_block_queues_is_unchanged() {
+    let (report, sink) = run(&common::graph(&graph_text("acc", "{ from: smooth.sum, delay: 1 }")));
+    assert_eq!(report.dropped, 0);
+    let out = sink.port("smooth", "sum");
+    let mut acc = 0.0;
+    for (k, m) in out.iter().enumerate() {
+        acc += k as f64;
+        assert_eq!(scalar(m, "sum"), acc);
+    }
+}
+
+// --- 9. a corrupt MCAP is bad input, never an abort ---------------------------------------------
+
+#[test]
+fn diff_reader_survives_every_flipped_bit() {
+    let dir = common::TempDir::new("flip");
+    let graph = dir.path().join("small.yaml");
+    std::fs::write(
+        &graph,
+        "name: small\nnodes:\n  cam: { op: test_pattern, params: { frames: 10, width: 4, height: 4 } }\n",
+    )
+    .unwrap();
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "mcap", "--out"])
+        .arg(dir.path())
+        .arg(&graph)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let path = dir.path().join("small.mcap");
+    let good = std::fs::read(&path).unwrap();
+    assert_eq!(dynaflow_recordings::diff::read_mcap_bytes(&path, &good).unwrap().topics.len(), 2);
+    // Every bit of the file, one at a time: lengths, chunk headers, compressed data, CRCs.
+    // Each read is Ok (the flip hit something unchecked, or looks like a cut-off file) or a
+    // clean error naming the file; an abort (the old reader asked the allocator for 3.4e18
+    // bytes) would end this test process.
+    let mut errors = 0;
+    for byte in 0..good.len() {
+        for bit in 0..8 {
+            let mut bad = good.clone();
+            bad[byte] ^= 1 << bit;
+            if let Err(e) = dynaflow_recordings::diff::read_mcap_bytes(&path, &bad) {
+                assert!(e.to_string().contains("small.mcap"), "{e}");
+                errors += 1;
+            }
+        }
+    }
+    assert!(errors > 0);
+}
