@@ -1,10 +1,12 @@
 //! dynaflow's operators, one module per family. [`registry`] returns all of them.
 //!
 //! Families: `synth` (the semi-synthetic dynamic RGB-D generator), `util` (test sources,
-//! pass-through, gating, fault injection: the pieces used to exercise the engine). Decoding, inference, ORB, flow, epipolar culling, PnP/BA and OctoMap
-//! families land in their own modules.
+//! pass-through, gating, fault injection: the pieces used to exercise the engine), `decode`
+//! (dataset readers), `frontend` (ORB, descriptor matching, LK flow over `dynaflow-vision`).
+//! Inference, epipolar culling, PnP/BA and OctoMap families land in their own modules.
 
 pub mod decode;
+mod frontend;
 pub mod synth;
 mod util;
 
@@ -18,5 +20,8 @@ pub fn registry() -> Registry {
     r.register(decode::TUM_RGBD);
     r.register(decode::IMAGE_FOLDER);
     r.register(decode::KITTI_ODOMETRY);
+    r.register(frontend::ORB_EXTRACT);
+    r.register(frontend::MATCH_DESCRIPTORS);
+    r.register(frontend::LK_FLOW);
     r
 }

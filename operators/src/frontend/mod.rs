@@ -1,0 +1,30 @@
+//! The geometric front-end operators: thin wrappers over `dynaflow-vision`.
+//!
+//! - `orb`: `orb_extract` (ORB-SLAM-style ORB features).
+//! - `matching`: `match_descriptors` (frame-to-frame Hamming matching with stable track ids).
+//! - `flow`: `lk_flow` (pyramidal Lucas-Kanade tracking with re-seeding).
+
+mod flow;
+mod matching;
+mod orb;
+
+pub use flow::LK_FLOW;
+pub use matching::MATCH_DESCRIPTORS;
+pub use orb::ORB_EXTRACT;
+
+use dynaflow_engine::msg::{Body, Image, Message, PixelFormat};
+use dynaflow_engine::op::OpError;
+use dynaflow_vision::GrayImage;
+
+/// The grey image of an image message (RGB converted with OpenCV's weights).
+fn gray(msg: &Message) -> Result<GrayImage, OpError> {
+    let Body::Image(Image { width, height, format, data }) = &msg.body else {
+        return Err(OpError::Input(format!("expected an image, got {}", msg.body.port_type())));
+    };
+    let (w, h) = (*width as usize, *height as usize);
+    let img = match format {
+        PixelFormat::Gray8 => GrayImage::from_vec(w, h, data.clone()),
+        PixelFormat::Rgb8 => GrayImage::from_rgb8(w, h, data),
+    };
+    img.ok_or_else(|| OpError::Input(format!("image {w}x{h} {format:?} has {} bytes", data.len())))
+}

@@ -1,0 +1,121 @@
+//! Shared by `tests/frontend.rs` and `benches/frontend.rs`: the images, our side of the
+//! front-end comparison, and the OpenCV peer (`tests/peers/frontend_cv2.py`).
+#![allow(clippy::unwrap_used, clippy::panic, dead_code)]
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use dynaflow_operators::synth::{Generator, SynthConfig};
+use dynaflow_vision::GrayImage;
+use dynaflow_vision::flow::seed_corners;
+use dynaflow_vision::matching::{MatchConfig, match_brute_force};
+use dynaflow_vision::orb::{Distribution, OrbConfig, OrbExtractor, OrbFeatures};
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The real Kinect pair (slambook2 ch7) and the real LK pair (slambook2 ch8).
+pub fn ch7() -> [PathBuf; 2] {
+    let d = repo().join("tests/fixtures/slambook2_rgbd_pair/rgb");
+    [d.join("1.png"), d.join("2.png")]
+}
+pub fn ch8() -> [PathBuf; 2] {
+    let d = repo().join("tests/fixtures/slambook2_lk_pair");
+    [d.join("LK1.png"), d.join("LK2.png")]
+}
+
+/// A PNG as grey, with OpenCV's conversion weights (what `cv2.imread(.., GRAYSCALE)` gives).
+pub fn load_gray(path: &Path) -> GrayImage {
+    let img = image::open(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    match img {
+        image::DynamicImage::ImageLuma8(g) => {
+            let (w, h) = g.dimensions();
+            GrayImage::from_vec(w as usize, h as usize, g.into_raw()).unwrap()
+        }
+        other => {
+            let rgb = other.to_rgb8();
+            let (w, h) = rgb.dimensions();
+            GrayImage::from_rgb8(w as usize, h as usize, rgb.as_raw()).unwrap()
+        }
+    }
+}
+
+pub fn save_gray(img: &GrayImage, path: &Path) {
+    image::GrayImage::from_raw(img.width as u32, img.height as u32, img.data.clone()).unwrap().save(path).unwrap();
+}
+
+/// Two consecutive synthetic frames (grey), the ground-truth flow of the first and its class
+/// mask (0 = static).
+pub struct SynthPair {
+    pub a: GrayImage,
+    pub b: GrayImage,
+    pub flow: Vec<[f32; 2]>,
+    pub class: Vec<u16>,
+}
+
+pub fn synth_pair(frame: u64) -> SynthPair {
+    let g = Generator::new(SynthConfig::default());
+    let (fa, fb) = (g.frame(frame, true), g.frame(frame + 1, false));
+    let k = &g.config().intrinsics;
+    let (w, h) = (k.width as usize, k.height as usize);
+    SynthPair {
+        a: GrayImage::from_rgb8(w, h, &fa.rgb).unwrap(),
+        b: GrayImage::from_rgb8(w, h, &fb.rgb).unwrap(),
+        flow: fa.flow.unwrap(),
+        class: fa.class,
+    }
+}
+
+/// Points to track on `img`: up to `n` FAST corners 5 px apart, 10 px from the border.
+pub fn lk_points(img: &GrayImage, n: usize) -> Vec<[f32; 2]> {
+    seed_corners(img, n, 20, 5.0, 10, &[])
+}
+
+/// Our ORB (in `distribution` mode) + matcher (`config`) on a pair: features of both and the
+/// matched positions (previous, current).
+pub fn our_matches(
+    a: &GrayImage,
+    b: &GrayImage,
+    distribution: Distribution,
+    config: &MatchConfig,
+) -> (OrbFeatures, OrbFeatures, Vec<[f32; 2]>, Vec<[f32; 2]>) {
+    let mut orb = OrbExtractor::new(OrbConfig { distribution, ..OrbConfig::default() });
+    let (fa, fb) = (orb.extract(a, None), orb.extract(b, None));
+    let angles = |f: &OrbFeatures| f.keypoints.iter().map(|k| k.angle).collect::<Vec<_>>();
+    let (qa, ta) = (angles(&fb), angles(&fa));
+    let m = match_brute_force(&fb.descriptors, &fa.descriptors, Some((&qa, &ta)), config);
+    let prev = m.iter().map(|m| fa.keypoints[m.train as usize]).map(|k| [k.x, k.y]).collect();
+    let cur = m.iter().map(|m| fb.keypoints[m.query as usize]).map(|k| [k.x, k.y]).collect();
+    (fa, fb, prev, cur)
+}
+
+/// The matcher set up like `cv2.BFMatcher(NORM_HAMMING, crossCheck=True)`: mutual best
+/// matches, no ratio test, no distance bound (rotation check kept).
+pub fn cross_check_only() -> MatchConfig {
+    MatchConfig { ratio: 1.0, max_distance: 256, ..MatchConfig::default() }
+}
+
+/// The Python of the peers venv if it has OpenCV. Without one the caller skips, unless
+/// `DYNAFLOW_REQUIRE_PEERS` is set (CI), where a missing peer is a failure.
+pub fn cv2_python() -> Option<PathBuf> {
+    let venv = std::env::var_os("DYNAFLOW_PEERS").map_or_else(|| PathBuf::from("/tmp/dynaflow-peers"), PathBuf::from);
+    let found = [venv.join("bin/python"), PathBuf::from("python3")]
+        .into_iter()
+        .find(|p| Command::new(p).args(["-c", "import cv2, numpy"]).output().is_ok_and(|o| o.status.success()));
+    if found.is_none() {
+        assert!(std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(), "OpenCV (cv2) required but not installed");
+        eprintln!("note: no Python with cv2; skipping the OpenCV comparison (CI runs it)");
+    }
+    found
+}
+
+/// Run the OpenCV side on `job` (written to `dir`).
+pub fn run_cv2(python: &Path, dir: &Path, job: &serde_json::Value) -> serde_json::Value {
+    let path = dir.join("job.json");
+    std::fs::write(&path, job.to_string()).unwrap();
+    let out = Command::new(python).arg(repo().join("tests/peers/frontend_cv2.py")).arg(&path).output().unwrap();
+    assert!(out.status.success(), "cv2 peer: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}

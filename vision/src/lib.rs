@@ -1,0 +1,20 @@
+//! dynaflow's geometric front-end: ORB features, descriptor matching and pyramidal
+//! Lucas-Kanade optical flow, as plain functions and structs on grey image buffers.
+//!
+//! - [`image`]: the grey image buffer, RGB conversion, resampling.
+//! - [`orb`]: ORB-SLAM-style extraction (pyramid, FAST per cell, quadtree distribution,
+//!   intensity-centroid orientation, rotated BRIEF with the learned pattern).
+//! - [`matching`]: Hamming brute force (ratio test, cross-check, rotation histogram) and a
+//!   guided window search.
+//! - [`flow`]: pyramidal LK (Scharr gradients, minimum-eigenvalue rejection,
+//!   forward-backward check) and a corner detector for re-seeding tracks.
+//!
+//! No engine, tokio or image-codec dependency: a user can call it directly, and the
+//! benchmarks call exactly what dynaflow's operators call.
+
+pub mod flow;
+pub mod image;
+pub mod matching;
+pub mod orb;
+
+pub use image::GrayImage;
