@@ -88,10 +88,14 @@ pub fn resize_bilinear(src: &GrayImage, width: usize, height: usize, dst: &mut G
         .collect();
     let mut row_a = vec![0i32; width];
     let mut row_b = vec![0i32; width];
+    // Source rows held in row_a / row_b: consecutive output rows mostly share one, so each
+    // source row is interpolated horizontally about once.
+    let (mut have_a, mut have_b) = (usize::MAX, usize::MAX);
+    let last = src.width - 1;
     let horizontal = |row: &[u8], out: &mut [i32]| {
         for (o, &(i, w)) in out.iter_mut().zip(&cols) {
             let a = i32::from(row[i]);
-            let b = i32::from(row[(i + 1).min(row.len() - 1)]);
+            let b = i32::from(row[(i + 1).min(last)]);
             *o = a * (ONE - w) + b * w;
         }
     };
@@ -99,8 +103,20 @@ pub fn resize_bilinear(src: &GrayImage, width: usize, height: usize, dst: &mut G
         let f = ((y as f64 + 0.5) * sy - 0.5).max(0.0);
         let i = (f.floor() as usize).min(src.height - 1);
         let w = if i + 1 < src.height { ((f - i as f64) * f64::from(ONE)).round() as i32 } else { 0 };
-        horizontal(src.row(i), &mut row_a);
-        horizontal(src.row((i + 1).min(src.height - 1)), &mut row_b);
+        let j = (i + 1).min(src.height - 1);
+        if have_a != i {
+            if have_b == i {
+                std::mem::swap(&mut row_a, &mut row_b);
+                have_b = usize::MAX;
+            } else {
+                horizontal(src.row(i), &mut row_a);
+            }
+            have_a = i;
+        }
+        if have_b != j {
+            horizontal(src.row(j), &mut row_b);
+            have_b = j;
+        }
         let out = &mut dst.data[y * width..(y + 1) * width];
         for ((o, &a), &b) in out.iter_mut().zip(&row_a).zip(&row_b) {
             let v =
@@ -158,8 +174,10 @@ pub fn gaussian_blur(src: &GrayImage, radius: usize, sigma: f64, scratch: &mut B
     for y in 0..h {
         let row = src.row(y);
         let pad = &mut scratch.padded;
-        for (i, p) in pad.iter_mut().enumerate() {
-            *p = row[reflect101(i as isize - radius as isize, w)];
+        pad[radius..radius + w].copy_from_slice(row);
+        for i in 0..radius {
+            pad[i] = row[reflect101(i as isize - radius as isize, w)];
+            pad[radius + w + i] = row[reflect101((w + i) as isize, w)];
         }
         let out = &mut scratch.rows[y * w..(y + 1) * w];
         out.fill(0);

@@ -105,14 +105,13 @@ pub fn detect_in(
         // Quick test, vectorisable: any 9-arc holds two of the four compass pixels, so a
         // corner has two of them brighter than c + t or two darker than c - t.
         let cand = &mut scratch.candidates[..rw];
-        for (i, flag) in cand.iter_mut().enumerate() {
-            let c = row[i + 3];
+        let (left, centre, right) = (&row[..rw], &row[3..3 + rw], &row[6..6 + rw]);
+        for (((((flag, &c), &u), &d), &l), &r) in cand.iter_mut().zip(centre).zip(up).zip(down).zip(left).zip(right) {
             let hi = c.saturating_add(t);
             let lo = c.saturating_sub(t);
-            let p = [up[i], row[i + 6], down[i], row[i]];
-            let bright = p.iter().map(|&v| u8::from(v > hi)).sum::<u8>();
-            let dark = p.iter().map(|&v| u8::from(v < lo)).sum::<u8>();
-            *flag = u8::from(bright >= 2 || dark >= 2);
+            let bright = u8::from(u > hi) + u8::from(d > hi) + u8::from(l > hi) + u8::from(r > hi);
+            let dark = u8::from(u < lo) + u8::from(d < lo) + u8::from(l < lo) + u8::from(r < lo);
+            *flag = u8::from(bright >= 2) | u8::from(dark >= 2);
         }
         for (i, _) in cand.iter().enumerate().filter(|(_, c)| **c != 0) {
             let center = y * width + x0 + i;

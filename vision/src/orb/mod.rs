@@ -307,10 +307,14 @@ impl OrbExtractor {
             self.corners.sort_by_key(|c| (std::cmp::Reverse(c.score), c.y, c.x));
             self.corners.truncate(2 * target);
         }
-        // Harris response (7x7 block, k = 0.04) ranks corners in both modes: more repeatable
-        // between views than the FAST score.
-        let response: Vec<f32> =
-            self.corners.iter().map(|c| brief::harris(img, usize::from(c.x), usize::from(c.y))).collect();
+        // Ranking: OpenCV ranks by Harris response (7x7 block, k = 0.04), ORB-SLAM's quadtree
+        // by FAST score (cheap: the quadtree sees every corner, weak ones included). The
+        // reported response is Harris's either way.
+        let response: Vec<f32> = if harris_mode {
+            self.corners.iter().map(|c| brief::harris(img, usize::from(c.x), usize::from(c.y))).collect()
+        } else {
+            self.corners.iter().map(|c| f32::from(c.score)).collect()
+        };
         let mut chosen: Vec<u32> = if harris_mode {
             (0..self.corners.len() as u32).collect()
         } else {
@@ -325,7 +329,18 @@ impl OrbExtractor {
             });
             chosen.truncate(target);
         }
-        chosen.iter().map(|&i| (self.corners[i as usize], response[i as usize])).collect()
+        chosen
+            .iter()
+            .map(|&i| {
+                let c = self.corners[i as usize];
+                let r = if harris_mode {
+                    response[i as usize]
+                } else {
+                    brief::harris(img, usize::from(c.x), usize::from(c.y))
+                };
+                (c, r)
+            })
+            .collect()
     }
 }
 
