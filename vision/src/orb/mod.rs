@@ -140,6 +140,22 @@ impl OrbExtractor {
         self.config.scale_factor.powi(level as i32)
     }
 
+    /// Make pyramid level `level` (level 0 is `image` itself; level l is resized from level
+    /// l - 1, as ORB-SLAM and OpenCV do). False when the level is too small for a patch.
+    fn build_level(&mut self, image: &GrayImage, level: usize) -> bool {
+        let scale = self.scale(level);
+        let (w, h) = ((image.width as f32 / scale).round() as usize, (image.height as f32 / scale).round() as usize);
+        if w < 2 * EDGE + 1 || h < 2 * EDGE + 1 {
+            return false;
+        }
+        if level > 0 {
+            let (prev, rest) = self.levels.split_at_mut(level);
+            let src = if level == 1 { image } else { &prev[level - 1] };
+            resize_bilinear(src, w, h, &mut rest[0]);
+        }
+        true
+    }
+
     /// Features wanted on each level: a geometric series over the levels' areas' square
     /// roots, as ORB-SLAM does.
     fn per_level(&self) -> Vec<usize> {
@@ -166,23 +182,15 @@ impl OrbExtractor {
         let wanted = self.per_level();
         self.levels.resize_with(self.config.levels, GrayImage::default);
         let mut carry = 0usize;
-        for level in 0..self.config.levels {
+        for (level, &share) in wanted.iter().enumerate() {
             let scale = self.scale(level);
-            let (w, h) =
-                ((image.width as f32 / scale).round() as usize, (image.height as f32 / scale).round() as usize);
-            if w < 2 * EDGE + 1 || h < 2 * EDGE + 1 {
+            if !self.build_level(image, level) {
                 break;
-            }
-            // Level 0 is the input itself; level l is resized from level l - 1.
-            if level > 0 {
-                let (prev, rest) = self.levels.split_at_mut(level);
-                let src = if level == 1 { image } else { &prev[level - 1] };
-                resize_bilinear(src, w, h, &mut rest[0]);
             }
             // Borrow the level out of `self` while the scratch buffers are in use.
             let taken = (level > 0).then(|| std::mem::take(&mut self.levels[level]));
             let img: &GrayImage = taken.as_ref().unwrap_or(image);
-            let target = wanted[level] + carry;
+            let target = share + carry;
             let kept = self.level_corners(img, scale, target, mask);
             carry = target.saturating_sub(kept.len());
             if !kept.is_empty() {
@@ -219,16 +227,14 @@ impl OrbExtractor {
         self.levels.resize_with(self.config.levels, GrayImage::default);
         for level in 0..self.config.levels {
             let scale = self.scale(level);
-            let (w, h) =
-                ((image.width as f32 / scale).round() as usize, (image.height as f32 / scale).round() as usize);
-            if w < 2 * EDGE + 1 || h < 2 * EDGE + 1 {
+            if !self.build_level(image, level) {
                 break;
             }
-            if level > 0 {
-                let (prev, rest) = self.levels.split_at_mut(level);
-                let src = if level == 1 { image } else { &prev[level - 1] };
-                resize_bilinear(src, w, h, &mut rest[0]);
-            }
+            let (w, h) = if level == 0 {
+                (image.width, image.height)
+            } else {
+                (self.levels[level].width, self.levels[level].height)
+            };
             let on_level: Vec<&OrbKeypoint> = keypoints.iter().filter(|k| usize::from(k.octave) == level).collect();
             if on_level.is_empty() {
                 continue;
