@@ -13,6 +13,7 @@ mod frontend;
 use std::time::Instant;
 
 use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid};
+use dynaflow_vision::geometry::{RansacConfig, SplitMix64, fit_fundamental};
 use dynaflow_vision::matching::{MatchConfig, match_brute_force};
 use dynaflow_vision::orb::{Distribution, OrbConfig, OrbExtractor};
 use serde_json::json;
@@ -112,6 +113,19 @@ fn main() {
         ours_lk.push((name, ms, pts.len(), res, back, pts, gt));
     }
 
+    // Fundamental-matrix RANSAC on real ORB matches and synthetic LK tracks.
+    let f_cases = frontend::fundamental_cases();
+    let f_ours: Vec<(f64, usize)> = f_cases
+        .iter()
+        .map(|(_, p1, p2)| {
+            let config = RansacConfig::default();
+            let ms = median_ms(reps, || {
+                std::hint::black_box(fit_fundamental(p1, p2, &config, &mut SplitMix64::new(7)));
+            });
+            (ms, fit_fundamental(p1, p2, &config, &mut SplitMix64::new(7)).map_or(0, |f| f.inlier_count()))
+        })
+        .collect();
+
     println!("front-end, single thread, median of {reps} calls; peer: OpenCV (cv2) on the same inputs");
     let cv = frontend::cv2_python().map(|py| {
         let job = json!({
@@ -121,6 +135,7 @@ fn main() {
                 { "name": "harris", "prev": h_prev, "cur": h_cur },
             ] },
             "lk": lk_cases,
+            "fundamental": f_cases.iter().map(|(name, p1, p2)| json!({ "name": name, "p1": p1, "p2": p2 })).collect::<Vec<_>>(),
         });
         frontend::run_cv2(&py, &dir, &job)
     });
@@ -226,6 +241,29 @@ fn main() {
                 Some(median(v))
             });
             println!("{:<34} {:>10.4} {:>10.4}", "  median endpoint error px (GT)", epe, epe_cv.unwrap_or(f64::NAN));
+        }
+    }
+    for ((name, p1, _), (ms, inliers)) in f_cases.iter().zip(&f_ours) {
+        for method in ["ransac", "magsac"] {
+            let theirs = cvf(&["fundamental", name, method, "ms"]);
+            let cv_inliers = cv.as_ref().and_then(|c| {
+                Some(
+                    c["fundamental"][name][method]["inliers"]
+                        .as_array()?
+                        .iter()
+                        .filter(|v| v.as_i64() == Some(1))
+                        .count(),
+                )
+            });
+            println!(
+                "{:<34} {:>8.2}ms {:>8.2}ms {:>8}   inliers {} vs {}",
+                format!("F LO-RANSAC vs {method} ({name}, {})", p1.len()),
+                ms,
+                theirs.unwrap_or(f64::NAN),
+                ratio(*ms, theirs),
+                inliers,
+                cv_inliers.map_or("n/a".into(), |c| c.to_string())
+            );
         }
     }
     println!(

@@ -7,7 +7,7 @@ use std::process::Command;
 
 use dynaflow_operators::synth::{Generator, SynthConfig};
 use dynaflow_vision::GrayImage;
-use dynaflow_vision::flow::seed_corners;
+use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid, seed_corners};
 use dynaflow_vision::matching::{MatchConfig, match_brute_force};
 use dynaflow_vision::orb::{Distribution, OrbConfig, OrbExtractor, OrbFeatures};
 
@@ -95,6 +95,27 @@ pub fn our_matches(
 /// matches, no ratio test, no distance bound (rotation check kept).
 pub fn cross_check_only() -> MatchConfig {
     MatchConfig { ratio: 1.0, max_distance: 256, ..MatchConfig::default() }
+}
+
+/// A named set of point correspondences `(name, p1, p2)`.
+pub type Correspondences = (&'static str, Vec<[f64; 2]>, Vec<[f64; 2]>);
+
+/// Tracks for the fundamental-matrix comparison: ORB matches on the real Kinect pair, LK
+/// tracks on a synthetic pair with walking people (their points are outliers to F).
+pub fn fundamental_cases() -> Vec<Correspondences> {
+    let ch7 = ch7();
+    let (a7, b7) = (load_gray(&ch7[0]), load_gray(&ch7[1]));
+    let (_, _, prev, cur) = our_matches(&a7, &b7, Distribution::Harris, &cross_check_only());
+    let to64 = |v: &[[f32; 2]]| v.iter().map(|p| [f64::from(p[0]), f64::from(p[1])]).collect::<Vec<_>>();
+    let syn = synth_pair(60);
+    let pts = lk_points(&syn.a, 800);
+    let (mut pa, mut pb) = (Pyramid::default(), Pyramid::default());
+    pa.build(&syn.a, 3);
+    pb.build(&syn.b, 3);
+    let res = LkTracker::new(LkConfig::default()).track(&pa, &pb, &pts);
+    let (s1, s2): (Vec<[f32; 2]>, Vec<[f32; 2]>) =
+        pts.iter().zip(&res).filter(|(_, r)| r.found).map(|(p, r)| (*p, r.point)).unzip();
+    vec![("ch7_orb", to64(&prev), to64(&cur)), ("synth_lk", to64(&s1), to64(&s2))]
 }
 
 /// The Python of the peers venv if it has OpenCV. Without one the caller skips, unless

@@ -90,4 +90,18 @@ if "lk" in job:
             r["epe"] = err.tolist()
         res[case["name"]] = r
     out["lk"] = res
+if "fundamental" in job:
+    res = {}
+    for case in job["fundamental"]:
+        p1, p2 = np.float64(case["p1"]), np.float64(case["p2"])
+        r = {}
+        for name, method in [("ransac", cv2.FM_RANSAC), ("magsac", cv2.USAC_MAGSAC)]:
+            run = lambda: cv2.findFundamentalMat(p1, p2, method, 1.0, 0.99, 1000)
+            _, mask = run()
+            r[name] = {
+                "ms": median_ms(run),
+                "inliers": [] if mask is None else mask.ravel().astype(int).tolist(),
+            }
+        res[case["name"]] = r
+    out["fundamental"] = res
 print(json.dumps(out))

@@ -8,11 +8,14 @@
 //!   guided window search.
 //! - [`flow`]: pyramidal LK (Scharr gradients, minimum-eigenvalue rejection,
 //!   forward-backward check) and a corner detector for re-seeding tracks.
+//! - [`geometry`]: the fundamental matrix (7- and 8-point solvers, LO-RANSAC) and epipolar
+//!   distances, for culling points that move.
 //!
-//! No engine, tokio or image-codec dependency: a user can call it directly, and the
+//! No engine, tokio or image-codec dependency (nalgebra for the small linear algebra): a user can call it directly, and the
 //! benchmarks call exactly what dynaflow's operators call.
 
 pub mod flow;
+pub mod geometry;
 pub mod image;
 pub mod matching;
 pub mod orb;

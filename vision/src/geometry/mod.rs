@@ -1,0 +1,16 @@
+//! Two-view geometry for culling dynamic points: the fundamental matrix from point
+//! correspondences and its robust estimation.
+//!
+//! - `fundamental`: Hartley normalisation, the 8-point and 7-point solvers, epipolar
+//!   distances.
+//! - `ransac`: adaptive RANSAC over the 7-point solver with a local-optimisation step
+//!   (LO-RANSAC: refit on the inliers of each new best model), deterministic from a seed.
+
+mod fundamental;
+mod ransac;
+
+pub use fundamental::{eight_point, epipolar_distance, epipolar_error, seven_point};
+pub use ransac::{FundamentalFit, RansacConfig, SplitMix64, fit_fundamental};
+
+/// A 3x3 matrix, row-major, `x2^T F x1 = 0` for homogeneous pixel coordinates.
+pub type Mat3 = nalgebra::Matrix3<f64>;
