@@ -2,9 +2,11 @@
 //!
 //! Families: `synth` (the semi-synthetic dynamic RGB-D generator), `util` (test sources,
 //! pass-through, gating, fault injection: the pieces used to exercise the engine), `decode`
-//! (dataset readers), `frontend` (ORB, descriptor matching, LK flow over `dynaflow-vision`).
-//! Inference, epipolar culling, PnP/BA and OctoMap families land in their own modules.
+//! (dataset readers), `frontend` (ORB, descriptor matching, LK flow over `dynaflow-vision`),
+//! `culling` (fundamental-matrix RANSAC, the seed papers' culling rules, an oracle for boxes).
+//! Inference, PnP/BA and OctoMap families land in their own modules.
 
+pub mod culling;
 pub mod decode;
 mod frontend;
 pub mod synth;
@@ -23,5 +25,8 @@ pub fn registry() -> Registry {
     r.register(frontend::ORB_EXTRACT);
     r.register(frontend::MATCH_DESCRIPTORS);
     r.register(frontend::LK_FLOW);
+    r.register(culling::FUNDAMENTAL_RANSAC);
+    r.register(culling::CULL);
+    r.register(culling::ORACLE_BOXES);
     r
 }

@@ -45,6 +45,7 @@ fn data(body: &Body) -> Value {
             "index": l.labels.iter().map(|l| l.index).collect::<Vec<_>>(),
             "dynamic": l.labels.iter().map(|l| l.dynamic).collect::<Vec<_>>(),
             "reason": l.labels.iter().map(|l| l.reason).collect::<Vec<_>>(),
+            "score": l.labels.iter().map(|l| l.score).collect::<Vec<_>>(),
         }),
         Body::Detections(d) => json!({
             "bbox": d.detections.iter().map(|d| d.bbox).collect::<Vec<_>>(),

@@ -288,6 +288,7 @@ fn decode(ty: PortType, v: &Value) -> Result<Body, String> {
                     index: x.as_u64().unwrap_or(0) as u32,
                     dynamic: d["dynamic"][i].as_bool().unwrap_or(false),
                     reason: reason(&d["reason"][i]),
+                    score: d["score"][i].as_f64().unwrap_or(0.0) as f32,
                 })
                 .collect();
             Body::PointLabels(PointLabels { labels })

@@ -272,20 +272,30 @@ impl Sink for RrdSink {
             }
             Body::PointLabels(l) => {
                 let pts = self.points_by_seq.get(&msg.header.seq).cloned().unwrap_or_default();
-                let (xy, colors): (Vec<[f32; 2]>, Vec<rerun::Color>) = l
-                    .labels
-                    .iter()
-                    .filter_map(|lab| {
-                        let p = pts.get(lab.index as usize)?;
-                        let c = if lab.dynamic {
-                            rerun::Color::from_rgb(230, 40, 40)
-                        } else {
-                            rerun::Color::from_rgb(40, 200, 60)
-                        };
-                        Some((*p, c))
-                    })
-                    .unzip();
-                rec.log(path, &rerun::Points2D::new(xy).with_colors(colors).with_radii([3.0]))
+                let mut xy = Vec::new();
+                let mut colors = Vec::new();
+                let mut texts = Vec::new();
+                for lab in &l.labels {
+                    let Some(p) = pts.get(lab.index as usize) else { continue };
+                    xy.push(*p);
+                    colors.push(if lab.dynamic {
+                        rerun::Color::from_rgb(230, 40, 40)
+                    } else {
+                        rerun::Color::from_rgb(40, 200, 60)
+                    });
+                    // The deciding rule and its measure, shown on hover.
+                    let reason = serde_json::to_value(lab.reason).ok();
+                    let reason = reason.as_ref().and_then(|v| v.as_str()).unwrap_or("?");
+                    texts.push(format!("{reason} {:.2}", lab.score));
+                }
+                rec.log(
+                    path,
+                    &rerun::Points2D::new(xy)
+                        .with_colors(colors)
+                        .with_radii([3.0])
+                        .with_labels(texts)
+                        .with_show_labels(false),
+                )
             }
             Body::Pose(p) => {
                 let t = p.world_from_cam.translation.vector;

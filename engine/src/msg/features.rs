@@ -114,6 +114,9 @@ pub struct PointLabel {
     pub dynamic: bool,
     /// The rule that decided.
     pub reason: LabelReason,
+    /// The rule's measure for this point, in the rule's unit (epipolar distance in pixels,
+    /// a class's dynamic value, a flow or depth residual, ...), compared with its threshold.
+    pub score: f32,
 }
 
 /// Labels of all points of a frame.
@@ -133,6 +136,7 @@ impl PointLabels {
         for l in &self.labels {
             d.u64(u64::from(l.index));
             d.bytes(&[u8::from(l.dynamic), l.reason as u8]);
+            d.f32(l.score);
         }
     }
 }

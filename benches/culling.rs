@@ -1,0 +1,129 @@
+//! Precision and recall of "dynamic" for each culling rule on the synthetic walking scene,
+//! against the generator's ground truth: a tracked point is truly dynamic when it lies on a
+//! person in the first frame of the pair (walking people always move).
+//!
+//! `cargo bench --bench culling` (add `-- FRAMES`, default 60 pairs per sequence). Tracks are
+//! what `lk_flow` produces (FAST seeds 5 px apart, pyramidal LK, forward-backward check 1 px);
+//! the rules are the functions `cull` calls; boxes are the `oracle_boxes` of the ground-truth
+//! masks.
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+use dynaflow_operators::culling::rules::{self, LabelledBox};
+use dynaflow_operators::synth::{Generator, Motion, SynthConfig};
+use dynaflow_vision::GrayImage;
+use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid, seed_corners};
+use dynaflow_vision::geometry::RansacConfig;
+
+#[derive(Default, Clone, Copy)]
+struct Counts {
+    tp: u64,
+    fp: u64,
+    fn_: u64,
+}
+
+impl Counts {
+    fn add(&mut self, predicted: bool, truth: bool) {
+        match (predicted, truth) {
+            (true, true) => self.tp += 1,
+            (true, false) => self.fp += 1,
+            (false, true) => self.fn_ += 1,
+            _ => {}
+        }
+    }
+    fn precision(self) -> f64 {
+        self.tp as f64 / (self.tp + self.fp).max(1) as f64
+    }
+    fn recall(self) -> f64 {
+        self.tp as f64 / (self.tp + self.fn_).max(1) as f64
+    }
+    fn f1(self) -> f64 {
+        let (p, r) = (self.precision(), self.recall());
+        if p + r > 0.0 { 2.0 * p * r / (p + r) } else { 0.0 }
+    }
+}
+
+/// One box per person instance of a frame (what `oracle_boxes` emits).
+fn oracle(instance: &[u16], w: usize) -> Vec<LabelledBox> {
+    let mut b: std::collections::BTreeMap<u16, [f32; 4]> = std::collections::BTreeMap::new();
+    for (i, &id) in instance.iter().enumerate() {
+        if id == 0 {
+            continue;
+        }
+        let (x, y) = ((i % w) as f32, (i / w) as f32);
+        let e = b.entry(id).or_insert([x, y, x, y]);
+        *e = [e[0].min(x), e[1].min(y), e[2].max(x), e[3].max(y)];
+    }
+    b.into_values().map(|bbox| LabelledBox { bbox, label: "person".into() }).collect()
+}
+
+const MODES: [&str; 6] =
+    ["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior", "semantic_prior+fixed", "mask|fixed"];
+
+fn main() {
+    let pairs: u64 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(60);
+    println!("culling on the synthetic scene (2 walking people, 640x480), {pairs} frame pairs per sequence");
+    println!("{:<12} {:<22} {:>9} {:>7} {:>6} {:>8}", "motion", "mode", "precision", "recall", "F1", "points");
+    for motion in [Motion::Xyz, Motion::Halfsphere] {
+        let g = Generator::new(SynthConfig { motion, ..SynthConfig::default() });
+        let k = g.config().intrinsics.clone();
+        let (w, h) = (k.width as usize, k.height as usize);
+        let mut lk = LkTracker::new(LkConfig { fb_threshold: Some(1.0), ..LkConfig::default() });
+        let mut counts = [Counts::default(); MODES.len()];
+        let mut total = 0u64;
+        let mut next = g.frame(0, false);
+        for f in 0..pairs {
+            let cur = std::mem::replace(&mut next, g.frame(f + 1, false));
+            let (a, b) =
+                (GrayImage::from_rgb8(w, h, &cur.rgb).unwrap(), GrayImage::from_rgb8(w, h, &next.rgb).unwrap());
+            let (mut pa, mut pb) = (Pyramid::default(), Pyramid::default());
+            pa.build(&a, 3);
+            pb.build(&b, 3);
+            let seeds = seed_corners(&a, 1000, 20, 5.0, 10, &[]);
+            let res = lk.track(&pa, &pb, &seeds);
+            let (prev, curp): (Vec<[f32; 2]>, Vec<[f32; 2]>) =
+                seeds.iter().zip(&res).filter(|(_, r)| r.found).map(|(p, r)| (*p, r.point)).unzip();
+            let truth: Vec<bool> =
+                prev.iter().map(|p| cur.class[p[1].round() as usize * w + p[0].round() as usize] == 1).collect();
+            let boxes = oracle(&next.instance, w);
+            let in_box = rules::in_any_box(&curp, &boxes);
+            let ransac = RansacConfig::default();
+            let Some((_, d_all)) = rules::epipolar_distances(&prev, &curp, &vec![true; prev.len()], &ransac, f) else {
+                continue;
+            };
+            let outside: Vec<bool> = in_box.iter().map(|b| !b).collect();
+            let fixed = rules::epipolar_fixed(&d_all, 0.4);
+            let adaptive = match rules::epipolar_distances(&prev, &curp, &outside, &ransac, f) {
+                Some((_, d)) => rules::epipolar_adaptive(&d, &in_box).0,
+                None => fixed.clone(),
+            };
+            let mask = rules::mask_rule(&curp, |x, y| x < w && y < h && next.class[y * w + x] == 1);
+            let value = |l: &str| if l == "person" { 1.0 } else { 0.0 };
+            let semantic = rules::semantic_prior(&curp, &boxes, value, false);
+            for i in 0..prev.len() {
+                let predictions = [
+                    fixed[i].dynamic,
+                    adaptive[i].dynamic,
+                    mask[i].dynamic,
+                    semantic[i].dynamic,
+                    semantic[i].dynamic && fixed[i].dynamic,
+                    mask[i].dynamic || fixed[i].dynamic,
+                ];
+                for (c, p) in counts.iter_mut().zip(predictions) {
+                    c.add(p, truth[i]);
+                }
+            }
+            total += prev.len() as u64;
+        }
+        for (mode, c) in MODES.iter().zip(counts) {
+            println!(
+                "{:<12} {:<22} {:>9.3} {:>7.3} {:>6.3} {:>8}",
+                format!("{motion:?}"),
+                mode,
+                c.precision(),
+                c.recall(),
+                c.f1(),
+                total
+            );
+        }
+    }
+}

@@ -1,0 +1,367 @@
+//! The culling operators.
+
+use std::sync::Arc;
+
+use dynaflow_engine::msg::{
+    Body, Detection, Detections, LabelReason, PointLabel, PointLabels, PortType, Scalars, Track, Tracks,
+};
+use dynaflow_engine::op::{
+    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
+    PortSpec,
+};
+use dynaflow_vision::geometry::RansacConfig;
+use rand_core::Rng;
+
+use super::rules::{self, Decision, LabelledBox};
+
+fn tracks_of<'a>(
+    inputs: &'a Inputs,
+    port: &str,
+) -> Result<(&'a Arc<dynaflow_engine::msg::Message>, &'a Tracks), OpError> {
+    let msg = inputs.require(port)?;
+    match &msg.body {
+        Body::Tracks(t) => Ok((msg, t)),
+        other => Err(OpError::Input(format!("`{port}` expects tracks, got {}", other.port_type()))),
+    }
+}
+
+fn labels(decisions: &[Decision]) -> PointLabels {
+    PointLabels {
+        labels: decisions
+            .iter()
+            .enumerate()
+            .map(|(i, d)| PointLabel { index: i as u32, dynamic: d.dynamic, reason: d.reason, score: d.score })
+            .collect(),
+    }
+}
+
+const RANSAC_PARAMS: [ParamSpec; 2] = [
+    ParamSpec {
+        name: "ransac_threshold",
+        ty: ParamType::Float { min: 0.01, max: 100.0 },
+        default: Default::Float(1.0),
+        doc: "RANSAC inlier threshold on the epipolar distances, pixels (OpenCV's default)",
+    },
+    ParamSpec {
+        name: "confidence",
+        ty: ParamType::Float { min: 0.5, max: 0.999_999 },
+        default: Default::Float(0.99),
+        doc: "RANSAC confidence",
+    },
+];
+
+// --- fundamental_ransac ----------------------------------------------------------------
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FConfig {
+    ransac_threshold: f64,
+    confidence: f64,
+    max_iterations: u64,
+    local_optimisation: bool,
+}
+
+pub const FUNDAMENTAL_RANSAC: OpSpec = OpSpec {
+    name: "fundamental_ransac",
+    family: "epipolar",
+    doc: "The fundamental matrix of the previous-to-current tracks by LO-RANSAC over the 7-point solver (8-point refits), deterministic from the node's seed. `labels` marks RANSAC outliers dynamic with each track's epipolar distance (pixels, MG-SLAM's Eq. 4) as score.",
+    kind: OpKind::Transform,
+    inputs: &[PortSpec::input("tracks", PortType::Tracks, "point correspondences, previous -> current")],
+    outputs: &[
+        PortSpec::output("model", PortType::Scalars, "`f00`..`f22` (x2^T F x1 = 0), `inliers`, `tracks`, `iterations`"),
+        PortSpec::output(
+            "labels",
+            PortType::PointLabels,
+            "per track: outlier = dynamic, reason `epipolar`, score = distance",
+        ),
+    ],
+    params: &[
+        RANSAC_PARAMS[0],
+        RANSAC_PARAMS[1],
+        ParamSpec {
+            name: "max_iterations",
+            ty: ParamType::Int { min: 1, max: 1_000_000 },
+            default: Default::Int(1000),
+            doc: "samples at most (fewer when the inlier ratio allows)",
+        },
+        ParamSpec {
+            name: "local_optimisation",
+            ty: ParamType::Bool,
+            default: Default::Bool(true),
+            doc: "refit on the inliers of each new best model (LO-RANSAC)",
+        },
+    ],
+    cpu_heavy: true,
+    build: |p: &Params| {
+        let c: FConfig = p.parse()?;
+        Ok(Instance::Transform(Box::new(FundamentalOp(RansacConfig {
+            threshold: c.ransac_threshold,
+            confidence: c.confidence,
+            max_iterations: c.max_iterations as usize,
+            local_optimisation: c.local_optimisation,
+        }))))
+    },
+};
+
+struct FundamentalOp(RansacConfig);
+
+impl Operator for FundamentalOp {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (msg, t) = tracks_of(inputs, "tracks")?;
+        let (prev, cur): (Vec<[f32; 2]>, Vec<[f32; 2]>) = t.tracks.iter().map(|t| (t.prev, t.cur)).unzip();
+        let seed = ctx.rng.next_u64();
+        let mut out = Outputs::new();
+        let Some((fit, dist)) = rules::epipolar_distances(&prev, &cur, &vec![true; prev.len()], &self.0, seed) else {
+            // Too few tracks for a model: nothing is labelled.
+            return Ok(out);
+        };
+        let mut values: Vec<(Arc<str>, f64)> =
+            fit.f.transpose().iter().enumerate().map(|(i, v)| (format!("f{}{}", i / 3, i % 3).into(), *v)).collect();
+        values.push(("inliers".into(), fit.inlier_count() as f64));
+        values.push(("tracks".into(), prev.len() as f64));
+        values.push(("iterations".into(), fit.iterations as f64));
+        out.push("model", msg.header.clone(), Body::Scalars(Scalars { values }));
+        let decisions: Vec<Decision> = fit
+            .inliers
+            .iter()
+            .zip(&dist)
+            .map(|(&inlier, &d)| Decision {
+                dynamic: !inlier,
+                reason: if inlier { LabelReason::Static } else { LabelReason::Epipolar },
+                score: d,
+            })
+            .collect();
+        out.push("labels", msg.header.clone(), Body::PointLabels(labels(&decisions)));
+        Ok(out)
+    }
+}
+
+// --- cull --------------------------------------------------------------------------------
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CullConfig {
+    mode: String,
+    threshold: f64,
+    ransac_threshold: f64,
+    confidence: f64,
+    classes: String,
+    values: String,
+}
+
+pub const CULL: OpSpec = OpSpec {
+    name: "cull",
+    family: "epipolar",
+    doc: "Labels each track dynamic or static by one of the seed papers' rules (`mode`): `epipolar_fixed` (MG-SLAM: epipolar distance above `threshold` pixels), `epipolar_adaptive` (YSAG-VINS: F from points outside `detections` boxes, threshold = their mean distance, points inside boxes tested against it), `mask` (points on a `mask` pixel of a class in `classes`), `semantic_prior` (YG-SLAM: dynamic values per class, 0.4-0.8 only on frames where `key_frame` has a message). Every label carries its reason and measure; `static` forwards the tracks kept, `counts` the numbers (chain `cull` nodes through `static` to combine rules).",
+    kind: OpKind::Transform,
+    inputs: &[
+        PortSpec::input("tracks", PortType::Tracks, "point correspondences, previous -> current"),
+        PortSpec::optional(
+            "detections",
+            PortType::Detections,
+            "boxes of potentially dynamic objects (adaptive, semantic_prior)",
+        ),
+        PortSpec::optional("mask", PortType::Mask, "segmentation of dynamic classes (mask)"),
+        PortSpec::optional("key_frame", PortType::Any, "present on key frames (semantic_prior's 0.4-0.8 band)"),
+    ],
+    outputs: &[
+        PortSpec::output("labels", PortType::PointLabels, "per track: dynamic, reason, score"),
+        PortSpec::output("static", PortType::Tracks, "the tracks labelled static"),
+        PortSpec::output(
+            "counts",
+            PortType::Scalars,
+            "`dynamic`, `static`, `total`, `threshold` (pixels; adaptive's is computed)",
+        ),
+    ],
+    params: &[
+        ParamSpec {
+            name: "mode",
+            ty: ParamType::Enum { values: &["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior"] },
+            default: Default::Str("epipolar_fixed"),
+            doc: "the rule",
+        },
+        ParamSpec {
+            name: "threshold",
+            ty: ParamType::Float { min: 0.0, max: 1000.0 },
+            default: Default::Float(0.4),
+            doc: "epipolar_fixed: distance in pixels above which a point is dynamic (MG-SLAM's 0.40; sub-pixel LK tracks put static points well below it)",
+        },
+        RANSAC_PARAMS[0],
+        RANSAC_PARAMS[1],
+        ParamSpec {
+            name: "classes",
+            ty: ParamType::Str,
+            default: Default::Str("person"),
+            doc: "mask: comma-separated class names that count as dynamic",
+        },
+        ParamSpec {
+            name: "values",
+            ty: ParamType::Str,
+            default: Default::Str(""),
+            doc: "semantic_prior: `class=value` pairs overriding YG-SLAM's table (person 1.0; cup, cell phone, keyboard, mouse 0.7; chair 0.6; tv 0.5; dining table 0.2; book 0.1)",
+        },
+    ],
+    cpu_heavy: true,
+    build: |p: &Params| {
+        let c: CullConfig = p.parse()?;
+        let mut values: Vec<(String, f32)> =
+            rules::DEFAULT_DYNAMIC_VALUES.iter().map(|(n, v)| ((*n).to_owned(), *v)).collect();
+        for pair in c.values.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+            let (name, v) = pair.split_once('=').ok_or_else(|| OpError::Config {
+                key: "values".into(),
+                message: format!("`{pair}` is not `class=value`"),
+            })?;
+            let v: f32 = v.trim().parse().map_err(|_| OpError::Config {
+                key: "values".into(),
+                message: format!("`{v}` in `{pair}` is not a number"),
+            })?;
+            values.retain(|(n, _)| n != name.trim());
+            values.push((name.trim().to_owned(), v));
+        }
+        let classes = c.classes.split(',').map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()).collect();
+        Ok(Instance::Transform(Box::new(CullOp { config: c, values, classes })))
+    },
+};
+
+struct CullOp {
+    config: CullConfig,
+    values: Vec<(String, f32)>,
+    classes: Vec<String>,
+}
+
+fn boxes(inputs: &Inputs) -> Vec<LabelledBox> {
+    match inputs.get("detections").map(|m| &m.body) {
+        Some(Body::Detections(d)) => {
+            d.detections.iter().map(|d| LabelledBox { bbox: d.bbox, label: d.label.to_string() }).collect()
+        }
+        _ => Vec::new(),
+    }
+}
+
+impl Operator for CullOp {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (msg, t) = tracks_of(inputs, "tracks")?;
+        let (prev, cur): (Vec<[f32; 2]>, Vec<[f32; 2]>) = t.tracks.iter().map(|t| (t.prev, t.cur)).unzip();
+        let ransac = RansacConfig {
+            threshold: self.config.ransac_threshold,
+            confidence: self.config.confidence,
+            ..RansacConfig::default()
+        };
+        // Drawn every frame, used or not, so the stream of seeds does not depend on the mode.
+        let seed = ctx.rng.next_u64();
+        let mut threshold = self.config.threshold as f32;
+        let decisions: Vec<Decision> = match self.config.mode.as_str() {
+            "epipolar_fixed" => match rules::epipolar_distances(&prev, &cur, &vec![true; prev.len()], &ransac, seed) {
+                Some((_, d)) => rules::epipolar_fixed(&d, threshold),
+                None => vec![Decision { dynamic: false, reason: LabelReason::Static, score: 0.0 }; prev.len()],
+            },
+            "epipolar_adaptive" => {
+                let in_box = rules::in_any_box(&cur, &boxes(inputs));
+                let outside: Vec<bool> = in_box.iter().map(|b| !b).collect();
+                match rules::epipolar_distances(&prev, &cur, &outside, &ransac, seed) {
+                    Some((_, d)) => {
+                        let (dec, thr) = rules::epipolar_adaptive(&d, &in_box);
+                        threshold = thr;
+                        dec
+                    }
+                    None => vec![Decision { dynamic: false, reason: LabelReason::Static, score: 0.0 }; prev.len()],
+                }
+            }
+            "mask" => match inputs.get("mask").map(|m| &m.body) {
+                Some(Body::Mask(m)) => {
+                    let dynamic_ids: Vec<u16> = m
+                        .class_names
+                        .iter()
+                        .enumerate()
+                        .filter(|(_, n)| self.classes.iter().any(|c| c.as_str() == &***n))
+                        .map(|(i, _)| i as u16)
+                        .collect();
+                    let (w, h) = (m.width as usize, m.height as usize);
+                    rules::mask_rule(&cur, |x, y| {
+                        x < w && y < h && m.classes.get(y * w + x).is_some_and(|c| dynamic_ids.contains(c))
+                    })
+                }
+                // No mask this frame: nothing can be said.
+                _ => vec![Decision { dynamic: false, reason: LabelReason::Static, score: 0.0 }; prev.len()],
+            },
+            _ => {
+                let key = inputs.get("key_frame").is_some();
+                let values = &self.values;
+                let value_of = |l: &str| values.iter().find(|(n, _)| n == l).map_or(0.0, |(_, v)| *v);
+                rules::semantic_prior(&cur, &boxes(inputs), value_of, key)
+            }
+        };
+        let kept: Vec<Track> = t.tracks.iter().zip(&decisions).filter(|(_, d)| !d.dynamic).map(|(t, _)| *t).collect();
+        let dynamic = decisions.iter().filter(|d| d.dynamic).count();
+        let counts = vec![
+            ("dynamic".into(), dynamic as f64),
+            ("static".into(), kept.len() as f64),
+            ("total".into(), decisions.len() as f64),
+            ("threshold".into(), f64::from(threshold)),
+        ];
+        Ok(Outputs::new()
+            .with("labels", msg.header.clone(), Body::PointLabels(labels(&decisions)))
+            .with("static", msg.header.clone(), Body::Tracks(Tracks { prev_seq: t.prev_seq, tracks: kept }))
+            .with("counts", msg.header.clone(), Body::Scalars(Scalars { values: counts })))
+    }
+}
+
+// --- oracle_boxes ------------------------------------------------------------------------
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct OracleConfig {
+    min_pixels: u64,
+}
+
+pub const ORACLE_BOXES: OpSpec = OpSpec {
+    name: "oracle_boxes",
+    family: "epipolar",
+    doc: "ORACLE, not a detector: turns a ground-truth instance mask (the `synth` source's `gt_mask`) into one box per instance with its class name and score 1, so the semantic rules can be developed and measured before a detector exists. Never use it to claim detection results.",
+    kind: OpKind::Transform,
+    inputs: &[PortSpec::input("mask", PortType::Mask, "ground-truth class and instance mask")],
+    outputs: &[PortSpec::output("detections", PortType::Detections, "one box per instance (score 1.0)")],
+    params: &[ParamSpec {
+        name: "min_pixels",
+        ty: ParamType::Int { min: 1, max: 100_000_000 },
+        default: Default::Int(50),
+        doc: "instances smaller than this are left out (a detector would not see them)",
+    }],
+    cpu_heavy: false,
+    build: |p: &Params| Ok(Instance::Transform(Box::new(OracleOp(p.parse()?)))),
+};
+
+struct OracleOp(OracleConfig);
+
+impl Operator for OracleOp {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let msg = inputs.require("mask")?;
+        let Body::Mask(m) = &msg.body else {
+            return Err(OpError::Input(format!("`mask` expects a mask, got {}", msg.body.port_type())));
+        };
+        let w = m.width as usize;
+        // Per instance: bounding box, pixel count, class.
+        let mut found: std::collections::BTreeMap<u16, ([usize; 4], u64, u16)> = std::collections::BTreeMap::new();
+        let ids = m.instances.as_deref().unwrap_or(&m.classes);
+        for (i, (&inst, &class)) in ids.iter().zip(&m.classes).enumerate() {
+            if inst == 0 || class == 0 {
+                continue;
+            }
+            let (x, y) = (i % w.max(1), i / w.max(1));
+            let e = found.entry(inst).or_insert(([x, y, x, y], 0, class));
+            e.0 = [e.0[0].min(x), e.0[1].min(y), e.0[2].max(x), e.0[3].max(y)];
+            e.1 += 1;
+        }
+        let detections = found
+            .into_values()
+            .filter(|(_, n, _)| *n >= self.0.min_pixels)
+            .map(|(b, _, class)| Detection {
+                bbox: b.map(|v| v as f32),
+                class_id: u32::from(class),
+                label: m.class_names.get(usize::from(class)).cloned().unwrap_or_else(|| "object".into()),
+                score: 1.0,
+            })
+            .collect();
+        Ok(Outputs::new().with("detections", msg.header.clone(), Body::Detections(Detections { detections })))
+    }
+}

@@ -1,0 +1,194 @@
+//! The culling rules, as plain functions. Each labels every point (dynamic or not, why, and
+//! the measure compared with the threshold), so runs with different rules can be diffed.
+
+use dynaflow_engine::msg::LabelReason;
+use dynaflow_vision::geometry::{FundamentalFit, RansacConfig, SplitMix64, epipolar_distance, fit_fundamental};
+
+/// One point's decision.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Decision {
+    /// Whether the point is taken as moving.
+    pub dynamic: bool,
+    /// The rule that decided.
+    pub reason: LabelReason,
+    /// The measure the rule compared (pixels for epipolar rules, the class's dynamic value for
+    /// the semantic prior, 1/0 for masks).
+    pub score: f32,
+}
+
+impl Decision {
+    fn keep(reason: LabelReason, score: f32) -> Self {
+        Self { dynamic: false, reason, score }
+    }
+}
+
+/// An axis-aligned box `[x_min, y_min, x_max, y_max]` with a class name.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LabelledBox {
+    /// Pixels.
+    pub bbox: [f32; 4],
+    /// Class name (COCO's, e.g. `person`).
+    pub label: String,
+}
+
+fn inside(b: &[f32; 4], p: [f32; 2]) -> bool {
+    p[0] >= b[0] && p[0] <= b[2] && p[1] >= b[1] && p[1] <= b[3]
+}
+
+/// Above the threshold, or not a number (no epipolar line): a point that cannot be shown
+/// static is taken as dynamic.
+fn exceeds(d: f32, threshold: f32) -> bool {
+    d.partial_cmp(&threshold) != Some(std::cmp::Ordering::Less) && d != threshold
+}
+
+fn to64(p: &[[f32; 2]]) -> Vec<[f64; 2]> {
+    p.iter().map(|q| [f64::from(q[0]), f64::from(q[1])]).collect()
+}
+
+/// F from the correspondences with `use_point[i]`, and every point's distance (pixels) from
+/// its epipolar line `F p1` (MG-SLAM's Eq. 4). `None` when fewer than 8 usable points or no
+/// model.
+pub fn epipolar_distances(
+    prev: &[[f32; 2]],
+    cur: &[[f32; 2]],
+    use_point: &[bool],
+    ransac: &RansacConfig,
+    seed: u64,
+) -> Option<(FundamentalFit, Vec<f32>)> {
+    let (p1, p2): (Vec<[f32; 2]>, Vec<[f32; 2]>) =
+        prev.iter().zip(cur).zip(use_point).filter(|(_, u)| **u).map(|((a, b), _)| (*a, *b)).unzip();
+    let fit = fit_fundamental(&to64(&p1), &to64(&p2), ransac, &mut SplitMix64::new(seed))?;
+    let d = prev
+        .iter()
+        .zip(cur)
+        .map(|(a, b)| {
+            epipolar_distance(&fit.f, [f64::from(a[0]), f64::from(a[1])], [f64::from(b[0]), f64::from(b[1])]) as f32
+        })
+        .collect();
+    Some((fit, d))
+}
+
+/// MG-SLAM: dynamic where the epipolar distance exceeds `threshold` pixels.
+pub fn epipolar_fixed(distances: &[f32], threshold: f32) -> Vec<Decision> {
+    distances
+        .iter()
+        .map(|&d| Decision { dynamic: exceeds(d, threshold), reason: LabelReason::Epipolar, score: d })
+        .collect()
+}
+
+/// YSAG-VINS: the threshold is the mean epipolar distance of the points outside every box
+/// (F was estimated from those); points inside a box are dynamic above it, points outside
+/// are static. Returns the decisions and the threshold.
+pub fn epipolar_adaptive(distances: &[f32], in_box: &[bool]) -> (Vec<Decision>, f32) {
+    let outside: Vec<f32> =
+        distances.iter().zip(in_box).filter(|(d, b)| !**b && d.is_finite()).map(|(d, _)| *d).collect();
+    let threshold = if outside.is_empty() { f32::INFINITY } else { outside.iter().sum::<f32>() / outside.len() as f32 };
+    let decisions = distances
+        .iter()
+        .zip(in_box)
+        .map(|(&d, &b)| {
+            if b {
+                Decision { dynamic: exceeds(d, threshold), reason: LabelReason::Epipolar, score: d }
+            } else {
+                Decision::keep(LabelReason::Static, d)
+            }
+        })
+        .collect();
+    (decisions, threshold)
+}
+
+/// DynaSLAM / MG-SLAM masks: dynamic where the point lies on a pixel of a dynamic class.
+/// `dynamic_at(x, y)` answers for a pixel.
+pub fn mask_rule(points: &[[f32; 2]], dynamic_at: impl Fn(usize, usize) -> bool) -> Vec<Decision> {
+    points
+        .iter()
+        .map(|p| {
+            let on = p[0] >= 0.0 && p[1] >= 0.0 && dynamic_at(p[0].round() as usize, p[1].round() as usize);
+            if on {
+                Decision { dynamic: true, reason: LabelReason::Semantic, score: 1.0 }
+            } else {
+                Decision::keep(LabelReason::Static, 0.0)
+            }
+        })
+        .collect()
+}
+
+/// YG-SLAM's dynamic values per COCO class; unlisted classes are 0 (static).
+pub const DEFAULT_DYNAMIC_VALUES: &[(&str, f32)] = &[
+    ("person", 1.0),
+    ("cup", 0.7),
+    ("cell phone", 0.7),
+    ("keyboard", 0.7),
+    ("mouse", 0.7),
+    ("chair", 0.6),
+    ("tv", 0.5),
+    ("dining table", 0.2),
+    ("book", 0.1),
+];
+
+/// YG-SLAM's semantic prior. A point takes the largest dynamic value m of the boxes holding
+/// it: m > 0.8 is dynamic; 0.4 < m <= 0.8 dynamic only on key frames; m <= 0.4 static. A point
+/// that also lies in a static object's box (m <= 0.4) is kept: the static object is in front.
+pub fn semantic_prior(
+    points: &[[f32; 2]],
+    boxes: &[LabelledBox],
+    value_of: impl Fn(&str) -> f32,
+    key_frame: bool,
+) -> Vec<Decision> {
+    let values: Vec<f32> = boxes.iter().map(|b| value_of(&b.label)).collect();
+    points
+        .iter()
+        .map(|&p| {
+            let holding: Vec<f32> =
+                boxes.iter().zip(&values).filter(|(b, _)| inside(&b.bbox, p)).map(|(_, v)| *v).collect();
+            let m = holding.iter().copied().fold(0.0f32, f32::max);
+            let in_static_box = holding.iter().any(|&v| v <= 0.4);
+            let dynamic = !in_static_box && (m > 0.8 || (m > 0.4 && key_frame));
+            Decision { dynamic, reason: if dynamic { LabelReason::Semantic } else { LabelReason::Static }, score: m }
+        })
+        .collect()
+}
+
+/// Whether each point lies inside any box.
+pub fn in_any_box(points: &[[f32; 2]], boxes: &[LabelledBox]) -> Vec<bool> {
+    points.iter().map(|&p| boxes.iter().any(|b| inside(&b.bbox, p))).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fixed_and_adaptive_epipolar_rules() {
+        let d = [0.1, 0.5, 3.0, f32::NAN];
+        let fixed = epipolar_fixed(&d, 0.4);
+        assert_eq!(fixed.iter().map(|x| x.dynamic).collect::<Vec<_>>(), vec![false, true, true, true]);
+        // Outside boxes: 0.1 and 0.5 -> threshold 0.3; inside: 3.0 dynamic, NaN dynamic.
+        let (adaptive, thr) = epipolar_adaptive(&d, &[false, false, true, true]);
+        assert!((thr - 0.3).abs() < 1e-6);
+        assert_eq!(adaptive.iter().map(|x| x.dynamic).collect::<Vec<_>>(), vec![false, false, true, true]);
+        assert_eq!(adaptive[0].reason, LabelReason::Static);
+    }
+
+    #[test]
+    fn semantic_prior_follows_yg_slam() {
+        let boxes = vec![
+            LabelledBox { bbox: [0.0, 0.0, 10.0, 10.0], label: "person".into() },
+            LabelledBox { bbox: [20.0, 0.0, 30.0, 10.0], label: "chair".into() },
+            LabelledBox { bbox: [5.0, 5.0, 8.0, 8.0], label: "book".into() },
+        ];
+        let value = |l: &str| DEFAULT_DYNAMIC_VALUES.iter().find(|(n, _)| *n == l).map_or(0.0, |(_, v)| *v);
+        let pts = [[2.0, 2.0], [25.0, 5.0], [6.0, 6.0], [50.0, 50.0]];
+        let normal = semantic_prior(&pts, &boxes, value, false);
+        assert_eq!(normal.iter().map(|x| x.dynamic).collect::<Vec<_>>(), vec![true, false, false, false]);
+        let key = semantic_prior(&pts, &boxes, value, true);
+        // The chair (0.6) counts on key frames; the point on the book inside the person is kept.
+        assert_eq!(key.iter().map(|x| x.dynamic).collect::<Vec<_>>(), vec![true, true, false, false]);
+    }
+
+    #[test]
+    fn mask_rule_uses_the_point_position() {
+        let d = mask_rule(&[[1.0, 1.0], [5.0, 5.0], [-3.0, 2.0]], |x, y| x < 3 && y < 3);
+        assert_eq!(d.iter().map(|x| x.dynamic).collect::<Vec<_>>(), vec![true, false, false]);
+    }
+}
