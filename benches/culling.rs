@@ -56,8 +56,16 @@ fn oracle(instance: &[u16], w: usize) -> Vec<LabelledBox> {
     b.into_values().map(|bbox| LabelledBox { bbox, label: "person".into() }).collect()
 }
 
-const MODES: [&str; 6] =
-    ["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior", "semantic_prior+fixed", "mask|fixed"];
+const MODES: [&str; 8] = [
+    "epipolar_fixed",
+    "epipolar_adaptive",
+    "mask",
+    "semantic_prior",
+    "semantic_prior+fixed",
+    "mask|fixed",
+    "flow (homography 1 px)",
+    "flow (F 1 px)",
+];
 
 fn main() {
     let pairs: u64 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(60);
@@ -99,6 +107,12 @@ fn main() {
             let mask = rules::mask_rule(&curp, |x, y| x < w && y < h && next.class[y * w + x] == 1);
             let value = |l: &str| if l == "person" { 1.0 } else { 0.0 };
             let semantic = rules::semantic_prior(&curp, &boxes, value, false);
+            let quality: Vec<f64> = res.iter().filter(|r| r.found).map(|r| 1.0 / (1.0 + f64::from(r.error))).collect();
+            let flow_h = match rules::homography_residuals(&prev, &curp, &quality, 1.0, f) {
+                Some((_, r)) => rules::flow_consistency(&r, 1.0),
+                None => fixed.clone(),
+            };
+            let flow_f = rules::flow_consistency(&d_all, 1.0);
             for i in 0..prev.len() {
                 let predictions = [
                     fixed[i].dynamic,
@@ -107,6 +121,8 @@ fn main() {
                     semantic[i].dynamic,
                     semantic[i].dynamic && fixed[i].dynamic,
                     mask[i].dynamic || fixed[i].dynamic,
+                    flow_h[i].dynamic,
+                    flow_f[i].dynamic,
                 ];
                 for (c, p) in counts.iter_mut().zip(predictions) {
                     c.add(p, truth[i]);

@@ -20,13 +20,14 @@ fn run(variant: &str, out: &std::path::Path, record: &str) -> serde_json::Value 
 #[test]
 fn every_rule_runs_and_the_same_seed_gives_the_same_labels() {
     let dir = common::TempDir::new("culling");
-    for variant in ["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior"] {
+    for variant in ["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior", "flow_consistency"] {
         let a = run(variant, &dir.path().join("a"), "none");
         let b = run(variant, &dir.path().join("b"), "none");
         let labels = &a["digests"]["cull/labels"];
         assert_eq!(labels["count"], 6, "{variant}: one label set per frame: {labels}");
         assert_eq!(labels, &b["digests"]["cull/labels"], "{variant}: labels differ between two runs");
         assert_eq!(a["digests"]["fundamental/model"], b["digests"]["fundamental/model"]);
+        assert_eq!(a["digests"]["homography/model"], b["digests"]["homography/model"]);
     }
 }
 

@@ -26,6 +26,7 @@ pub fn registry() -> Registry {
     r.register(frontend::MATCH_DESCRIPTORS);
     r.register(frontend::LK_FLOW);
     r.register(culling::FUNDAMENTAL_RANSAC);
+    r.register(culling::HOMOGRAPHY_PROSAC);
     r.register(culling::CULL);
     r.register(culling::ORACLE_BOXES);
     r

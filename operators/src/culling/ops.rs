@@ -136,6 +136,62 @@ impl Operator for FundamentalOp {
     }
 }
 
+// --- homography_prosac ----------------------------------------------------------------
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct HConfig {
+    threshold: f64,
+}
+
+pub const HOMOGRAPHY_PROSAC: OpSpec = OpSpec {
+    name: "homography_prosac",
+    family: "epipolar",
+    doc: "The homography of the previous-to-current tracks by PROSAC (samples from the best-ranked tracks first; rank = 1 / (1 + error), the tracker's residual or Hamming distance), for camera-motion compensation as in PSPNet-SLAM. `labels` marks tracks whose transfer error exceeds `threshold` pixels.",
+    kind: OpKind::Transform,
+    inputs: &[PortSpec::input("tracks", PortType::Tracks, "point correspondences, previous -> current")],
+    outputs: &[
+        PortSpec::output("model", PortType::Scalars, "`h00`..`h22` (p2 ~ H p1), `inliers`, `tracks`, `iterations`"),
+        PortSpec::output(
+            "labels",
+            PortType::PointLabels,
+            "per track: outlier = dynamic, reason `flow`, score = transfer error (px)",
+        ),
+    ],
+    params: &[ParamSpec {
+        name: "threshold",
+        ty: ParamType::Float { min: 0.01, max: 1000.0 },
+        default: Default::Float(1.0),
+        doc: "inlier threshold on the transfer error, pixels",
+    }],
+    cpu_heavy: true,
+    build: |p: &Params| Ok(Instance::Transform(Box::new(HomographyOp(p.parse()?)))),
+};
+
+struct HomographyOp(HConfig);
+
+impl Operator for HomographyOp {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (msg, t) = tracks_of(inputs, "tracks")?;
+        let (prev, cur): (Vec<[f32; 2]>, Vec<[f32; 2]>) = t.tracks.iter().map(|t| (t.prev, t.cur)).unzip();
+        let quality: Vec<f64> = t.tracks.iter().map(|t| 1.0 / (1.0 + f64::from(t.error.max(0.0)))).collect();
+        let seed = ctx.rng.next_u64();
+        let mut out = Outputs::new();
+        let Some((fit, residuals)) = rules::homography_residuals(&prev, &cur, &quality, self.0.threshold, seed) else {
+            return Ok(out);
+        };
+        let mut values: Vec<(Arc<str>, f64)> =
+            fit.h.transpose().iter().enumerate().map(|(i, v)| (format!("h{}{}", i / 3, i % 3).into(), *v)).collect();
+        values.push(("inliers".into(), fit.inliers.iter().filter(|&&i| i).count() as f64));
+        values.push(("tracks".into(), prev.len() as f64));
+        values.push(("iterations".into(), fit.iterations as f64));
+        out.push("model", msg.header.clone(), Body::Scalars(Scalars { values }));
+        let decisions = rules::flow_consistency(&residuals, self.0.threshold as f32);
+        out.push("labels", msg.header.clone(), Body::PointLabels(labels(&decisions)));
+        Ok(out)
+    }
+}
+
 // --- cull --------------------------------------------------------------------------------
 
 #[derive(Debug, serde::Deserialize)]
@@ -147,12 +203,14 @@ struct CullConfig {
     confidence: f64,
     classes: String,
     values: String,
+    motion_model: String,
+    flow_threshold: f64,
 }
 
 pub const CULL: OpSpec = OpSpec {
     name: "cull",
     family: "epipolar",
-    doc: "Labels each track dynamic or static by one of the seed papers' rules (`mode`): `epipolar_fixed` (MG-SLAM: epipolar distance above `threshold` pixels), `epipolar_adaptive` (YSAG-VINS: F from points outside `detections` boxes, threshold = their mean distance, points inside boxes tested against it), `mask` (points on a `mask` pixel of a class in `classes`), `semantic_prior` (YG-SLAM: dynamic values per class, 0.4-0.8 only on frames where `key_frame` has a message). Every label carries its reason and measure; `static` forwards the tracks kept, `counts` the numbers (chain `cull` nodes through `static` to combine rules).",
+    doc: "Labels each track dynamic or static by one of the seed papers' rules (`mode`): `epipolar_fixed` (MG-SLAM: epipolar distance above `threshold` pixels), `epipolar_adaptive` (YSAG-VINS: F from points outside `detections` boxes, threshold = their mean distance, points inside boxes tested against it), `mask` (points on a `mask` pixel of a class in `classes`), `semantic_prior` (YG-SLAM: dynamic values per class, 0.4-0.8 only on frames where `key_frame` has a message), `flow_consistency` (PSPNet-SLAM: the track disagrees with the camera-induced motion, a PROSAC homography or F, by more than `flow_threshold` pixels; chain a `mask` node after it for the second screening). Every label carries its reason and measure; `static` forwards the tracks kept, `counts` the numbers (chain `cull` nodes through `static` to combine rules).",
     kind: OpKind::Transform,
     inputs: &[
         PortSpec::input("tracks", PortType::Tracks, "point correspondences, previous -> current"),
@@ -176,7 +234,9 @@ pub const CULL: OpSpec = OpSpec {
     params: &[
         ParamSpec {
             name: "mode",
-            ty: ParamType::Enum { values: &["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior"] },
+            ty: ParamType::Enum {
+                values: &["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior", "flow_consistency"],
+            },
             default: Default::Str("epipolar_fixed"),
             doc: "the rule",
         },
@@ -199,6 +259,18 @@ pub const CULL: OpSpec = OpSpec {
             ty: ParamType::Str,
             default: Default::Str(""),
             doc: "semantic_prior: `class=value` pairs overriding YG-SLAM's table (person 1.0; cup, cell phone, keyboard, mouse 0.7; chair 0.6; tv 0.5; dining table 0.2; book 0.1)",
+        },
+        ParamSpec {
+            name: "motion_model",
+            ty: ParamType::Enum { values: &["homography", "fundamental"] },
+            default: Default::Str("homography"),
+            doc: "flow_consistency: the camera-induced motion, a homography by PROSAC (PSPNet-SLAM; exact for rotation or a distant scene) or F (allows parallax)",
+        },
+        ParamSpec {
+            name: "flow_threshold",
+            ty: ParamType::Float { min: 0.0, max: 1000.0 },
+            default: Default::Float(1.0),
+            doc: "flow_consistency: residual in pixels above which a track is dynamic",
         },
     ],
     cpu_heavy: true,
@@ -264,6 +336,22 @@ impl Operator for CullOp {
                         threshold = thr;
                         dec
                     }
+                    None => vec![Decision { dynamic: false, reason: LabelReason::Static, score: 0.0 }; prev.len()],
+                }
+            }
+            "flow_consistency" => {
+                let all = vec![true; prev.len()];
+                let residuals = if self.config.motion_model == "fundamental" {
+                    rules::epipolar_distances(&prev, &cur, &all, &ransac, seed).map(|(_, d)| d)
+                } else {
+                    let quality: Vec<f64> =
+                        t.tracks.iter().map(|t| 1.0 / (1.0 + f64::from(t.error.max(0.0)))).collect();
+                    rules::homography_residuals(&prev, &cur, &quality, self.config.ransac_threshold, seed)
+                        .map(|(_, r)| r)
+                };
+                threshold = self.config.flow_threshold as f32;
+                match residuals {
+                    Some(r) => rules::flow_consistency(&r, threshold),
                     None => vec![Decision { dynamic: false, reason: LabelReason::Static, score: 0.0 }; prev.len()],
                 }
             }

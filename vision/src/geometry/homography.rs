@@ -1,0 +1,200 @@
+//! The homography between two views by PROSAC (Chum & Matas, "Matching with PROSAC",
+//! CVPR 2005): samples drawn from progressively larger sets of the best-ranked
+//! correspondences, so good matches are tried first; the 4-point normalised DLT as solver.
+
+use nalgebra::{Matrix3, SMatrix, SymmetricEigen, Vector3};
+
+use super::Mat3;
+use super::ransac::SplitMix64;
+
+/// Hartley normalisation (centroid to 0, mean distance sqrt(2)).
+fn normaliser(points: &[[f64; 2]]) -> Option<Mat3> {
+    let n = points.len() as f64;
+    if points.is_empty() {
+        return None;
+    }
+    let (cx, cy) = points.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
+    let (cx, cy) = (cx / n, cy / n);
+    let mean = points.iter().map(|p| ((p[0] - cx).powi(2) + (p[1] - cy).powi(2)).sqrt()).sum::<f64>() / n;
+    if !(mean > 1e-12 && mean.is_finite()) {
+        return None;
+    }
+    let s = std::f64::consts::SQRT_2 / mean;
+    Some(Matrix3::new(s, 0.0, -s * cx, 0.0, s, -s * cy, 0.0, 0.0, 1.0))
+}
+
+/// Where `h` maps `p` (infinite when it maps to the line at infinity).
+pub fn transfer(h: &Mat3, p: [f64; 2]) -> [f64; 2] {
+    let v = h * Vector3::new(p[0], p[1], 1.0);
+    if v.z.abs() < 1e-15 { [f64::INFINITY, f64::INFINITY] } else { [v.x / v.z, v.y / v.z] }
+}
+
+/// Transfer error `|H p1 - p2|`, pixels.
+pub fn transfer_error(h: &Mat3, p1: [f64; 2], p2: [f64; 2]) -> f64 {
+    let q = transfer(h, p1);
+    ((q[0] - p2[0]).powi(2) + (q[1] - p2[1]).powi(2)).sqrt()
+}
+
+/// The normalised DLT on `n >= 4` correspondences (least squares for more). `None` when
+/// degenerate (coincident or collinear points give no finite, invertible model).
+pub fn homography_dlt(p1: &[[f64; 2]], p2: &[[f64; 2]]) -> Option<Mat3> {
+    if p1.len() < 4 || p1.len() != p2.len() {
+        return None;
+    }
+    let (t1, t2) = (normaliser(p1)?, normaliser(p2)?);
+    let mut ata = SMatrix::<f64, 9, 9>::zeros();
+    for (a, b) in p1.iter().zip(p2) {
+        let a = t1 * Vector3::new(a[0], a[1], 1.0);
+        let b = t2 * Vector3::new(b[0], b[1], 1.0);
+        let (x, y, u, v) = (a.x / a.z, a.y / a.z, b.x / b.z, b.y / b.z);
+        for row in [[-x, -y, -1.0, 0.0, 0.0, 0.0, u * x, u * y, u], [0.0, 0.0, 0.0, -x, -y, -1.0, v * x, v * y, v]] {
+            let r = SMatrix::<f64, 9, 1>::from_column_slice(&row);
+            ata += r * r.transpose();
+        }
+    }
+    let eig = SymmetricEigen::new(ata);
+    let (imin, _) = eig.eigenvalues.iter().enumerate().min_by(|a, b| a.1.total_cmp(b.1))?;
+    let h = eig.eigenvectors.column(imin);
+    let hn = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]);
+    let h = t2.try_inverse()? * hn * t1;
+    let scale = h.norm();
+    let h = h / scale;
+    (h.iter().all(|v| v.is_finite()) && h.determinant().abs() > 1e-12).then_some(h)
+}
+
+/// A robustly estimated homography.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HomographyFit {
+    /// `p2 ~ H p1`, unit Frobenius norm.
+    pub h: Mat3,
+    /// Per correspondence: transfer error within the threshold.
+    pub inliers: Vec<bool>,
+    /// Samples drawn.
+    pub iterations: usize,
+}
+
+/// PROSAC: `quality[i]` ranks correspondence `i` (higher is better; PSPNet-SLAM's
+/// `1 / (beta * d_min)`). Inliers have a transfer error below `threshold` pixels.
+pub fn fit_homography_prosac(
+    p1: &[[f64; 2]],
+    p2: &[[f64; 2]],
+    quality: &[f64],
+    threshold: f64,
+    max_iterations: usize,
+    rng: &mut SplitMix64,
+) -> Option<HomographyFit> {
+    let n = p1.len();
+    const M: usize = 4;
+    if n < M || p2.len() != n || quality.len() != n {
+        return None;
+    }
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| quality[b].total_cmp(&quality[a]).then(a.cmp(&b)));
+    let count = |h: &Mat3| p1.iter().zip(p2).filter(|(a, b)| transfer_error(h, **a, **b) <= threshold).count();
+    // PROSAC growth schedule: T_n, the expected number of samples drawn from the top n.
+    let t_max = max_iterations.max(1) as f64;
+    let mut t_n = t_max;
+    for i in 0..M {
+        t_n *= (M - i) as f64 / (n - i) as f64;
+    }
+    let (mut subset, mut t_prime, mut t_n_prev) = (M, 1usize, t_n);
+    let mut best: Option<(Mat3, usize)> = None;
+    let mut iterations = 0;
+    let mut limit = max_iterations.max(1);
+    while iterations < limit {
+        iterations += 1;
+        if iterations == t_prime && subset < n {
+            // Grow the pool by the next-best correspondence.
+            let t_next = t_n_prev * (subset + 1) as f64 / (subset + 1 - M) as f64;
+            t_prime += (t_next - t_n_prev).ceil().max(1.0) as usize;
+            t_n_prev = t_next;
+            subset += 1;
+        }
+        // M - 1 points from the top `subset - 1`, plus the `subset`-th (PROSAC's sampling).
+        let mut idx = [0usize; M];
+        idx[M - 1] = order[subset - 1];
+        for k in 0..M - 1 {
+            loop {
+                let i = order[rng.below(subset.saturating_sub(1).max(1))];
+                if !idx[..k].contains(&i) && i != idx[M - 1] {
+                    idx[k] = i;
+                    break;
+                }
+                if subset <= M {
+                    // Only the top M exist: take them in order.
+                    idx[k] = order[k];
+                    break;
+                }
+            }
+        }
+        let s1: Vec<[f64; 2]> = idx.iter().map(|&i| p1[i]).collect();
+        let s2: Vec<[f64; 2]> = idx.iter().map(|&i| p2[i]).collect();
+        let Some(h) = homography_dlt(&s1, &s2) else { continue };
+        let c = count(&h);
+        if best.as_ref().is_none_or(|b| c > b.1) {
+            best = Some((h, c));
+            // RANSAC's stopping rule on the inlier ratio: 99 % confidence that an all-inlier
+            // sample was drawn (PROSAC reaches it sooner: good matches come first).
+            let p_good = (c as f64 / n as f64).powi(M as i32);
+            if p_good >= 1.0 {
+                break;
+            }
+            let needed = (0.01f64).ln() / (1.0 - p_good).ln();
+            if needed.is_finite() {
+                limit = limit.min((needed.ceil() as usize).max(1));
+            }
+        }
+    }
+    let (mut h, c) = best?;
+    // Refit on the inliers.
+    let (i1, i2): (Vec<[f64; 2]>, Vec<[f64; 2]>) =
+        p1.iter().zip(p2).filter(|(a, b)| transfer_error(&h, **a, **b) <= threshold).map(|(a, b)| (*a, *b)).unzip();
+    if let Some(g) = homography_dlt(&i1, &i2)
+        && count(&g) >= c
+    {
+        h = g;
+    }
+    let inliers = p1.iter().zip(p2).map(|(a, b)| transfer_error(&h, *a, *b) <= threshold).collect();
+    Some(HomographyFit { h, inliers, iterations })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn truth() -> Mat3 {
+        Matrix3::new(1.02, 0.03, 5.0, -0.02, 0.98, -3.0, 1e-5, -2e-5, 1.0)
+    }
+
+    #[test]
+    fn dlt_is_exact_and_prosac_rejects_outliers() {
+        let h = truth();
+        let mut rng = SplitMix64::new(3);
+        let p1: Vec<[f64; 2]> = (0..100).map(|_| [rng.uniform() * 640.0, rng.uniform() * 480.0]).collect();
+        let mut p2: Vec<[f64; 2]> = p1.iter().map(|&p| transfer(&h, p)).collect();
+        let est = homography_dlt(&p1, &p2).unwrap();
+        for (a, b) in p1.iter().zip(&p2) {
+            assert!(transfer_error(&est, *a, *b) < 1e-6);
+        }
+        // 40 % outliers, ranked last by quality.
+        for p in p2.iter_mut().skip(60) {
+            *p = [rng.uniform() * 640.0, rng.uniform() * 480.0];
+        }
+        let quality: Vec<f64> = (0..100).map(|i| if i < 60 { 1.0 - i as f64 * 1e-3 } else { 0.1 }).collect();
+        let fit = fit_homography_prosac(&p1, &p2, &quality, 1.0, 500, &mut SplitMix64::new(1)).unwrap();
+        assert_eq!(fit.inliers.iter().take(60).filter(|&&i| i).count(), 60);
+        assert!(fit.inliers.iter().skip(60).filter(|&&i| i).count() <= 2);
+        // Good ones ranked first: found within a few samples.
+        assert!(fit.iterations <= 50, "{}", fit.iterations);
+    }
+
+    #[test]
+    fn degenerate_input_gives_no_model() {
+        let same = vec![[1.0, 1.0]; 10];
+        assert!(homography_dlt(&same, &same).is_none());
+        assert!(homography_dlt(&same[..3], &same[..3]).is_none());
+        let line: Vec<[f64; 2]> = (0..10).map(|i| [f64::from(i), 2.0 * f64::from(i)]).collect();
+        assert!(homography_dlt(&line, &line).is_none_or(|h| h.iter().all(|v| v.is_finite())));
+        assert!(fit_homography_prosac(&same, &same, &[1.0; 10], 1.0, 50, &mut SplitMix64::new(0)).is_none());
+    }
+}
