@@ -77,6 +77,7 @@ fn main() {
         let (w, h) = (k.width as usize, k.height as usize);
         let mut lk = LkTracker::new(LkConfig { fb_threshold: Some(1.0), ..LkConfig::default() });
         let mut counts = [Counts::default(); MODES.len()];
+        let mut depth_counts = Counts::default();
         let mut total = 0u64;
         let mut next = g.frame(0, false);
         for f in 0..pairs {
@@ -113,6 +114,36 @@ fn main() {
                 None => fixed.clone(),
             };
             let flow_f = rules::flow_consistency(&d_all, 1.0);
+            // Depth check against a key frame 10 frames back (a walking person moves about
+            // 0.3 m in that time; frame to frame only 3 cm, below the depth noise).
+            let camera = rules::Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
+            let key_f = f.saturating_sub(10);
+            let key = g.frame(key_f, false);
+            let kimg = GrayImage::from_rgb8(w, h, &key.rgb).unwrap();
+            let mut pk = Pyramid::default();
+            pk.build(&kimg, 3);
+            let kseeds = seed_corners(&kimg, 1000, 20, 5.0, 10, &[]);
+            // The key frame's points themselves are checked (no tracking needed: they are
+            // projected).
+            let kprev = kseeds;
+            let cur_from_world = next.world_from_cam.inverse();
+            let at = |d: &[f32], x: f32, y: f32| {
+                let (xi, yi) = (x.round() as usize, y.round() as usize);
+                if xi < w && yi < h { d[yi * w + xi] } else { 0.0 }
+            };
+            let predicted: Vec<_> = kprev
+                .iter()
+                .map(|p| {
+                    let z = at(&key.depth, p[0], p[1]);
+                    (z > 0.0)
+                        .then(|| cur_from_world * (key.world_from_cam * rules::back_project(camera, *p, f64::from(z))))
+                })
+                .collect();
+            let depth = rules::depth_consistency(&predicted, camera, |x, y| at(&next.depth, x, y), 0.1);
+            for (i, d) in depth.iter().enumerate() {
+                let truth = key.class[kprev[i][1].round() as usize * w + kprev[i][0].round() as usize] == 1;
+                depth_counts.add(d.dynamic, truth);
+            }
             for i in 0..prev.len() {
                 let predictions = [
                     fixed[i].dynamic,
@@ -130,7 +161,7 @@ fn main() {
             }
             total += prev.len() as u64;
         }
-        for (mode, c) in MODES.iter().zip(counts) {
+        for (mode, c) in MODES.iter().copied().zip(counts).chain([("depth_consistency (key 10 back)", depth_counts)]) {
             println!(
                 "{:<12} {:<22} {:>9.3} {:>7.3} {:>6.3} {:>8}",
                 format!("{motion:?}"),

@@ -20,7 +20,9 @@ fn run(variant: &str, out: &std::path::Path, record: &str) -> serde_json::Value 
 #[test]
 fn every_rule_runs_and_the_same_seed_gives_the_same_labels() {
     let dir = common::TempDir::new("culling");
-    for variant in ["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior", "flow_consistency"] {
+    for variant in
+        ["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior", "flow_consistency", "depth_consistency"]
+    {
         let a = run(variant, &dir.path().join("a"), "none");
         let b = run(variant, &dir.path().join("b"), "none");
         let labels = &a["digests"]["cull/labels"];

@@ -205,12 +205,13 @@ struct CullConfig {
     values: String,
     motion_model: String,
     flow_threshold: f64,
+    depth_threshold: f64,
 }
 
 pub const CULL: OpSpec = OpSpec {
     name: "cull",
     family: "epipolar",
-    doc: "Labels each track dynamic or static by one of the seed papers' rules (`mode`): `epipolar_fixed` (MG-SLAM: epipolar distance above `threshold` pixels), `epipolar_adaptive` (YSAG-VINS: F from points outside `detections` boxes, threshold = their mean distance, points inside boxes tested against it), `mask` (points on a `mask` pixel of a class in `classes`), `semantic_prior` (YG-SLAM: dynamic values per class, 0.4-0.8 only on frames where `key_frame` has a message), `flow_consistency` (PSPNet-SLAM: the track disagrees with the camera-induced motion, a PROSAC homography or F, by more than `flow_threshold` pixels; chain a `mask` node after it for the second screening). Every label carries its reason and measure; `static` forwards the tracks kept, `counts` the numbers (chain `cull` nodes through `static` to combine rules).",
+    doc: "Labels each track dynamic or static by one of the seed papers' rules (`mode`): `epipolar_fixed` (MG-SLAM: epipolar distance above `threshold` pixels), `epipolar_adaptive` (YSAG-VINS: F from points outside `detections` boxes, threshold = their mean distance, points inside boxes tested against it), `mask` (points on a `mask` pixel of a class in `classes`), `semantic_prior` (YG-SLAM: dynamic values per class, 0.4-0.8 only on frames where `key_frame` has a message), `flow_consistency` (PSPNet-SLAM: the track disagrees with the camera-induced motion, a PROSAC homography or F, by more than `flow_threshold` pixels; chain a `mask` node after it for the second screening), `depth_consistency` (YOEC-DSLAM: each track's point, placed in the world with its depth and `pose` when first seen, has a predicted depth in the current view; dynamic where the measured `depth` differs by more than `depth_threshold` metres: a static point stays put, a walking person's drifts away over the frames). Every label carries its reason and measure; `static` forwards the tracks kept, `counts` the numbers (chain `cull` nodes through `static` to combine rules).",
     kind: OpKind::Transform,
     inputs: &[
         PortSpec::input("tracks", PortType::Tracks, "point correspondences, previous -> current"),
@@ -221,6 +222,9 @@ pub const CULL: OpSpec = OpSpec {
         ),
         PortSpec::optional("mask", PortType::Mask, "segmentation of dynamic classes (mask)"),
         PortSpec::optional("key_frame", PortType::Any, "present on key frames (semantic_prior's 0.4-0.8 band)"),
+        PortSpec::optional("depth", PortType::Depth, "depth in metres (depth_consistency)"),
+        PortSpec::optional("camera_info", PortType::CameraInfo, "intrinsics (depth_consistency)"),
+        PortSpec::optional("pose", PortType::Pose, "camera pose, from the tracker or ground truth (depth_consistency)"),
     ],
     outputs: &[
         PortSpec::output("labels", PortType::PointLabels, "per track: dynamic, reason, score"),
@@ -235,7 +239,14 @@ pub const CULL: OpSpec = OpSpec {
         ParamSpec {
             name: "mode",
             ty: ParamType::Enum {
-                values: &["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior", "flow_consistency"],
+                values: &[
+                    "epipolar_fixed",
+                    "epipolar_adaptive",
+                    "mask",
+                    "semantic_prior",
+                    "flow_consistency",
+                    "depth_consistency",
+                ],
             },
             default: Default::Str("epipolar_fixed"),
             doc: "the rule",
@@ -272,6 +283,12 @@ pub const CULL: OpSpec = OpSpec {
             default: Default::Float(1.0),
             doc: "flow_consistency: residual in pixels above which a track is dynamic",
         },
+        ParamSpec {
+            name: "depth_threshold",
+            ty: ParamType::Float { min: 0.0, max: 100.0 },
+            default: Default::Float(0.1),
+            doc: "depth_consistency: predicted-vs-measured depth difference in metres above which a point is dynamic (4 sigma of Kinect depth noise at 4 m)",
+        },
     ],
     cpu_heavy: true,
     build: |p: &Params| {
@@ -291,7 +308,13 @@ pub const CULL: OpSpec = OpSpec {
             values.push((name.trim().to_owned(), v));
         }
         let classes = c.classes.split(',').map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()).collect();
-        Ok(Instance::Transform(Box::new(CullOp { config: c, values, classes })))
+        Ok(Instance::Transform(Box::new(CullOp {
+            config: c,
+            values,
+            classes,
+            last: None,
+            anchors: std::collections::HashMap::new(),
+        })))
     },
 };
 
@@ -299,6 +322,20 @@ struct CullOp {
     config: CullConfig,
     values: Vec<(String, f32)>,
     classes: Vec<String>,
+    /// depth_consistency: the previous frame's depth and pose, and each track's position in
+    /// the world when it was first seen (its key frame), by track id.
+    last: Option<(dynaflow_engine::msg::DepthImage, nalgebra::Isometry3<f64>)>,
+    anchors: std::collections::HashMap<u64, nalgebra::Point3<f64>>,
+}
+
+/// Depth in metres at the pixel nearest `(x, y)`, 0 outside.
+fn depth_at(d: &dynaflow_engine::msg::DepthImage, x: f32, y: f32) -> f32 {
+    let (w, h) = (d.width as usize, d.height as usize);
+    let (xi, yi) = (x.round(), y.round());
+    if !(xi >= 0.0 && yi >= 0.0) || xi as usize >= w || yi as usize >= h {
+        return 0.0;
+    }
+    d.data.get(yi as usize * w + xi as usize).copied().unwrap_or(0.0)
 }
 
 fn boxes(inputs: &Inputs) -> Vec<LabelledBox> {
@@ -354,6 +391,46 @@ impl Operator for CullOp {
                     Some(r) => rules::flow_consistency(&r, threshold),
                     None => vec![Decision { dynamic: false, reason: LabelReason::Static, score: 0.0 }; prev.len()],
                 }
+            }
+            "depth_consistency" => {
+                let depth = match inputs.get("depth").map(|m| &m.body) {
+                    Some(Body::Depth(d)) => Some(d.clone()),
+                    _ => None,
+                };
+                let pose = match inputs.get("pose").map(|m| &m.body) {
+                    Some(Body::Pose(p)) => Some(p.world_from_cam),
+                    _ => None,
+                };
+                let camera = match inputs.get("camera_info").map(|m| &m.body) {
+                    Some(Body::CameraInfo(k)) => Some(rules::Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy }),
+                    _ => None,
+                };
+                threshold = self.config.depth_threshold as f32;
+                let decisions = match (&depth, pose, camera) {
+                    (Some(cur_depth), Some(world_from_cur), Some(camera)) => {
+                        // Anchor tracks seen for the first time at their previous position,
+                        // with the previous frame's depth and pose; forget tracks that ended.
+                        let ids: std::collections::HashSet<u64> = t.tracks.iter().map(|t| t.id).collect();
+                        self.anchors.retain(|id, _| ids.contains(id));
+                        if let Some((prev_depth, world_from_prev)) = &self.last {
+                            for tr in &t.tracks {
+                                let z = depth_at(prev_depth, tr.prev[0], tr.prev[1]);
+                                if z > 0.0 && !self.anchors.contains_key(&tr.id) {
+                                    let x = world_from_prev * rules::back_project(camera, tr.prev, f64::from(z));
+                                    self.anchors.insert(tr.id, x);
+                                }
+                            }
+                        }
+                        let cur_from_world = world_from_cur.inverse();
+                        let predicted: Vec<Option<nalgebra::Point3<f64>>> =
+                            t.tracks.iter().map(|tr| self.anchors.get(&tr.id).map(|x| cur_from_world * x)).collect();
+                        rules::depth_consistency(&predicted, camera, |x, y| depth_at(cur_depth, x, y), threshold)
+                    }
+                    // An input missing: nothing can be judged.
+                    _ => vec![Decision { dynamic: false, reason: LabelReason::Static, score: f32::NAN }; prev.len()],
+                };
+                self.last = depth.zip(pose);
+                decisions
             }
             "mask" => match inputs.get("mask").map(|m| &m.body) {
                 Some(Body::Mask(m)) => {

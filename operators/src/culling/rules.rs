@@ -100,6 +100,60 @@ pub fn flow_consistency(residuals: &[f32], threshold: f32) -> Vec<Decision> {
         .collect()
 }
 
+/// A pinhole camera (pixels).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Pinhole {
+    /// Focal lengths and principal point.
+    pub fx: f64,
+    /// Focal length y.
+    pub fy: f64,
+    /// Principal point x.
+    pub cx: f64,
+    /// Principal point y.
+    pub cy: f64,
+}
+
+/// Back-project pixel `p` with depth `z` (metres) into the camera frame.
+pub fn back_project(camera: Pinhole, p: [f32; 2], z: f64) -> nalgebra::Point3<f64> {
+    nalgebra::Point3::new(
+        (f64::from(p[0]) - camera.cx) / camera.fx * z,
+        (f64::from(p[1]) - camera.cy) / camera.fy * z,
+        z,
+    )
+}
+
+/// YOEC-DSLAM's multi-view depth check: each point of a key frame, back-projected with its
+/// depth and moved into the current camera frame (`predicted[i]`, `None` when it had no depth),
+/// is projected into the current image; where the depth measured there (`depth_cur`, metres,
+/// 0 or NaN: none) differs from the predicted depth by more than `threshold` metres, the point
+/// did not stay where the camera motion alone would put it: dynamic. A walking person's point
+/// lands where the person was, on the background now. Points that cannot be judged (no depth,
+/// behind the camera, outside the image) stay static with score NaN.
+pub fn depth_consistency(
+    predicted: &[Option<nalgebra::Point3<f64>>],
+    camera: Pinhole,
+    depth_cur: impl Fn(f32, f32) -> f32,
+    threshold: f32,
+) -> Vec<Decision> {
+    predicted
+        .iter()
+        .map(|x| {
+            let Some(x) = x.filter(|x| x.z > 1e-6) else {
+                return Decision::keep(LabelReason::Static, f32::NAN);
+            };
+            let (u, v) = ((camera.fx * x.x / x.z + camera.cx) as f32, (camera.fy * x.y / x.z + camera.cy) as f32);
+            let z2 = depth_cur(u, v);
+            // No measurement (0, or NaN from outside the image).
+            if z2.is_nan() || z2 <= 0.0 {
+                return Decision::keep(LabelReason::Static, f32::NAN);
+            }
+            let r = (x.z as f32 - z2).abs();
+            let dynamic = exceeds(r, threshold);
+            Decision { dynamic, reason: if dynamic { LabelReason::Depth } else { LabelReason::Static }, score: r }
+        })
+        .collect()
+}
+
 /// MG-SLAM: dynamic where the epipolar distance exceeds `threshold` pixels.
 pub fn epipolar_fixed(distances: &[f32], threshold: f32) -> Vec<Decision> {
     distances
@@ -216,6 +270,32 @@ mod tests {
         let key = semantic_prior(&pts, &boxes, value, true);
         // The chair (0.6) counts on key frames; the point on the book inside the person is kept.
         assert_eq!(key.iter().map(|x| x.dynamic).collect::<Vec<_>>(), vec![true, true, false, false]);
+    }
+
+    #[test]
+    fn depth_consistency_flags_points_whose_depth_does_not_follow_the_camera() {
+        let cam = Pinhole { fx: 500.0, fy: 500.0, cx: 320.0, cy: 240.0 };
+        // The camera moved 0.1 m forward since the key frame: static points came 0.1 m closer.
+        let cur_from_key = nalgebra::Isometry3::translation(0.0, 0.0, -0.1);
+        let pts = [[320.0, 240.0], [100.0, 100.0], [200.0, 300.0], [50.0, 50.0]];
+        let predicted: Vec<Option<nalgebra::Point3<f64>>> =
+            pts.iter().enumerate().map(|(i, p)| (i != 3).then(|| cur_from_key * back_project(cam, *p, 2.0))).collect();
+        // Moving straight forward keeps the centre pixel and pulls the others outwards: the
+        // second point now projects near (88, 93), where something 0.5 m nearer is seen (it
+        // moved); the third near (194, 303), with no measurement; the fourth had no key depth.
+        let depth_cur = |x: f32, y: f32| {
+            if (x - 320.0).abs() < 0.5 && (y - 240.0).abs() < 0.5 {
+                1.9
+            } else if x < 150.0 && y < 150.0 {
+                1.4
+            } else {
+                0.0
+            }
+        };
+        let d = depth_consistency(&predicted, cam, depth_cur, 0.1);
+        assert_eq!(d.iter().map(|x| x.dynamic).collect::<Vec<_>>(), vec![false, true, false, false]);
+        assert!(d[0].score < 1e-5 && (d[1].score - 0.5).abs() < 1e-5 && d[2].score.is_nan());
+        assert_eq!(d[1].reason, LabelReason::Depth);
     }
 
     #[test]
