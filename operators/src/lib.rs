@@ -28,6 +28,7 @@ pub fn registry() -> Registry {
     r.register(culling::FUNDAMENTAL_RANSAC);
     r.register(culling::HOMOGRAPHY_PROSAC);
     r.register(culling::CULL);
+    r.register(culling::COMBINE_LABELS);
     r.register(culling::ORACLE_BOXES);
     r
 }

@@ -471,6 +471,84 @@ impl Operator for CullOp {
     }
 }
 
+// --- combine_labels ------------------------------------------------------------------------
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct CombineConfig {
+    mode: String,
+}
+
+pub const COMBINE_LABELS: OpSpec = OpSpec {
+    name: "combine_labels",
+    family: "epipolar",
+    doc: "Combines two label sets of the same tracks: `or` (dynamic if either rule says so, e.g. MG-SLAM's S+G) or `and` (dynamic only if both do, e.g. a box AND a geometric check). The deciding label (reason, score) is `a`'s where it decides, else `b`'s. Chaining `cull` nodes through `static` is the sequence form.",
+    kind: OpKind::Transform,
+    inputs: &[
+        PortSpec::input("tracks", PortType::Tracks, "the tracks both label sets index"),
+        PortSpec::input("a", PortType::PointLabels, "first rule's labels"),
+        PortSpec::input("b", PortType::PointLabels, "second rule's labels"),
+    ],
+    outputs: &[
+        PortSpec::output("labels", PortType::PointLabels, "combined labels"),
+        PortSpec::output("static", PortType::Tracks, "the tracks labelled static"),
+        PortSpec::output("counts", PortType::Scalars, "`dynamic`, `static`, `total`"),
+    ],
+    params: &[ParamSpec {
+        name: "mode",
+        ty: ParamType::Enum { values: &["or", "and"] },
+        default: Default::Str("or"),
+        doc: "how the two decisions combine",
+    }],
+    cpu_heavy: false,
+    build: |p: &Params| Ok(Instance::Transform(Box::new(CombineOp(p.parse()?)))),
+};
+
+struct CombineOp(CombineConfig);
+
+impl Operator for CombineOp {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (msg, t) = tracks_of(inputs, "tracks")?;
+        let get = |port: &str| -> Result<&PointLabels, OpError> {
+            match &inputs.require(port)?.body {
+                Body::PointLabels(l) => Ok(l),
+                other => Err(OpError::Input(format!("`{port}` expects point labels, got {}", other.port_type()))),
+            }
+        };
+        let (a, b) = (get("a")?, get("b")?);
+        let find = |l: &PointLabels, i: usize| l.labels.iter().find(|x| x.index as usize == i).copied();
+        let and = self.0.mode == "and";
+        let decisions: Vec<Decision> = (0..t.tracks.len())
+            .map(|i| {
+                let (la, lb) = (find(a, i), find(b, i));
+                let (da, db) = (la.is_some_and(|l| l.dynamic), lb.is_some_and(|l| l.dynamic));
+                let dynamic = if and { da && db } else { da || db };
+                let decider = if dynamic == da { la.or(lb) } else { lb.or(la) };
+                Decision {
+                    dynamic,
+                    reason: if dynamic {
+                        decider.map_or(LabelReason::Static, |l| l.reason)
+                    } else {
+                        LabelReason::Static
+                    },
+                    score: decider.map_or(f32::NAN, |l| l.score),
+                }
+            })
+            .collect();
+        let kept: Vec<Track> = t.tracks.iter().zip(&decisions).filter(|(_, d)| !d.dynamic).map(|(t, _)| *t).collect();
+        let dynamic = decisions.iter().filter(|d| d.dynamic).count();
+        let counts = vec![
+            ("dynamic".into(), dynamic as f64),
+            ("static".into(), kept.len() as f64),
+            ("total".into(), decisions.len() as f64),
+        ];
+        Ok(Outputs::new()
+            .with("labels", msg.header.clone(), Body::PointLabels(labels(&decisions)))
+            .with("static", msg.header.clone(), Body::Tracks(Tracks { prev_seq: t.prev_seq, tracks: kept }))
+            .with("counts", msg.header.clone(), Body::Scalars(Scalars { values: counts })))
+    }
+}
+
 // --- oracle_boxes ------------------------------------------------------------------------
 
 #[derive(Debug, serde::Deserialize)]
