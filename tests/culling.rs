@@ -30,6 +30,11 @@ fn every_rule_runs_and_the_same_seed_gives_the_same_labels() {
         assert_eq!(labels, &b["digests"]["cull/labels"], "{variant}: labels differ between two runs");
         assert_eq!(a["digests"]["fundamental/model"], b["digests"]["fundamental/model"]);
         assert_eq!(a["digests"]["homography/model"], b["digests"]["homography/model"]);
+        if variant == "pspnet" {
+            // The screening sees only what the flow rule kept, and removes more.
+            assert_eq!(a["digests"]["screen/counts"], b["digests"]["screen/counts"]);
+            assert_eq!(a["digests"]["screen/counts"]["count"], 6);
+        }
         if variant == "mask_or_epipolar" {
             assert_eq!(a["digests"]["combined/labels"], b["digests"]["combined/labels"]);
             assert_eq!(a["digests"]["combined/labels"]["count"], 6);
