@@ -35,6 +35,22 @@ fn labels(decisions: &[Decision]) -> PointLabels {
     }
 }
 
+/// The three outputs of a labelling node: labels, the tracks kept, and counts (plus `extra`).
+fn labelled(msg: &dynaflow_engine::msg::Message, t: &Tracks, decisions: &[Decision], extra: &[(&str, f64)]) -> Outputs {
+    let kept: Vec<Track> = t.tracks.iter().zip(decisions).filter(|(_, d)| !d.dynamic).map(|(t, _)| *t).collect();
+    let dynamic = decisions.iter().filter(|d| d.dynamic).count();
+    let mut counts: Vec<(Arc<str>, f64)> = vec![
+        ("dynamic".into(), dynamic as f64),
+        ("static".into(), kept.len() as f64),
+        ("total".into(), decisions.len() as f64),
+    ];
+    counts.extend(extra.iter().map(|(k, v)| ((*k).into(), *v)));
+    Outputs::new()
+        .with("labels", msg.header.clone(), Body::PointLabels(labels(decisions)))
+        .with("static", msg.header.clone(), Body::Tracks(Tracks { prev_seq: t.prev_seq, tracks: kept }))
+        .with("counts", msg.header.clone(), Body::Scalars(Scalars { values: counts }))
+}
+
 const RANSAC_PARAMS: [ParamSpec; 2] = [
     ParamSpec {
         name: "ransac_threshold",
@@ -456,18 +472,7 @@ impl Operator for CullOp {
                 rules::semantic_prior(&cur, &boxes(inputs), value_of, key)
             }
         };
-        let kept: Vec<Track> = t.tracks.iter().zip(&decisions).filter(|(_, d)| !d.dynamic).map(|(t, _)| *t).collect();
-        let dynamic = decisions.iter().filter(|d| d.dynamic).count();
-        let counts = vec![
-            ("dynamic".into(), dynamic as f64),
-            ("static".into(), kept.len() as f64),
-            ("total".into(), decisions.len() as f64),
-            ("threshold".into(), f64::from(threshold)),
-        ];
-        Ok(Outputs::new()
-            .with("labels", msg.header.clone(), Body::PointLabels(labels(&decisions)))
-            .with("static", msg.header.clone(), Body::Tracks(Tracks { prev_seq: t.prev_seq, tracks: kept }))
-            .with("counts", msg.header.clone(), Body::Scalars(Scalars { values: counts })))
+        Ok(labelled(msg, t, &decisions, &[("threshold", f64::from(threshold))]))
     }
 }
 
@@ -535,17 +540,7 @@ impl Operator for CombineOp {
                 }
             })
             .collect();
-        let kept: Vec<Track> = t.tracks.iter().zip(&decisions).filter(|(_, d)| !d.dynamic).map(|(t, _)| *t).collect();
-        let dynamic = decisions.iter().filter(|d| d.dynamic).count();
-        let counts = vec![
-            ("dynamic".into(), dynamic as f64),
-            ("static".into(), kept.len() as f64),
-            ("total".into(), decisions.len() as f64),
-        ];
-        Ok(Outputs::new()
-            .with("labels", msg.header.clone(), Body::PointLabels(labels(&decisions)))
-            .with("static", msg.header.clone(), Body::Tracks(Tracks { prev_seq: t.prev_seq, tracks: kept }))
-            .with("counts", msg.header.clone(), Body::Scalars(Scalars { values: counts })))
+        Ok(labelled(msg, t, &decisions, &[]))
     }
 }
 

@@ -7,7 +7,7 @@ use super::Mat3;
 
 /// Similarity that moves the points' centroid to the origin and their mean distance from it
 /// to sqrt(2). `None` when the points coincide (no scale to normalise).
-fn normaliser(points: &[[f64; 2]]) -> Option<Mat3> {
+pub(super) fn normaliser(points: &[[f64; 2]]) -> Option<Mat3> {
     let n = points.len() as f64;
     if points.is_empty() {
         return None;

@@ -5,23 +5,8 @@
 use nalgebra::{Matrix3, SMatrix, SymmetricEigen, Vector3};
 
 use super::Mat3;
+use super::fundamental::normaliser;
 use super::ransac::SplitMix64;
-
-/// Hartley normalisation (centroid to 0, mean distance sqrt(2)).
-fn normaliser(points: &[[f64; 2]]) -> Option<Mat3> {
-    let n = points.len() as f64;
-    if points.is_empty() {
-        return None;
-    }
-    let (cx, cy) = points.iter().fold((0.0, 0.0), |(x, y), p| (x + p[0], y + p[1]));
-    let (cx, cy) = (cx / n, cy / n);
-    let mean = points.iter().map(|p| ((p[0] - cx).powi(2) + (p[1] - cy).powi(2)).sqrt()).sum::<f64>() / n;
-    if !(mean > 1e-12 && mean.is_finite()) {
-        return None;
-    }
-    let s = std::f64::consts::SQRT_2 / mean;
-    Some(Matrix3::new(s, 0.0, -s * cx, 0.0, s, -s * cy, 0.0, 0.0, 1.0))
-}
 
 /// Where `h` maps `p` (infinite when it maps to the line at infinity).
 pub fn transfer(h: &Mat3, p: [f64; 2]) -> [f64; 2] {
