@@ -62,6 +62,8 @@ enum Command {
     },
     /// Compare two recorded runs (MCAP): per topic, counts, first differing frame, deltas, ATE.
     Diff(commands::diff::DiffArgs),
+    /// Evaluate a trajectory against ground truth (TUM files): ATE and RPE, as evo computes them.
+    Eval(commands::eval::EvalArgs),
     /// Generate a semi-synthetic dynamic RGB-D sequence in the TUM layout, with ground truth.
     Synth(commands::synth::SynthArgs),
     /// Open a `.rrd` recording in the rerun viewer (if installed).
@@ -195,6 +197,7 @@ fn main() -> ExitCode {
             })
         }
         Command::Diff(args) => commands::diff::diff(&args),
+        Command::Eval(args) => commands::eval::eval(&args),
         Command::Synth(args) => commands::synth::synth(&args),
         Command::View { file } => commands::view::view(&file),
         Command::Graph { graph, format, variant } => {

@@ -1,6 +1,7 @@
 //! One module per subcommand.
 
 pub mod diff;
+pub mod eval;
 pub mod graph;
 pub mod ops;
 pub mod run;

@@ -1,0 +1,71 @@
+//! `dynaflow eval --gt GT --est EST`.
+
+use std::path::PathBuf;
+
+use dynaflow_operators::decode::read_trajectory;
+use dynaflow_recordings::eval::{Align, Stats, evaluate};
+
+use crate::{EXIT_BAD_INPUT, EXIT_OK};
+
+/// `dynaflow eval` arguments.
+#[derive(Debug, clap::Args)]
+pub struct EvalArgs {
+    /// Ground-truth trajectory, TUM format (`stamp tx ty tz qx qy qz qw`, T_world_camera).
+    #[arg(long)]
+    pub gt: PathBuf,
+    /// Estimated trajectory, TUM format.
+    #[arg(long)]
+    pub est: PathBuf,
+    /// Alignment of the estimate before the ATE: `se3` (evo `-a`), `sim3` (evo `-as`, for
+    /// monocular scale), `none`.
+    #[arg(long, default_value = "se3", value_parser = ["se3", "sim3", "none"])]
+    pub align: String,
+    /// Largest time difference of associated poses, seconds (evo's `--t_max_diff`).
+    #[arg(long, default_value_t = 0.01)]
+    pub max_diff: f64,
+    /// RPE step in frames (evo's `--delta`, unit frames).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+    pub rpe_delta: u64,
+    /// Print JSON instead of a table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn row(name: &str, unit: &str, s: &Stats) -> String {
+    format!(
+        "{name:<16} {:>10.6} {:>10.6} {:>10.6} {:>10.6} {:>10.6} {:>10.6}  {unit}",
+        s.rmse, s.mean, s.median, s.std, s.min, s.max
+    )
+}
+
+/// Exit 0 with the report, 2 on unreadable or incomparable input.
+pub fn eval(args: &EvalArgs) -> u8 {
+    let read = |p: &PathBuf| read_trajectory(p).map_err(|e| eprintln!("error: {e}"));
+    let (Ok(gt), Ok(est)) = (read(&args.gt), read(&args.est)) else { return EXIT_BAD_INPUT };
+    let align = match args.align.as_str() {
+        "sim3" => Align::Sim3,
+        "none" => Align::None,
+        _ => Align::Se3,
+    };
+    let delta = usize::try_from(args.rpe_delta).unwrap_or(1);
+    let result = match evaluate(&gt, &est, args.max_diff, align, delta) {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: {} vs {}: {e}", args.est.display(), args.gt.display());
+            return EXIT_BAD_INPUT;
+        }
+    };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&result).unwrap_or_default());
+        return EXIT_OK;
+    }
+    println!(
+        "{} of {} estimated poses matched {} ground-truth poses (max diff {} s); alignment {:?}, scale {:.6}",
+        result.matched, result.poses[1], result.poses[0], args.max_diff, align, result.scale
+    );
+    println!("{:<16} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}", "", "rmse", "mean", "median", "std", "min", "max");
+    println!("{}", row("ATE", "m", &result.ate));
+    println!("{}", row(&format!("RPE trans ({delta})"), "m", &result.rpe_translation));
+    println!("{}", row(&format!("RPE rot ({delta})"), "deg", &result.rpe_rotation_deg));
+    EXIT_OK
+}

@@ -1,0 +1,173 @@
+//! `dynaflow eval` against evo (PyPI `evo`, in the peers venv): ATE with SE(3) and Sim(3)
+//! alignment and RPE (translation, rotation) equal to 1e-6 on a real TUM-format pair and on
+//! generated pairs with noise, gaps, unequal rates and a scale error.
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use dynaflow_operators::decode::read_trajectory;
+use dynaflow_recordings::eval::{Align, Evaluation, Stats, evaluate};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+fn evo_python() -> Option<PathBuf> {
+    let venv = std::env::var_os("DYNAFLOW_PEERS").map_or_else(|| PathBuf::from("/tmp/dynaflow-peers"), PathBuf::from);
+    let py = venv.join("bin/python");
+    let ok = Command::new(&py).args(["-c", "import evo"]).output().is_ok_and(|o| o.status.success());
+    if !ok {
+        assert!(std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(), "evo required but not installed");
+        eprintln!("note: evo not installed; skipping the comparison (CI runs it)");
+        return None;
+    }
+    Some(py)
+}
+
+fn write_tum(path: &Path, poses: &[(f64, Isometry3<f64>)]) {
+    let mut s = String::from("# timestamp tx ty tz qx qy qz qw\n");
+    for (t, p) in poses {
+        let (v, q) = (p.translation.vector, p.rotation.coords);
+        s.push_str(&format!("{t:.6} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}\n", v.x, v.y, v.z, q.x, q.y, q.z, q.w));
+    }
+    std::fs::write(path, s).unwrap();
+}
+
+/// A smooth ground truth (a loop with turning orientation) at `rate` Hz.
+fn ground_truth(n: usize, rate: f64) -> Vec<(f64, Isometry3<f64>)> {
+    (0..n)
+        .map(|i| {
+            let t = i as f64 / rate;
+            let p = Vector3::new(1.5 * (0.3 * t).cos(), 1.0 * (0.3 * t).sin(), 0.2 * (0.7 * t).sin());
+            let q = UnitQuaternion::from_euler_angles(0.1 * (0.5 * t).sin(), 0.2 * (0.3 * t).cos(), 0.3 * t);
+            (1_000.0 + t, Isometry3::from_parts(Translation3::from(p), q))
+        })
+        .collect()
+}
+
+/// A deterministic pseudo-random value in [-1, 1).
+fn jitter(i: usize, k: u64) -> f64 {
+    let mut z = (i as u64).wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ k.wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 31)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+}
+
+/// An estimate of `gt`: in another frame, scaled, noisy, with stamps off by a few ms, every
+/// `step`-th pose, with a gap.
+fn estimate(
+    gt: &[(f64, Isometry3<f64>)],
+    scale: f64,
+    noise: f64,
+    step: usize,
+    gap: std::ops::Range<usize>,
+) -> Vec<(f64, Isometry3<f64>)> {
+    let offset =
+        Isometry3::from_parts(Translation3::new(0.4, -1.0, 0.2), UnitQuaternion::from_euler_angles(0.2, -0.1, 0.7));
+    gt.iter()
+        .enumerate()
+        .filter(|(i, _)| i % step == 0 && !gap.contains(i))
+        .map(|(i, (t, p))| {
+            let mut q = offset * p;
+            q.translation.vector =
+                q.translation.vector * scale + Vector3::new(jitter(i, 1), jitter(i, 2), jitter(i, 3)) * noise;
+            let dq =
+                UnitQuaternion::from_euler_angles(jitter(i, 4) * noise, jitter(i, 5) * noise, jitter(i, 6) * noise);
+            q.rotation = dq * q.rotation;
+            (t + 0.003 * jitter(i, 7), q)
+        })
+        .collect()
+}
+
+fn close(ours: &Stats, theirs: &serde_json::Value, what: &str) {
+    for (name, v) in [
+        ("rmse", ours.rmse),
+        ("mean", ours.mean),
+        ("median", ours.median),
+        ("std", ours.std),
+        ("min", ours.min),
+        ("max", ours.max),
+        ("sse", ours.sse),
+    ] {
+        let t = theirs[name].as_f64().unwrap_or_else(|| panic!("{what}: evo has no {name}: {theirs}"));
+        assert!((v - t).abs() <= 1e-6 * t.abs().max(1.0), "{what} {name}: ours {v}, evo {t}");
+    }
+}
+
+#[test]
+fn eval_equals_evo_on_real_and_generated_pairs() {
+    let Some(python) = evo_python() else { return };
+    let dir = common::TempDir::new("eval");
+    let fixtures = common::repo().join("tests/fixtures/slambook2_trajectories");
+    let gt = ground_truth(600, 30.0);
+    let dense_gt = ground_truth(2000, 100.0);
+    let mut cases: Vec<(PathBuf, PathBuf, usize)> =
+        vec![(fixtures.join("groundtruth.txt"), fixtures.join("estimated.txt"), 1)];
+    for (k, (g, est, delta)) in [
+        (&gt, estimate(&gt, 1.0, 0.01, 1, 0..0), 1),
+        (&gt, estimate(&gt, 1.0, 0.02, 1, 200..260), 5),
+        (&dense_gt, estimate(&dense_gt, 0.5, 0.005, 3, 900..1000), 2),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let (gp, ep) = (dir.path().join(format!("gt{k}.txt")), dir.path().join(format!("est{k}.txt")));
+        write_tum(&gp, g);
+        write_tum(&ep, &est);
+        cases.push((gp, ep, delta));
+    }
+    let job: Vec<serde_json::Value> =
+        cases.iter().map(|(g, e, d)| serde_json::json!({ "gt": g, "est": e, "max_diff": 0.01, "delta": d })).collect();
+    let job_path = dir.path().join("job.json");
+    std::fs::write(&job_path, serde_json::Value::Array(job).to_string()).unwrap();
+    let out =
+        Command::new(&python).arg(common::repo().join("tests/peers/evo_eval.py")).arg(&job_path).output().unwrap();
+    assert!(out.status.success(), "evo: {}", String::from_utf8_lossy(&out.stderr));
+    let evo: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+    for ((g, e, delta), theirs) in cases.iter().zip(&evo) {
+        let (gt, est) = (read_trajectory(g).unwrap(), read_trajectory(e).unwrap());
+        for (align, key) in [(Align::Se3, "se3"), (Align::Sim3, "sim3")] {
+            let ours: Evaluation = evaluate(&gt, &est, 0.01, align, *delta).unwrap();
+            let what = format!("{} ({key})", e.display());
+            assert_eq!(ours.matched as u64, theirs["matched"].as_u64().unwrap(), "{what}");
+            close(&ours.ate, &theirs[format!("ate_{key}")], &format!("{what} ATE"));
+            close(&ours.rpe_translation, &theirs[format!("rpe_t_{key}")], &format!("{what} RPE t"));
+            close(&ours.rpe_rotation_deg, &theirs[format!("rpe_r_{key}")], &format!("{what} RPE r"));
+        }
+    }
+}
+
+#[test]
+fn eval_cli_reports_and_rejects_bad_input() {
+    let fixtures = common::repo().join("tests/fixtures/slambook2_trajectories");
+    let out = common::bin()
+        .args(["eval", "--json", "--gt"])
+        .arg(fixtures.join("groundtruth.txt"))
+        .arg("--est")
+        .arg(fixtures.join("estimated.txt"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["matched"], 610);
+    assert!(v["ate"]["rmse"].as_f64().unwrap() > 0.0);
+    // A missing file names it; disjoint times say so.
+    let out = common::bin()
+        .args(["eval", "--gt", "/nonexistent/gt.txt", "--est"])
+        .arg(fixtures.join("estimated.txt"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/gt.txt"));
+    let dir = common::TempDir::new("eval-cli");
+    let shifted = dir.path().join("shifted.txt");
+    write_tum(&shifted, &ground_truth(10, 30.0).into_iter().map(|(t, p)| (t + 1e6, p)).collect::<Vec<_>>());
+    let out = common::bin()
+        .args(["eval", "--gt"])
+        .arg(fixtures.join("groundtruth.txt"))
+        .arg("--est")
+        .arg(&shifted)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("no timestamps"));
+}
