@@ -13,7 +13,7 @@ mod frontend;
 use std::time::Instant;
 
 use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid};
-use dynaflow_vision::geometry::{RansacConfig, SplitMix64, fit_fundamental};
+use dynaflow_vision::geometry::{RansacConfig, SplitMix64, fit_fundamental, pnp_ransac};
 use dynaflow_vision::matching::{MatchConfig, match_brute_force};
 use dynaflow_vision::orb::{Distribution, OrbConfig, OrbExtractor};
 use serde_json::json;
@@ -126,6 +126,12 @@ fn main() {
         })
         .collect();
 
+    // PnP RANSAC + motion-only BA on the real RGB-D pair.
+    let (pnp_world, pnp_pixels, pnp_cam) = frontend::ch7_pnp();
+    let pnp_ms = median_ms(reps, || {
+        std::hint::black_box(pnp_ransac(&pnp_world, &pnp_pixels, &pnp_cam, 3.0, 500, &mut SplitMix64::new(7)));
+    });
+
     println!("front-end, single thread, median of {reps} calls; peer: OpenCV (cv2) on the same inputs");
     let cv = frontend::cv2_python().map(|py| {
         let job = json!({
@@ -136,6 +142,12 @@ fn main() {
             ] },
             "lk": lk_cases,
             "fundamental": f_cases.iter().map(|(name, p1, p2)| json!({ "name": name, "p1": p1, "p2": p2 })).collect::<Vec<_>>(),
+            "pnp": [{
+                "name": "ch7",
+                "world": pnp_world.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>(),
+                "pixels": pnp_pixels,
+                "k": [[pnp_cam.fx, 0.0, pnp_cam.cx], [0.0, pnp_cam.fy, pnp_cam.cy], [0.0, 0.0, 1.0]],
+            }],
         });
         frontend::run_cv2(&py, &dir, &job)
     });
@@ -266,6 +278,14 @@ fn main() {
             );
         }
     }
+    let cv_pnp = cvf(&["pnp", "ch7", "ms"]);
+    println!(
+        "{:<34} {:>8.2}ms {:>8.2}ms {:>8}",
+        format!("PnP RANSAC + BA ({} pts, ch7)", pnp_world.len()),
+        pnp_ms,
+        cv_pnp.unwrap_or(f64::NAN),
+        ratio(pnp_ms, cv_pnp)
+    );
     println!(
         "{:<34} {:>8.2}ms {:>8.2}ms {:>8}",
         "ORB + match + LK (ch8), together",

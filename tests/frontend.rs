@@ -356,3 +356,57 @@ fn fundamental_ransac_agrees_with_opencv() {
         }
     }
 }
+
+#[test]
+fn pnp_ransac_agrees_with_opencv_on_the_real_rgbd_pair() {
+    use dynaflow_vision::geometry::{SplitMix64, pnp_ransac};
+    let Some(python) = frontend::cv2_python() else { return };
+    let dir = common::TempDir::new("pnp-cv2");
+    let (world, pixels, cam) = frontend::ch7_pnp();
+    assert!(world.len() >= 100, "{} correspondences", world.len());
+    let k = [[cam.fx, 0.0, cam.cx], [0.0, cam.fy, cam.cy], [0.0, 0.0, 1.0]];
+    let job = json!({
+        "reps": 1,
+        "pnp": [{ "name": "ch7", "world": world.iter().map(|p| [p.x, p.y, p.z]).collect::<Vec<_>>(), "pixels": pixels, "k": k }],
+    });
+    let cv = frontend::run_cv2(&python, dir.path(), &job);
+    let theirs = &cv["pnp"]["ch7"];
+    assert_eq!(theirs["ok"], true);
+    let fit = pnp_ransac(&world, &pixels, &cam, 3.0, 500, &mut SplitMix64::new(7)).unwrap();
+    let rvec: Vec<f64> = theirs["rvec"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    let tvec: Vec<f64> = theirs["tvec"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    let cv_pose = nalgebra::Isometry3::from_parts(
+        nalgebra::Translation3::new(tvec[0], tvec[1], tvec[2]),
+        nalgebra::UnitQuaternion::from_scaled_axis(nalgebra::Vector3::new(rvec[0], rvec[1], rvec[2])),
+    );
+    let d = cv_pose.inverse() * fit.pose;
+    let (dt, dr) = (d.translation.vector.norm(), d.rotation.angle().to_degrees());
+    let ours_n = fit.inliers.iter().filter(|&&i| i).count();
+    let cv_n = theirs["inliers"].as_array().unwrap().len();
+    eprintln!(
+        "ch7 PnP: {} correspondences; inliers ours {ours_n}, OpenCV {cv_n}; poses differ by {:.2} mm, {dr:.3} deg; motion {:.1} mm",
+        world.len(),
+        dt * 1e3,
+        fit.pose.translation.vector.norm() * 1e3
+    );
+    // The two differ in their consensus sets, so their poses differ within the noise; ours
+    // must fit OpenCV's own inliers as well as OpenCV's pose does.
+    assert!(dt < 0.02 && dr < 0.5, "poses differ by {dt} m, {dr} deg");
+    assert!(ours_n as f64 >= 0.9 * cv_n as f64, "{ours_n} vs {cv_n}");
+    let cv_inliers: Vec<usize> =
+        theirs["inliers"].as_array().unwrap().iter().map(|v| v.as_u64().unwrap() as usize).collect();
+    let median_error = |pose: &nalgebra::Isometry3<f64>| {
+        let mut e: Vec<f64> = cv_inliers
+            .iter()
+            .map(|&i| {
+                cam.project(&(pose * world[i]))
+                    .map_or(f64::INFINITY, |uv| (uv[0] - pixels[i][0]).hypot(uv[1] - pixels[i][1]))
+            })
+            .collect();
+        e.sort_by(f64::total_cmp);
+        e[e.len() / 2]
+    };
+    let (ours_e, cv_e) = (median_error(&fit.pose), median_error(&cv_pose));
+    eprintln!("median reprojection error on OpenCV's inliers: ours {ours_e:.3} px, OpenCV {cv_e:.3} px");
+    assert!(ours_e <= 1.1 * cv_e + 0.01, "ours {ours_e} px vs OpenCV {cv_e} px");
+}

@@ -118,6 +118,27 @@ pub fn fundamental_cases() -> Vec<Correspondences> {
     vec![("ch7_orb", to64(&prev), to64(&cur)), ("synth_lk", to64(&s1), to64(&s2))]
 }
 
+/// 3-D points of the real ch7 pair's first frame (ORB matches back-projected with its depth,
+/// TUM fr2 intrinsics, depth / 5000 = metres) and their pixels in the second frame.
+pub fn ch7_pnp() -> (Vec<nalgebra::Point3<f64>>, Vec<[f64; 2]>, dynaflow_vision::geometry::Camera) {
+    let cam = dynaflow_vision::geometry::Camera { fx: 520.9, fy: 521.0, cx: 325.1, cy: 249.7 };
+    let [a, b] = ch7();
+    let (ga, gb) = (load_gray(&a), load_gray(&b));
+    let (_, _, prev, cur) = our_matches(&ga, &gb, Distribution::Harris, &cross_check_only());
+    let depth = image::open(repo().join("tests/fixtures/slambook2_rgbd_pair/depth/1.png")).unwrap().into_luma16();
+    let (mut world, mut pixels) = (Vec::new(), Vec::new());
+    for (p, c) in prev.iter().zip(&cur) {
+        let (x, y) = (p[0].round() as u32, p[1].round() as u32);
+        let d = f64::from(depth.get_pixel(x.min(depth.width() - 1), y.min(depth.height() - 1))[0]) / 5000.0;
+        if d > 0.0 {
+            let (u, v) = (f64::from(p[0]), f64::from(p[1]));
+            world.push(nalgebra::Point3::new((u - cam.cx) / cam.fx * d, (v - cam.cy) / cam.fy * d, d));
+            pixels.push([f64::from(c[0]), f64::from(c[1])]);
+        }
+    }
+    (world, pixels, cam)
+}
+
 /// The Python of the peers venv if it has OpenCV. Without one the caller skips, unless
 /// `DYNAFLOW_REQUIRE_PEERS` is set (CI), where a missing peer is a failure.
 pub fn cv2_python() -> Option<PathBuf> {

@@ -104,4 +104,20 @@ if "fundamental" in job:
             }
         res[case["name"]] = r
     out["fundamental"] = res
+if "pnp" in job:
+    res = {}
+    for case in job["pnp"]:
+        obj = np.float64(case["world"]).reshape(-1, 1, 3)
+        img = np.float64(case["pixels"]).reshape(-1, 1, 2)
+        k = np.float64(case["k"])
+        run = lambda: cv2.solvePnPRansac(obj, img, k, None, iterationsCount=500, reprojectionError=3.0, confidence=0.99)
+        ok, rvec, tvec, inliers = run()
+        res[case["name"]] = {
+            "ms": median_ms(run),
+            "ok": bool(ok),
+            "rvec": rvec.ravel().tolist() if ok else None,
+            "tvec": tvec.ravel().tolist() if ok else None,
+            "inliers": [] if inliers is None else inliers.ravel().tolist(),
+        }
+    out["pnp"] = res
 print(json.dumps(out))
