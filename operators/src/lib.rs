@@ -10,6 +10,7 @@ pub mod culling;
 pub mod decode;
 mod frontend;
 pub mod synth;
+pub mod tracking;
 mod util;
 
 use dynaflow_engine::op::Registry;
@@ -30,5 +31,6 @@ pub fn registry() -> Registry {
     r.register(culling::CULL);
     r.register(culling::COMBINE_LABELS);
     r.register(culling::ORACLE_BOXES);
+    r.register(tracking::PNP_TRACK);
     r
 }

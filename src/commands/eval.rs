@@ -1,5 +1,6 @@
 //! `dynaflow eval --gt GT --est EST`.
 
+use std::io::Write;
 use std::path::PathBuf;
 
 use dynaflow_operators::decode::read_trajectory;
@@ -55,17 +56,24 @@ pub fn eval(args: &EvalArgs) -> u8 {
             return EXIT_BAD_INPUT;
         }
     };
+    // Written with errors ignored: a closed pipe (`| head`) is not a failure of the evaluation.
+    let mut out = std::io::stdout().lock();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&result).unwrap_or_default());
+        let _ = writeln!(out, "{}", serde_json::to_string_pretty(&result).unwrap_or_default());
         return EXIT_OK;
     }
-    println!(
+    let _ = writeln!(
+        out,
         "{} of {} estimated poses matched {} ground-truth poses (max diff {} s); alignment {:?}, scale {:.6}",
         result.matched, result.poses[1], result.poses[0], args.max_diff, align, result.scale
     );
-    println!("{:<16} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}", "", "rmse", "mean", "median", "std", "min", "max");
-    println!("{}", row("ATE", "m", &result.ate));
-    println!("{}", row(&format!("RPE trans ({delta})"), "m", &result.rpe_translation));
-    println!("{}", row(&format!("RPE rot ({delta})"), "deg", &result.rpe_rotation_deg));
+    let _ = writeln!(
+        out,
+        "{:<16} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}",
+        "", "rmse", "mean", "median", "std", "min", "max"
+    );
+    let _ = writeln!(out, "{}", row("ATE", "m", &result.ate));
+    let _ = writeln!(out, "{}", row(&format!("RPE trans ({delta})"), "m", &result.rpe_translation));
+    let _ = writeln!(out, "{}", row(&format!("RPE rot ({delta})"), "deg", &result.rpe_rotation_deg));
     EXIT_OK
 }
