@@ -1,6 +1,15 @@
 //! `dynaflow`: the command-line front end. Argument parsing, wiring and exit codes only; the
 //! work happens in the `dynaflow-engine`, `dynaflow-operators` and `dynaflow-recordings` crates.
 
+/// `println!` that ignores a closed standard output (`dynaflow ops | head`): the command's work
+/// is done either way, and a panic there would be noise.
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout().lock(), $($t)*);
+    }};
+}
+
 mod commands;
 
 use std::path::PathBuf;

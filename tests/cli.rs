@@ -286,3 +286,22 @@ fn unknown_op_does_not_hide_an_unknown_input_node() {
     assert!(err.contains("unknown op `yolo_magic`"), "{err}");
     assert!(err.contains("g.yaml:4:39") && err.contains("unknown node `ghost_node`"), "{err}");
 }
+
+#[test]
+fn a_closed_stdout_is_not_a_crash() {
+    // `dynaflow ops | head -1`: the reader goes away after one line.
+    use std::io::{BufRead, BufReader};
+    let mut child = common::bin()
+        .args(["ops"])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut first = String::new();
+    BufReader::new(child.stdout.take().unwrap()).read_line(&mut first).unwrap();
+    assert!(!first.is_empty());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(out.status.code(), Some(0));
+}

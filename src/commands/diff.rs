@@ -47,7 +47,7 @@ pub fn diff(args: &DiffArgs) -> u8 {
     };
     let report = diff::diff(&a, &b, &tols);
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
+        say!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
     } else {
         print!("{}", report.table());
     }

@@ -12,7 +12,7 @@ pub fn graph(path: &Path, dot: bool, variant: Option<String>) -> u8 {
     let Some(graph) = super::load_and_report(path, &req).and_then(|l| l.graph) else {
         return EXIT_BAD_INPUT;
     };
-    println!("{}", if dot { to_dot(&graph) } else { to_mermaid(&graph) });
+    say!("{}", if dot { to_dot(&graph) } else { to_mermaid(&graph) });
     EXIT_OK
 }
 

@@ -15,22 +15,22 @@ pub fn ops(format: &Format) -> u8 {
     let registry = dynaflow::registry();
     let ops: Vec<&OpSpec> = registry.iter().collect();
     match format {
-        Format::Json => println!("{}", serde_json::to_string_pretty(&ops).unwrap_or_default()),
+        Format::Json => say!("{}", serde_json::to_string_pretty(&ops).unwrap_or_default()),
         Format::Markdown => print!("{}", markdown(&ops)),
         Format::Text => {
             for op in ops {
                 let kind = if op.kind == OpKind::Source { " (source)" } else { "" };
-                println!("{}{kind} [{}]\n  {}", op.name, op.family, op.doc);
+                say!("{}{kind} [{}]\n  {}", op.name, op.family, op.doc);
                 for p in op.inputs {
-                    println!("  in  {:<14} {:<12}{}", p.name, p.ty.name(), if p.required { "" } else { " (optional)" });
+                    say!("  in  {:<14} {:<12}{}", p.name, p.ty.name(), if p.required { "" } else { " (optional)" });
                 }
                 for p in op.outputs {
-                    println!("  out {:<14} {}", p.name, port_type(p));
+                    say!("  out {:<14} {}", p.name, port_type(p));
                 }
                 for p in op.params {
-                    println!("  param {:<12} {} = {}", p.name, p.ty.describe(), default(p));
+                    say!("  param {:<12} {} = {}", p.name, p.ty.describe(), default(p));
                 }
-                println!();
+                say!();
             }
         }
     }

@@ -127,7 +127,7 @@ pub fn run(args: &RunArgs) -> u8 {
             return EXIT_BAD_INPUT;
         }
     };
-    println!("{}", report.table());
+    say!("{}", report.table());
     let mut summary = serde_json::to_value(&report).unwrap_or_default();
     if args.digest
         && let Some(obj) = summary.as_object_mut()

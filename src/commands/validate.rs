@@ -42,7 +42,7 @@ pub fn validate(graphs: &[PathBuf], json: bool) -> u8 {
         }
     }
     if json {
-        println!("{}", serde_json::Value::Array(all));
+        say!("{}", serde_json::Value::Array(all));
     }
     if bad { EXIT_BAD_INPUT } else { EXIT_OK }
 }
