@@ -68,6 +68,15 @@ pub struct DepthImage {
 }
 
 impl DepthImage {
+    /// Depth in metres at the pixel nearest `(x, y)`; 0 (no measurement) outside the image.
+    pub fn at_nearest(&self, x: f32, y: f32) -> f32 {
+        let (xi, yi) = (x.round(), y.round());
+        if !(xi >= 0.0 && yi >= 0.0) || xi as usize >= self.width as usize || yi as usize >= self.height as usize {
+            return 0.0;
+        }
+        self.data.get(yi as usize * self.width as usize + xi as usize).copied().unwrap_or(0.0)
+    }
+
     pub(super) fn digest_into(&self, d: &mut Digest) {
         d.u64(u64::from(self.width));
         d.u64(u64::from(self.height));

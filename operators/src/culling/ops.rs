@@ -344,16 +344,6 @@ struct CullOp {
     anchors: std::collections::HashMap<u64, nalgebra::Point3<f64>>,
 }
 
-/// Depth in metres at the pixel nearest `(x, y)`, 0 outside.
-fn depth_at(d: &dynaflow_engine::msg::DepthImage, x: f32, y: f32) -> f32 {
-    let (w, h) = (d.width as usize, d.height as usize);
-    let (xi, yi) = (x.round(), y.round());
-    if !(xi >= 0.0 && yi >= 0.0) || xi as usize >= w || yi as usize >= h {
-        return 0.0;
-    }
-    d.data.get(yi as usize * w + xi as usize).copied().unwrap_or(0.0)
-}
-
 fn boxes(inputs: &Inputs) -> Vec<LabelledBox> {
     match inputs.get("detections").map(|m| &m.body) {
         Some(Body::Detections(d)) => {
@@ -430,7 +420,7 @@ impl Operator for CullOp {
                         self.anchors.retain(|id, _| ids.contains(id));
                         if let Some((prev_depth, world_from_prev)) = &self.last {
                             for tr in &t.tracks {
-                                let z = depth_at(prev_depth, tr.prev[0], tr.prev[1]);
+                                let z = prev_depth.at_nearest(tr.prev[0], tr.prev[1]);
                                 if z > 0.0 && !self.anchors.contains_key(&tr.id) {
                                     let x = world_from_prev * rules::back_project(camera, tr.prev, f64::from(z));
                                     self.anchors.insert(tr.id, x);
@@ -440,7 +430,7 @@ impl Operator for CullOp {
                         let cur_from_world = world_from_cur.inverse();
                         let predicted: Vec<Option<nalgebra::Point3<f64>>> =
                             t.tracks.iter().map(|tr| self.anchors.get(&tr.id).map(|x| cur_from_world * x)).collect();
-                        rules::depth_consistency(&predicted, camera, |x, y| depth_at(cur_depth, x, y), threshold)
+                        rules::depth_consistency(&predicted, camera, |x, y| cur_depth.at_nearest(x, y), threshold)
                     }
                     // An input missing: nothing can be judged.
                     _ => vec![Decision { dynamic: false, reason: LabelReason::Static, score: f32::NAN }; prev.len()],

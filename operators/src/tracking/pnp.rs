@@ -75,14 +75,6 @@ struct PnpTrack {
     trajectory: Vec<(f64, Isometry3<f64>)>,
 }
 
-fn depth_at(d: &DepthImage, x: f32, y: f32) -> f32 {
-    let (xi, yi) = (x.round(), y.round());
-    if xi < 0.0 || yi < 0.0 || xi as usize >= d.width as usize || yi as usize >= d.height as usize {
-        return 0.0;
-    }
-    d.data.get(yi as usize * d.width as usize + xi as usize).copied().unwrap_or(0.0)
-}
-
 impl Operator for PnpTrack {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let msg = inputs.require("tracks")?;
@@ -113,7 +105,7 @@ impl Operator for PnpTrack {
             Some((prev_depth, world_from_prev)) => {
                 let (mut world, mut pixels) = (Vec::new(), Vec::new());
                 for (tr, dyn_) in t.tracks.iter().zip(&dynamic) {
-                    let z = f64::from(depth_at(prev_depth, tr.prev[0], tr.prev[1]));
+                    let z = f64::from(prev_depth.at_nearest(tr.prev[0], tr.prev[1]));
                     if *dyn_ || !(z > 0.0 && z <= self.config.max_depth) {
                         continue;
                     }
