@@ -42,20 +42,6 @@ impl Counts {
     }
 }
 
-/// One box per person instance of a frame (what `oracle_boxes` emits).
-fn oracle(instance: &[u16], w: usize) -> Vec<LabelledBox> {
-    let mut b: std::collections::BTreeMap<u16, [f32; 4]> = std::collections::BTreeMap::new();
-    for (i, &id) in instance.iter().enumerate() {
-        if id == 0 {
-            continue;
-        }
-        let (x, y) = ((i % w) as f32, (i / w) as f32);
-        let e = b.entry(id).or_insert([x, y, x, y]);
-        *e = [e[0].min(x), e[1].min(y), e[2].max(x), e[3].max(y)];
-    }
-    b.into_values().map(|bbox| LabelledBox { bbox, label: "person".into() }).collect()
-}
-
 const MODES: [&str; 8] = [
     "epipolar_fixed",
     "epipolar_adaptive",
@@ -93,7 +79,11 @@ fn main() {
                 seeds.iter().zip(&res).filter(|(_, r)| r.found).map(|(p, r)| (*p, r.point)).unzip();
             let truth: Vec<bool> =
                 prev.iter().map(|p| cur.class[p[1].round() as usize * w + p[0].round() as usize] == 1).collect();
-            let boxes = oracle(&next.instance, w);
+            // What `oracle_boxes` emits (every instance, however small).
+            let boxes: Vec<LabelledBox> = rules::instance_boxes(&next.instance, &next.class, w, 1)
+                .into_iter()
+                .map(|(bbox, _)| LabelledBox { bbox, label: "person".into() })
+                .collect();
             let in_box = rules::in_any_box(&curp, &boxes);
             let ransac = RansacConfig::default();
             let Some((_, d_all)) = rules::epipolar_distances(&prev, &curp, &vec![true; prev.len()], &ransac, f) else {

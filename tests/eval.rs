@@ -4,6 +4,8 @@
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 mod common;
+#[path = "common/frontend.rs"]
+mod frontend;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -11,18 +13,6 @@ use std::process::Command;
 use dynaflow_operators::decode::read_trajectory;
 use dynaflow_recordings::eval::{Align, Evaluation, Stats, evaluate};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
-
-fn evo_python() -> Option<PathBuf> {
-    let venv = std::env::var_os("DYNAFLOW_PEERS").map_or_else(|| PathBuf::from("/tmp/dynaflow-peers"), PathBuf::from);
-    let py = venv.join("bin/python");
-    let ok = Command::new(&py).args(["-c", "import evo"]).output().is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(), "evo required but not installed");
-        eprintln!("note: evo not installed; skipping the comparison (CI runs it)");
-        return None;
-    }
-    Some(py)
-}
 
 fn write_tum(path: &Path, poses: &[(f64, Isometry3<f64>)]) {
     let mut s = String::from("# timestamp tx ty tz qx qy qz qw\n");
@@ -95,7 +85,7 @@ fn close(ours: &Stats, theirs: &serde_json::Value, what: &str) {
 
 #[test]
 fn eval_equals_evo_on_real_and_generated_pairs() {
-    let Some(python) = evo_python() else { return };
+    let Some(python) = frontend::python_with("evo") else { return };
     let dir = common::TempDir::new("eval");
     let fixtures = common::repo().join("tests/fixtures/slambook2_trajectories");
     let gt = ground_truth(600, 30.0);

@@ -139,18 +139,28 @@ pub fn ch7_pnp() -> (Vec<nalgebra::Point3<f64>>, Vec<[f64; 2]>, dynaflow_vision:
     (world, pixels, cam)
 }
 
-/// The Python of the peers venv if it has OpenCV. Without one the caller skips, unless
-/// `DYNAFLOW_REQUIRE_PEERS` is set (CI), where a missing peer is a failure.
-pub fn cv2_python() -> Option<PathBuf> {
+/// The Python of the peers venv (or `python3`) that can `import modules`. Without one the
+/// caller skips, unless `DYNAFLOW_REQUIRE_PEERS` is set (CI), where a missing peer is a
+/// failure.
+pub fn python_with(modules: &str) -> Option<PathBuf> {
     let venv = std::env::var_os("DYNAFLOW_PEERS").map_or_else(|| PathBuf::from("/tmp/dynaflow-peers"), PathBuf::from);
+    let import = format!("import {modules}");
     let found = [venv.join("bin/python"), PathBuf::from("python3")]
         .into_iter()
-        .find(|p| Command::new(p).args(["-c", "import cv2, numpy"]).output().is_ok_and(|o| o.status.success()));
+        .find(|p| Command::new(p).args(["-c", &import]).output().is_ok_and(|o| o.status.success()));
     if found.is_none() {
-        assert!(std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(), "OpenCV (cv2) required but not installed");
-        eprintln!("note: no Python with cv2; skipping the OpenCV comparison (CI runs it)");
+        assert!(
+            std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(),
+            "Python peer `{modules}` required but not installed"
+        );
+        eprintln!("note: no Python with `{modules}`; skipping the comparison (CI runs it)");
     }
     found
+}
+
+/// The Python with OpenCV.
+pub fn cv2_python() -> Option<PathBuf> {
+    python_with("cv2, numpy")
 }
 
 /// Run the OpenCV side on `job` (written to `dir`).

@@ -567,24 +567,11 @@ impl Operator for OracleOp {
         let Body::Mask(m) = &msg.body else {
             return Err(OpError::Input(format!("`mask` expects a mask, got {}", msg.body.port_type())));
         };
-        let w = m.width as usize;
-        // Per instance: bounding box, pixel count, class.
-        let mut found: std::collections::BTreeMap<u16, ([usize; 4], u64, u16)> = std::collections::BTreeMap::new();
         let ids = m.instances.as_deref().unwrap_or(&m.classes);
-        for (i, (&inst, &class)) in ids.iter().zip(&m.classes).enumerate() {
-            if inst == 0 || class == 0 {
-                continue;
-            }
-            let (x, y) = (i % w.max(1), i / w.max(1));
-            let e = found.entry(inst).or_insert(([x, y, x, y], 0, class));
-            e.0 = [e.0[0].min(x), e.0[1].min(y), e.0[2].max(x), e.0[3].max(y)];
-            e.1 += 1;
-        }
-        let detections = found
-            .into_values()
-            .filter(|(_, n, _)| *n >= self.0.min_pixels)
-            .map(|(b, _, class)| Detection {
-                bbox: b.map(|v| v as f32),
+        let detections = rules::instance_boxes(ids, &m.classes, m.width as usize, self.0.min_pixels)
+            .into_iter()
+            .map(|(bbox, class)| Detection {
+                bbox,
                 class_id: u32::from(class),
                 label: m.class_names.get(usize::from(class)).cloned().unwrap_or_else(|| "object".into()),
                 score: 1.0,

@@ -235,6 +235,25 @@ pub fn semantic_prior(
         .collect()
 }
 
+/// One box per instance of an instance mask (`instances`, 0 = none) with its class (from
+/// `classes`, 0 = background, skipped), in instance order; instances under `min_pixels` pixels
+/// are left out. What `oracle_boxes` reports.
+pub fn instance_boxes(instances: &[u16], classes: &[u16], width: usize, min_pixels: u64) -> Vec<([f32; 4], u16)> {
+    let w = width.max(1);
+    // Per instance: bounding box, pixel count, class.
+    let mut found: std::collections::BTreeMap<u16, ([usize; 4], u64, u16)> = std::collections::BTreeMap::new();
+    for (i, (&inst, &class)) in instances.iter().zip(classes).enumerate() {
+        if inst == 0 || class == 0 {
+            continue;
+        }
+        let (x, y) = (i % w, i / w);
+        let e = found.entry(inst).or_insert(([x, y, x, y], 0, class));
+        e.0 = [e.0[0].min(x), e.0[1].min(y), e.0[2].max(x), e.0[3].max(y)];
+        e.1 += 1;
+    }
+    found.into_values().filter(|(_, n, _)| *n >= min_pixels).map(|(b, _, class)| (b.map(|v| v as f32), class)).collect()
+}
+
 /// Whether each point lies inside any box.
 pub fn in_any_box(points: &[[f32; 2]], boxes: &[LabelledBox]) -> Vec<bool> {
     points.iter().map(|&p| boxes.iter().any(|b| inside(&b.bbox, p))).collect()

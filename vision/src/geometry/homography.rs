@@ -6,7 +6,7 @@ use nalgebra::{Matrix3, SMatrix, SymmetricEigen, Vector3};
 
 use super::Mat3;
 use super::fundamental::normaliser;
-use super::ransac::SplitMix64;
+use super::ransac::{SplitMix64, needed};
 
 /// Where `h` maps `p` (infinite when it maps to the line at infinity).
 pub fn transfer(h: &Mat3, p: [f64; 2]) -> [f64; 2] {
@@ -120,14 +120,7 @@ pub fn fit_homography_prosac(
             best = Some((h, c));
             // RANSAC's stopping rule on the inlier ratio: 99 % confidence that an all-inlier
             // sample was drawn (PROSAC reaches it sooner: good matches come first).
-            let p_good = (c as f64 / n as f64).powi(M as i32);
-            if p_good >= 1.0 {
-                break;
-            }
-            let needed = (0.01f64).ln() / (1.0 - p_good).ln();
-            if needed.is_finite() {
-                limit = limit.min((needed.ceil() as usize).max(1));
-            }
+            limit = limit.min(needed(c as f64 / n as f64, M, 0.99, limit));
         }
     }
     let (mut h, c) = best?;

@@ -8,7 +8,7 @@ use nalgebra::{
     Vector6,
 };
 
-use super::ransac::SplitMix64;
+use super::ransac::{SplitMix64, needed};
 
 /// A pinhole camera.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -107,12 +107,10 @@ pub fn pnp_dlt(world: &[Point3<f64>], pixels: &[[f64; 2]], cam: &Camera) -> Opti
     if in_front * 2 < world.len() {
         return None;
     }
-    // Undo the normalisation: X_cam = R (k (X - c)) + t = (k R) X + (t - k R c); R must stay a
-    // rotation, so the scale k goes into the translation: X_cam / k = R X + (t / k - R c).
+    // Undo the normalisation: the DLT saw q = k (X - c), so k X_cam = R q + t and
+    // X_cam = R X + (t / k - R c).
     let rot = Rotation3::from_matrix_unchecked(r);
     let trans = t / k - r * c;
-    // The DLT solved for points scaled by k: depths are 1/k of the true ones, which
-    // rescales the translation only.
     Some(Isometry3::from_parts(Translation3::from(trans), UnitQuaternion::from_rotation_matrix(&rot)))
 }
 
@@ -278,14 +276,7 @@ pub fn pnp_ransac(
         let c = count(&pose);
         if best.as_ref().is_none_or(|b| c > b.1) {
             best = Some((pose, c));
-            let p_good = (c as f64 / n as f64).powi(6);
-            if p_good >= 1.0 {
-                break;
-            }
-            let needed = (0.01f64).ln() / (1.0 - p_good).ln();
-            if needed.is_finite() {
-                limit = limit.min(needed.ceil() as usize);
-            }
+            limit = limit.min(needed(c as f64 / n as f64, 6, 0.99, limit));
         }
     }
     let (pose, _) = best?;

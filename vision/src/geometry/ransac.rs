@@ -90,10 +90,11 @@ fn inlier_points(f: &Mat3, p1: &[[f64; 2]], p2: &[[f64; 2]], thr2: f64) -> (Vec<
     p1.iter().zip(p2).filter(|(a, b)| epipolar_error(f, **a, **b) <= thr2).map(|(a, b)| (*a, *b)).unzip()
 }
 
-/// Iterations needed so that, with inlier ratio `w`, a 7-point all-inlier sample was drawn
-/// with probability `confidence`.
-fn needed(w: f64, confidence: f64, cap: usize) -> usize {
-    let p_good = w.powi(7);
+/// RANSAC's adaptive stopping rule: iterations needed so that, with inlier ratio `w`, an
+/// all-inlier sample of `sample` points was drawn with probability `confidence` (at most
+/// `cap`; 1 when every point is an inlier).
+pub(super) fn needed(w: f64, sample: usize, confidence: f64, cap: usize) -> usize {
+    let p_good = w.powi(i32::try_from(sample).unwrap_or(i32::MAX));
     if p_good <= 0.0 {
         return cap;
     }
@@ -156,7 +157,7 @@ pub fn fit_fundamental(
                     }
                 }
             }
-            limit = needed(cand.1 as f64 / n as f64, config.confidence, config.max_iterations.max(1));
+            limit = needed(cand.1 as f64 / n as f64, 7, config.confidence, config.max_iterations.max(1));
             best = Some(cand);
         }
     }
