@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use dynaflow_operators::decode::read_trajectory;
-use dynaflow_recordings::eval::{Align, Evaluation, Stats, evaluate};
+use dynaflow_slam::eval::{Align, Evaluation, Stats, evaluate};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 fn write_tum(path: &Path, poses: &[(f64, Isometry3<f64>)]) {

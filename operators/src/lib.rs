@@ -32,5 +32,6 @@ pub fn registry() -> Registry {
     r.register(culling::COMBINE_LABELS);
     r.register(culling::ORACLE_BOXES);
     r.register(tracking::PNP_TRACK);
+    r.register(tracking::LOCAL_MAP);
     r
 }

@@ -1,16 +1,14 @@
 //! dynaflow's recorders and run tools: the rerun `.rrd` recorder, the MCAP recorder, the
-//! JSON-lines message log, `dynaflow diff` of two recorded runs and `dynaflow eval` of a
-//! trajectory against ground truth. This is the only crate
+//! JSON-lines message log and `dynaflow diff` of two recorded runs. This is the only crate
 //! that depends on `rerun` or `mcap`.
 //!
 //! Modules: `rrd` (rerun), `mcap` (MCAP + Foxglove JSON schemas), `jsonl` (message log),
 //! `payload` (the numeric `dynaflow` object stored with each MCAP message), `encode` (pixel
-//! codecs), `diff` (run comparison), `eval` (ATE/RPE as evo computes them), `replay` (the
+//! codecs), `diff` (run comparison), `replay` (the
 //! `mcap_replay` source).
 
 pub mod diff;
 mod encode;
-pub mod eval;
 mod jsonl;
 pub mod mcap;
 mod payload;

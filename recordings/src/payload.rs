@@ -65,6 +65,13 @@ fn data(body: &Body) -> Value {
         }),
         Body::Scalars(s) => Value::Object(s.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect()),
         Body::PointCloud(c) => json!({"count": c.points.len()}),
+        Body::Map(m) => json!({
+            "map_id": m.map_id,
+            "keyframes": m.keyframes.iter().map(|k| k.id).collect::<Vec<_>>(),
+            "points": m.points.len(),
+            "observations": m.observations.len(),
+            "removed": m.removed.len(),
+        }),
         Body::OctreeUpdate(o) => {
             json!({"occupied": o.occupied.len(), "freed": o.freed.len(), "resolution": o.resolution})
         }

@@ -342,6 +342,7 @@ impl Sink for RrdSink {
                 }
                 rec.log(world, &pts)
             }
+            Body::Map(m) => rec.log(world, &rerun::Points3D::new(crate::mcap::schemas::map_cloud(m).points)),
             Body::OctreeUpdate(o) => {
                 let h = o.resolution / 2.0;
                 let centers: Vec<[f32; 3]> = o.occupied.iter().map(|(p, _)| *p).collect();

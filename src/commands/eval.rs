@@ -4,7 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use dynaflow_operators::decode::read_trajectory;
-use dynaflow_recordings::eval::{Align, Stats, evaluate};
+use dynaflow_slam::eval::{Align, Stats, evaluate};
 
 use crate::{EXIT_BAD_INPUT, EXIT_OK};
 

@@ -129,6 +129,33 @@ pub fn run(args: &RunArgs) -> u8 {
     };
     say!("{}", report.table());
     let mut summary = serde_json::to_value(&report).unwrap_or_default();
+    // Trackers with ground truth report their ATE: print it, and lift the first to the top.
+    let mut first_ate = None;
+    for n in &report.nodes {
+        if let Some(ate) = n.report.as_ref().and_then(|r| r.get("ate")) {
+            let f = |k: &str| ate.get(k).and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
+            say!(
+                "ATE of `{}` ({} poses, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m",
+                n.node,
+                ate.get("pairs").and_then(serde_json::Value::as_u64).unwrap_or(0),
+                ate.get("align").and_then(serde_json::Value::as_str).unwrap_or("se3"),
+                f("rmse"),
+                f("mean"),
+                f("median"),
+                f("std")
+            );
+            if first_ate.is_none() {
+                let mut a = ate.clone();
+                if let Some(o) = a.as_object_mut() {
+                    o.insert("node".into(), serde_json::Value::from(n.node.clone()));
+                }
+                first_ate = Some(a);
+            }
+        }
+    }
+    if let (Some(a), Some(obj)) = (first_ate, summary.as_object_mut()) {
+        obj.insert("ate".into(), a);
+    }
     if args.digest
         && let Some(obj) = summary.as_object_mut()
     {

@@ -106,3 +106,96 @@ impl OctreeUpdate {
         }
     }
 }
+
+/// A key frame of a sparse SLAM map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapKeyFrame {
+    /// Unique within a run.
+    pub id: u64,
+    /// Sensor time stamp, seconds.
+    pub stamp: f64,
+    /// Camera-to-world transform.
+    pub world_from_cam: Isometry3<f64>,
+}
+
+/// A point of a sparse SLAM map.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapPoint {
+    /// Unique within a run.
+    pub id: u64,
+    /// World position, metres.
+    pub position: [f64; 3],
+    /// 256-bit ORB descriptor.
+    pub descriptor: [u8; 32],
+    /// Key frames observing it.
+    pub observations: u32,
+    /// The key frame that created it.
+    pub first_keyframe: u64,
+}
+
+/// A key frame's observation of a map point.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapObservation {
+    /// Key frame id.
+    pub keyframe: u64,
+    /// Map point id.
+    pub point: u64,
+    /// Pixel.
+    pub uv: [f64; 2],
+    /// Measured depth in metres (0: none).
+    pub depth: f64,
+    /// Pyramid level.
+    pub octave: u8,
+}
+
+/// A batch of a sparse SLAM map, as tracking and local mapping exchange them: a new key frame
+/// with its observations and new points (tracking to mapping), or the refined local window
+/// and the removed points (mapping to tracking).
+#[derive(Clone, Debug, PartialEq, Default)]
+pub struct SparseMap {
+    /// Map number (a new map starts after tracking is lost for good).
+    pub map_id: u32,
+    /// Key frames.
+    pub keyframes: Vec<MapKeyFrame>,
+    /// Points.
+    pub points: Vec<MapPoint>,
+    /// Observations.
+    pub observations: Vec<MapObservation>,
+    /// Ids of removed points.
+    pub removed: Vec<u64>,
+}
+
+impl SparseMap {
+    pub(super) fn digest_into(&self, d: &mut Digest) {
+        d.u64(u64::from(self.map_id));
+        d.u64(self.keyframes.len() as u64);
+        for k in &self.keyframes {
+            d.u64(k.id);
+            d.f64(k.stamp);
+            digest_iso(d, &k.world_from_cam);
+        }
+        d.u64(self.points.len() as u64);
+        for p in &self.points {
+            d.u64(p.id);
+            for v in p.position {
+                d.f64(v);
+            }
+            d.bytes(&p.descriptor);
+            d.u64(u64::from(p.observations));
+            d.u64(p.first_keyframe);
+        }
+        d.u64(self.observations.len() as u64);
+        for o in &self.observations {
+            d.u64(o.keyframe);
+            d.u64(o.point);
+            for v in [o.uv[0], o.uv[1], o.depth] {
+                d.f64(v);
+            }
+            d.bytes(&[o.octave]);
+        }
+        d.u64(self.removed.len() as u64);
+        for r in &self.removed {
+            d.u64(*r);
+        }
+    }
+}

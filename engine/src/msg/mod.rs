@@ -21,7 +21,10 @@ use std::sync::Arc;
 
 pub use digest::Digest;
 pub use features::{Descriptors, Keypoint, Keypoints, LabelReason, PointLabel, PointLabels, Track, Tracks};
-pub use geometry::{Isometry3, OctreeUpdate, PointCloud, Pose, StampedPose, Trajectory};
+pub use geometry::{
+    Isometry3, MapKeyFrame, MapObservation, MapPoint, OctreeUpdate, PointCloud, Pose, SparseMap, StampedPose,
+    Trajectory,
+};
 pub use image::{CameraInfo, DepthImage, Image, PixelFormat};
 pub use scalar::Scalars;
 pub use semantic::{Detection, Detections, SegmentationMask};
@@ -74,6 +77,8 @@ pub enum Body {
     PointCloud(PointCloud),
     /// Changed voxels of an occupancy octree.
     OctreeUpdate(OctreeUpdate),
+    /// A batch of a sparse SLAM map (key frames, points, observations).
+    Map(SparseMap),
     /// Named scalar metrics.
     Scalars(Scalars),
 }
@@ -106,6 +111,8 @@ pub enum PortType {
     PointCloud,
     /// [`OctreeUpdate`].
     OctreeUpdate,
+    /// [`SparseMap`].
+    Map,
     /// [`Scalars`].
     Scalars,
     /// Accepts any message (inputs of generic operators only).
@@ -114,7 +121,7 @@ pub enum PortType {
 
 impl PortType {
     /// Every concrete type (not `Any`).
-    pub const ALL: [PortType; 13] = [
+    pub const ALL: [PortType; 14] = [
         PortType::Image,
         PortType::Depth,
         PortType::CameraInfo,
@@ -127,6 +134,7 @@ impl PortType {
         PortType::Trajectory,
         PortType::PointCloud,
         PortType::OctreeUpdate,
+        PortType::Map,
         PortType::Scalars,
     ];
 
@@ -145,6 +153,7 @@ impl PortType {
             PortType::Trajectory => "trajectory",
             PortType::PointCloud => "point_cloud",
             PortType::OctreeUpdate => "octree_update",
+            PortType::Map => "map",
             PortType::Scalars => "scalars",
             PortType::Any => "any",
         }
@@ -178,6 +187,7 @@ impl Body {
             Body::Trajectory(_) => PortType::Trajectory,
             Body::PointCloud(_) => PortType::PointCloud,
             Body::OctreeUpdate(_) => PortType::OctreeUpdate,
+            Body::Map(_) => PortType::Map,
             Body::Scalars(_) => PortType::Scalars,
         }
     }
@@ -210,6 +220,7 @@ impl Message {
             Body::Trajectory(m) => m.digest_into(&mut d),
             Body::PointCloud(m) => m.digest_into(&mut d),
             Body::OctreeUpdate(m) => m.digest_into(&mut d),
+            Body::Map(m) => m.digest_into(&mut d),
             Body::Scalars(m) => m.digest_into(&mut d),
         }
         d.finish()
@@ -235,6 +246,13 @@ impl Message {
             Body::Trajectory(m) => json!({"poses": m.poses.len()}),
             Body::PointCloud(m) => json!({"points": m.points.len()}),
             Body::OctreeUpdate(m) => json!({"occupied": m.occupied.len(), "resolution": m.resolution}),
+            Body::Map(m) => json!({
+                "map_id": m.map_id,
+                "keyframes": m.keyframes.len(),
+                "points": m.points.len(),
+                "observations": m.observations.len(),
+                "removed": m.removed.len(),
+            }),
             Body::Scalars(m) => {
                 serde_json::Value::Object(m.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect())
             }

@@ -62,8 +62,14 @@ pub struct Context {
     pub rng: ChaCha8Rng,
     /// The run's output directory, if any.
     pub out_dir: Option<PathBuf>,
+    /// The run's file stem, `<graph>` or `<graph>-<variant>`: an operator's own files are
+    /// `<out_dir>/<stem>.<node>.<what>` so variants and nodes never overwrite each other.
+    pub stem: Arc<str>,
     /// Whether the run is paced at sensor rate.
     pub realtime: bool,
+    /// What the operator has to add to its node's entry in the run summary (e.g. a
+    /// tracker's ATE against ground truth), set by the time `stop` returns.
+    pub report: Option<serde_json::Value>,
 }
 
 /// The inputs of one frame, in declaration order; `None` where an input is absent this frame.

@@ -14,6 +14,8 @@ pub(crate) struct NodeMetrics {
     pub latency: Histogram,
     /// Per fired frame: time since the source emitted the frame.
     pub age: Histogram,
+    /// The operator's own contribution to the summary.
+    pub report: Option<serde_json::Value>,
 }
 
 /// Relative width of a histogram bucket: quantiles are exact to within 1 %.
@@ -132,6 +134,9 @@ pub struct NodeReport {
     pub max_queue: usize,
     /// Messages dropped on the node's inputs.
     pub dropped: u64,
+    /// What the operator reported (e.g. a tracker's ATE), if anything.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub report: Option<serde_json::Value>,
 }
 
 /// What one edge did.

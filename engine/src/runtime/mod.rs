@@ -168,6 +168,10 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
         probes.push(probe);
     }
 
+    let stem: Arc<str> = match &graph.variant {
+        Some(v) => format!("{}-{v}", graph.name).into(),
+        None => graph.name.as_str().into(),
+    };
     let mut tasks = Vec::new();
     for (i, (node, inst)) in graph.nodes.iter().zip(instances).enumerate() {
         let seed = node_seed(graph.seed, &node.id);
@@ -176,7 +180,9 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
             seed,
             rng: rand_chacha::ChaCha8Rng::seed_from_u64(seed),
             out_dir: options.out_dir.clone(),
+            stem: stem.clone(),
             realtime: options.realtime,
+            report: None,
         };
         let outputs = node::Outputs {
             ports: node
@@ -277,6 +283,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
                 busy_s: m.busy.as_secs_f64(),
                 max_queue,
                 dropped,
+                report: m.report,
             }
         })
         .collect();

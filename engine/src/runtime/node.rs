@@ -74,6 +74,7 @@ impl NodeTask {
             // A disabled source produces no frames.
             None => {}
         }
+        metrics.report = self.ctx.report.take();
         metrics
     }
 
@@ -415,7 +416,9 @@ fn placeholder_ctx(ctx: &Context) -> Context {
         seed: ctx.seed,
         rng: rand_chacha::ChaCha8Rng::seed_from_u64(0),
         out_dir: None,
+        stem: ctx.stem.clone(),
         realtime: ctx.realtime,
+        report: None,
     }
 }
 

@@ -90,6 +90,9 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<(f64, Isometry3<f64>)>, IndexE
         let v: Vec<f64> = fields.iter().map(|f| stamp(path, line, f)).collect::<Result<_, _>>()?;
         check_order(path, prev, line, v[0])?;
         prev = Some((line, v[0]));
+        if v.iter().any(|x| !x.is_finite()) {
+            return Err(bad(path, line, "a value is not a finite number"));
+        }
         let q = Quaternion::new(v[7], v[4], v[5], v[6]);
         if (q.norm() - 1.0).abs() > 1e-2 {
             return Err(bad(path, line, format!("quaternion norm {:.4} is not 1", q.norm())));

@@ -108,7 +108,12 @@ fn read_poses(path: &Path) -> Result<Vec<Isometry3<f64>>, OpError> {
             return Err(input(path, i + 1, format!("expected 12 numbers (a 3×4 matrix), found {}", v.len())));
         };
         let r = Matrix3::new(r00, r01, r02, r10, r11, r12, r20, r21, r22);
-        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix(&r));
+        let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_eps(
+            &r,
+            f64::EPSILON,
+            100,
+            Rotation3::identity(),
+        ));
         out.push(Isometry3::from_parts(Translation3::new(tx, ty, tz), rot));
     }
     Ok(out)

@@ -6,7 +6,7 @@
 //! ignores and `dynaflow diff` reads. The schemas below list the fields we write.
 
 use base64::Engine as _;
-use dynaflow_engine::msg::{Body, Message, PortType};
+use dynaflow_engine::msg::{Body, Message, PointCloud, PortType, SparseMap};
 use serde_json::{Value, json};
 
 use crate::encode::{self, EncodeCache, ImageCodec};
@@ -20,7 +20,7 @@ pub fn schema_name(ty: PortType) -> &'static str {
         PortType::Keypoints | PortType::Tracks | PortType::Detections => "foxglove.ImageAnnotations",
         PortType::Pose => "foxglove.PoseInFrame",
         PortType::Trajectory => "foxglove.PosesInFrame",
-        PortType::PointCloud => "foxglove.PointCloud",
+        PortType::PointCloud | PortType::Map => "foxglove.PointCloud",
         PortType::OctreeUpdate => "foxglove.SceneUpdate",
         PortType::PointLabels => "dynaflow.PointLabels",
         PortType::Scalars | PortType::Any => "dynaflow.Scalars",
@@ -149,32 +149,8 @@ pub fn to_json(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Result<
             "timestamp": ts, "frame_id": "world",
             "poses": t.poses.iter().map(|p| pose_json(&p.world_from_cam)).collect::<Vec<_>>(),
         }),
-        Body::PointCloud(c) => {
-            let with_color = c.colors.is_some();
-            let stride = if with_color { 16 } else { 12 };
-            let mut data = Vec::with_capacity(c.points.len() * stride);
-            for (i, p) in c.points.iter().enumerate() {
-                for v in p {
-                    data.extend_from_slice(&v.to_le_bytes());
-                }
-                if let Some(colors) = &c.colors {
-                    let [r, g, b] = colors.get(i).copied().unwrap_or([255, 255, 255]);
-                    data.extend_from_slice(&[r, g, b, 255]);
-                }
-            }
-            let mut fields = vec![
-                json!({"name": "x", "offset": 0, "type": 7}),
-                json!({"name": "y", "offset": 4, "type": 7}),
-                json!({"name": "z", "offset": 8, "type": 7}),
-            ];
-            if with_color {
-                for (i, n) in ["red", "green", "blue", "alpha"].iter().enumerate() {
-                    fields.push(json!({"name": n, "offset": 12 + i, "type": 1}));
-                }
-            }
-            json!({"timestamp": ts, "frame_id": "world", "pose": pose_json(&nalgebra::Isometry3::identity()),
-                   "point_stride": stride, "fields": fields, "data": b64(&data)})
-        }
+        Body::PointCloud(c) => point_cloud_json(c, &ts),
+        Body::Map(m) => point_cloud_json(&map_cloud(m), &ts),
         Body::OctreeUpdate(o) => {
             let size = json!({"x": o.resolution, "y": o.resolution, "z": o.resolution});
             let cubes: Vec<Value> = o
@@ -198,4 +174,40 @@ pub fn to_json(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Result<
         obj.insert("dynaflow".into(), payload(msg));
     }
     Ok(v)
+}
+
+/// A point cloud as `foxglove.PointCloud` (x, y, z float32, optional RGBA bytes).
+fn point_cloud_json(c: &PointCloud, ts: &Value) -> Value {
+    let with_color = c.colors.is_some();
+    let stride = if with_color { 16 } else { 12 };
+    let mut data = Vec::with_capacity(c.points.len() * stride);
+    for (i, p) in c.points.iter().enumerate() {
+        for v in p {
+            data.extend_from_slice(&v.to_le_bytes());
+        }
+        if let Some(colors) = &c.colors {
+            let [r, g, b] = colors.get(i).copied().unwrap_or([255, 255, 255]);
+            data.extend_from_slice(&[r, g, b, 255]);
+        }
+    }
+    let mut fields = vec![
+        json!({"name": "x", "offset": 0, "type": 7}),
+        json!({"name": "y", "offset": 4, "type": 7}),
+        json!({"name": "z", "offset": 8, "type": 7}),
+    ];
+    if with_color {
+        for (i, n) in ["red", "green", "blue", "alpha"].iter().enumerate() {
+            fields.push(json!({"name": n, "offset": 12 + i, "type": 1}));
+        }
+    }
+    json!({"timestamp": ts, "frame_id": "world", "pose": pose_json(&nalgebra::Isometry3::identity()),
+               "point_stride": stride, "fields": fields, "data": b64(&data)})
+}
+
+/// A sparse map's points as a cloud (what the recorders show of a map batch).
+pub fn map_cloud(m: &SparseMap) -> PointCloud {
+    PointCloud {
+        points: m.points.iter().map(|p| [p.position[0] as f32, p.position[1] as f32, p.position[2] as f32]).collect(),
+        colors: None,
+    }
 }

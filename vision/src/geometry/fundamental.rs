@@ -83,7 +83,7 @@ pub fn eight_point(p1: &[[f64; 2]], p2: &[[f64; 2]]) -> Option<Mat3> {
 }
 
 /// Real roots of `a x^3 + b x^2 + c x + d` (degree drops when leading terms vanish).
-fn real_roots_cubic(a: f64, b: f64, c: f64, d: f64) -> Vec<f64> {
+pub(crate) fn real_roots_cubic(a: f64, b: f64, c: f64, d: f64) -> Vec<f64> {
     let scale = a.abs().max(b.abs()).max(c.abs()).max(d.abs());
     if scale == 0.0 || !scale.is_finite() {
         return Vec::new();

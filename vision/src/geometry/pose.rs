@@ -8,6 +8,7 @@ use nalgebra::{
     Vector6,
 };
 
+use super::p3p::p3p;
 use super::ransac::{SplitMix64, needed};
 
 /// A pinhole camera.
@@ -119,7 +120,7 @@ fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
 }
 
 /// SE(3) exponential of `xi = (rho, phi)` (translation first), as a pose increment.
-fn exp_se3(xi: &Vector6<f64>) -> Isometry3<f64> {
+pub fn exp_se3(xi: &Vector6<f64>) -> Isometry3<f64> {
     let rho = Vector3::new(xi[0], xi[1], xi[2]);
     let phi = Vector3::new(xi[3], xi[4], xi[5]);
     let theta = phi.norm();
@@ -135,6 +136,19 @@ fn exp_se3(xi: &Vector6<f64>) -> Isometry3<f64> {
     Isometry3::from_parts(Translation3::from(v * rho), rot)
 }
 
+/// `exp(xi) * pose` with the rotation renormalised: products of unit quaternions drift off
+/// the unit sphere, and composed frame after frame the drift grows geometrically.
+pub fn compose(xi: &Vector6<f64>, pose: &Isometry3<f64>) -> Isometry3<f64> {
+    renormalised(&(exp_se3(xi) * pose))
+}
+
+/// `pose` with its quaternion scaled back to unit length.
+pub fn renormalised(pose: &Isometry3<f64>) -> Isometry3<f64> {
+    let mut p = *pose;
+    p.rotation.renormalize();
+    p
+}
+
 /// Motion-only bundle adjustment result.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseFit {
@@ -146,9 +160,131 @@ pub struct PoseFit {
     pub errors: Vec<f64>,
 }
 
-/// Refine `cam_from_world` by Levenberg-Marquardt on the reprojection error (pixels, sigma
-/// `sigma`), Huber kernel at the chi-square bound; four rounds of 10 iterations, outliers of
-/// each round left out of the next (ORB-SLAM's `PoseOptimization`).
+/// Chi-square 95 % quantile for 3 degrees of freedom: the bound for an RGB-D observation
+/// (pixel plus virtual right-image coordinate), as ORB-SLAM2 uses it.
+pub const CHI2_3DOF_95: f64 = 7.815;
+
+/// One 3-D point and where it was seen, for [`optimize_pose`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PoseObservation {
+    /// World point.
+    pub point: Point3<f64>,
+    /// Observed pixel.
+    pub uv: [f64; 2],
+    /// Standard deviation of the observation, pixels (ORB-SLAM: 1.2^octave).
+    pub sigma: f64,
+    /// Measured depth (metres) of the observation, when the sensor gives one: it becomes
+    /// ORB-SLAM2's RGB-D virtual right coordinate `u - bf / depth`.
+    pub depth: Option<f64>,
+}
+
+/// Residual and Jacobian (left SE(3) perturbation, translation first) of one observation:
+/// rows 0-1 for the pixel, row 2 for the virtual right coordinate `u - bf / z` when the
+/// observation has a depth and `bf > 0` (zero otherwise). `None` behind the camera.
+pub fn observation_jacobian(
+    cam: &Camera,
+    bf: f64,
+    pc: &Point3<f64>,
+    obs: &PoseObservation,
+) -> Option<(Vector3<f64>, SMatrix<f64, 3, 6>)> {
+    let uv = cam.project(pc)?;
+    let (x, y, z) = (pc.x, pc.y, pc.z);
+    let (iz, iz2) = (1.0 / z, 1.0 / (z * z));
+    let mut r = Vector3::new(uv[0] - obs.uv[0], uv[1] - obs.uv[1], 0.0);
+    let mut dp = Matrix3::zeros();
+    dp[(0, 0)] = cam.fx * iz;
+    dp[(0, 2)] = -cam.fx * x * iz2;
+    dp[(1, 1)] = cam.fy * iz;
+    dp[(1, 2)] = -cam.fy * y * iz2;
+    if let Some(d) = obs.depth.filter(|_| bf > 0.0) {
+        r[2] = (uv[0] - bf * iz) - (obs.uv[0] - bf / d);
+        dp[(2, 0)] = cam.fx * iz;
+        dp[(2, 2)] = -cam.fx * x * iz2 + bf * iz2;
+    }
+    let mut j = SMatrix::<f64, 3, 6>::zeros();
+    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&dp);
+    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(dp * -skew(&pc.coords)));
+    Some((r, j))
+}
+
+fn huber(e2: f64, delta: f64) -> (f64, f64) {
+    let e = e2.sqrt();
+    if e <= delta { (e2, 1.0) } else { (2.0 * delta * e - delta * delta, delta / e) }
+}
+
+/// Motion-only bundle adjustment (ORB-SLAM's `PoseOptimization`): Levenberg-Marquardt on
+/// SE(3) over the reprojection errors (and depth, with `bf > 0`: focal length times a virtual
+/// baseline, ORB-SLAM2's RGB-D model) whitened by each observation's sigma, Huber kernel at
+/// the chi-square 95 % bound, four rounds of ten iterations with every observation
+/// re-classified after each round (outliers may come back). `inliers` is the starting
+/// classification (all observations when `None`).
+pub fn optimize_pose(
+    obs: &[PoseObservation],
+    cam: &Camera,
+    bf: f64,
+    initial: &Isometry3<f64>,
+    inliers: Option<Vec<bool>>,
+) -> PoseFit {
+    let n = obs.len();
+    let mut pose = *initial;
+    let mut inlier = inliers.filter(|v| v.len() == n).unwrap_or_else(|| vec![true; n]);
+    let bound = |o: &PoseObservation| if o.depth.is_some() && bf > 0.0 { CHI2_3DOF_95 } else { CHI2_2DOF_95 };
+    let chi2 = |pose: &Isometry3<f64>, i: usize| -> Option<f64> {
+        let o = &obs[i];
+        let (r, _) = observation_jacobian(cam, bf, &(pose * o.point), o)?;
+        Some(r.norm_squared() / (o.sigma * o.sigma))
+    };
+    let cost_of = |pose: &Isometry3<f64>, mask: &[bool]| -> f64 {
+        (0..n).filter(|&i| mask[i]).map(|i| chi2(pose, i).map_or(0.0, |c| huber(c, bound(&obs[i]).sqrt()).0)).sum()
+    };
+    for _round in 0..4 {
+        let mut lambda = 1e-3;
+        let mut cost = cost_of(&pose, &inlier);
+        for _ in 0..10 {
+            let mut h = Matrix6::<f64>::zeros();
+            let mut g = Vector6::<f64>::zeros();
+            for i in (0..n).filter(|&i| inlier[i]) {
+                let o = &obs[i];
+                let Some((r, j)) = observation_jacobian(cam, bf, &(pose * o.point), o) else { continue };
+                let info = 1.0 / (o.sigma * o.sigma);
+                let (_, w) = huber(r.norm_squared() * info, bound(o).sqrt());
+                let jt = j.transpose();
+                h += (w * info) * (jt * j);
+                g += (w * info) * (jt * r);
+            }
+            let mut damped = h;
+            for k in 0..6 {
+                damped[(k, k)] += lambda * h[(k, k)].max(1e-9);
+            }
+            let Some(step) = damped.cholesky().map(|c| c.solve(&(-g))) else { break };
+            let candidate = compose(&step, &pose);
+            let new_cost = cost_of(&candidate, &inlier);
+            if new_cost < cost {
+                pose = candidate;
+                cost = new_cost;
+                lambda = (lambda * 0.3).max(1e-9);
+                if step.norm() < 1e-10 {
+                    break;
+                }
+            } else {
+                lambda *= 10.0;
+                if lambda > 1e8 {
+                    break;
+                }
+            }
+        }
+        for (i, flag) in inlier.iter_mut().enumerate() {
+            *flag = chi2(&pose, i).is_some_and(|c| c <= bound(&obs[i]));
+        }
+    }
+    let errors = obs
+        .iter()
+        .map(|o| cam.project(&(pose * o.point)).map_or(f64::INFINITY, |uv| (uv[0] - o.uv[0]).hypot(uv[1] - o.uv[1])))
+        .collect();
+    PoseFit { pose, inliers: inlier, errors }
+}
+
+/// [`optimize_pose`] on pixels alone with one sigma for all (pixels, sigma `sigma`).
 pub fn refine_pose(
     world: &[Point3<f64>],
     pixels: &[[f64; 2]],
@@ -156,112 +292,49 @@ pub fn refine_pose(
     initial: &Isometry3<f64>,
     sigma: f64,
 ) -> PoseFit {
-    let mut pose = *initial;
-    let n = world.len().min(pixels.len());
-    let mut inlier = vec![true; n];
-    let delta = CHI2_2DOF_95.sqrt() * sigma;
-    let residual = |pose: &Isometry3<f64>, i: usize| -> Option<(Vector3<f64>, [f64; 2])> {
-        let pc = pose * world[i];
-        let uv = cam.project(&pc)?;
-        Some((pc.coords, [uv[0] - pixels[i][0], uv[1] - pixels[i][1]]))
-    };
-    for _round in 0..4 {
-        let mut lambda = 1e-3;
-        for _ in 0..10 {
-            let mut h = Matrix6::<f64>::zeros();
-            let mut g = Vector6::<f64>::zeros();
-            let mut cost = 0.0;
-            for i in (0..n).filter(|&i| inlier[i]) {
-                let Some((pc, r)) = residual(&pose, i) else { continue };
-                let e = (r[0] * r[0] + r[1] * r[1]).sqrt();
-                // Huber: weight 1 inside, delta / e outside.
-                let w = if e <= delta { 1.0 } else { delta / e };
-                cost += if e <= delta { e * e } else { 2.0 * delta * e - delta * delta };
-                let (x, y, z) = (pc.x, pc.y, pc.z);
-                let (iz, iz2) = (1.0 / z, 1.0 / (z * z));
-                // d(uv)/d(xi) for a left perturbation: d(uv)/d(pc) * [I | -[pc]x].
-                let j = SMatrix::<f64, 2, 6>::new(
-                    cam.fx * iz,
-                    0.0,
-                    -cam.fx * x * iz2,
-                    -cam.fx * x * y * iz2,
-                    cam.fx * (1.0 + x * x * iz2),
-                    -cam.fx * y * iz,
-                    0.0,
-                    cam.fy * iz,
-                    -cam.fy * y * iz2,
-                    -cam.fy * (1.0 + y * y * iz2),
-                    cam.fy * x * y * iz2,
-                    cam.fy * x * iz,
-                );
-                let rv = nalgebra::Vector2::new(r[0], r[1]);
-                h += w * j.transpose() * j;
-                g += w * j.transpose() * rv;
-            }
-            let mut damped = h;
-            for k in 0..6 {
-                damped[(k, k)] += lambda * h[(k, k)].max(1e-9);
-            }
-            let Some(step) = damped.cholesky().map(|c| c.solve(&(-g))) else { break };
-            let candidate = exp_se3(&step) * pose;
-            let new_cost: f64 = (0..n)
-                .filter(|&i| inlier[i])
-                .filter_map(|i| residual(&candidate, i))
-                .map(|(_, r)| {
-                    let e = (r[0] * r[0] + r[1] * r[1]).sqrt();
-                    if e <= delta { e * e } else { 2.0 * delta * e - delta * delta }
-                })
-                .sum();
-            if new_cost < cost {
-                pose = candidate;
-                lambda = (lambda * 0.3).max(1e-9);
-                if step.norm() < 1e-12 {
-                    break;
-                }
-            } else {
-                lambda *= 10.0;
-            }
-        }
-        // Re-classify every correspondence (ORB-SLAM lets outliers come back).
-        for (i, flag) in inlier.iter_mut().enumerate() {
-            *flag =
-                residual(&pose, i).is_some_and(|(_, r)| (r[0] * r[0] + r[1] * r[1]) / (sigma * sigma) <= CHI2_2DOF_95);
-        }
-    }
-    let errors = (0..n).map(|i| residual(&pose, i).map_or(f64::INFINITY, |(_, r)| r[0].hypot(r[1]))).collect();
-    PoseFit { pose, inliers: inlier, errors }
+    let obs: Vec<PoseObservation> =
+        world.iter().zip(pixels).map(|(p, uv)| PoseObservation { point: *p, uv: *uv, sigma, depth: None }).collect();
+    optimize_pose(&obs, cam, 0.0, initial, None)
 }
 
-/// PnP with RANSAC over 6-point DLT samples (reprojection threshold `threshold` pixels),
-/// then motion-only BA on the best consensus. `None` with fewer than 6 correspondences or no
-/// usable sample.
-pub fn pnp_ransac(
+/// The unit bearing of a pixel.
+pub fn bearing(cam: &Camera, uv: [f64; 2]) -> Vector3<f64> {
+    let [x, y] = cam.normalised(uv);
+    Vector3::new(x, y, 1.0).normalize()
+}
+
+/// RANSAC over minimal P3P samples: three points give up to four poses, a fourth picks
+/// one (as OpenCV's `SOLVEPNP_P3P` does), the consensus counts reprojection errors within
+/// `threshold` pixels; adaptive stopping at 99 % confidence. Returns the best pose
+/// (`cam_from_world`) and its inlier mask, without refinement. `None` with fewer than 4
+/// correspondences or no usable sample.
+pub fn p3p_ransac(
     world: &[Point3<f64>],
     pixels: &[[f64; 2]],
     cam: &Camera,
     threshold: f64,
     max_iterations: usize,
     rng: &mut SplitMix64,
-) -> Option<PoseFit> {
+) -> Option<(Isometry3<f64>, Vec<bool>)> {
     let n = world.len();
-    if n < 6 || pixels.len() != n {
+    if n < 4 || pixels.len() != n {
         return None;
     }
-    let count = |pose: &Isometry3<f64>| {
-        (0..n)
-            .filter(|&i| {
-                cam.project(&(pose * world[i]))
-                    .is_some_and(|uv| (uv[0] - pixels[i][0]).hypot(uv[1] - pixels[i][1]) <= threshold)
-            })
-            .count()
+    let t2 = threshold * threshold;
+    let error2 = |pose: &Isometry3<f64>, i: usize| {
+        cam.project(&(pose * world[i])).map_or(f64::INFINITY, |uv| {
+            let (du, dv) = (uv[0] - pixels[i][0], uv[1] - pixels[i][1]);
+            du * du + dv * dv
+        })
     };
+    let bearings: Vec<Vector3<f64>> = pixels.iter().map(|uv| bearing(cam, *uv)).collect();
     let mut best: Option<(Isometry3<f64>, usize)> = None;
     let mut limit = max_iterations.max(1);
     let mut it = 0;
     while it < limit {
         it += 1;
-        let mut idx = [0usize; 6];
-        for k in 0..6 {
+        let mut idx = [0usize; 4];
+        for k in 0..4 {
             loop {
                 let i = rng.below(n);
                 if !idx[..k].contains(&i) {
@@ -270,18 +343,43 @@ pub fn pnp_ransac(
                 }
             }
         }
-        let w: Vec<Point3<f64>> = idx.iter().map(|&i| world[i]).collect();
-        let p: Vec<[f64; 2]> = idx.iter().map(|&i| pixels[i]).collect();
-        let Some(pose) = pnp_dlt(&w, &p, cam) else { continue };
-        let c = count(&pose);
+        let sols = p3p(
+            &[world[idx[0]], world[idx[1]], world[idx[2]]],
+            &[bearings[idx[0]], bearings[idx[1]], bearings[idx[2]]],
+        );
+        let Some(pose) = sols.into_iter().min_by(|a, b| error2(a, idx[3]).total_cmp(&error2(b, idx[3]))) else {
+            continue;
+        };
+        let e4 = error2(&pose, idx[3]);
+        if e4 > t2 || e4.is_nan() {
+            continue;
+        }
+        let c = (0..n).filter(|&i| error2(&pose, i) <= t2).count();
         if best.as_ref().is_none_or(|b| c > b.1) {
             best = Some((pose, c));
-            limit = limit.min(needed(c as f64 / n as f64, 6, 0.99, limit));
+            limit = limit.min(needed(c as f64 / n as f64, 4, 0.99, limit));
         }
     }
     let (pose, _) = best?;
-    // Refine on the consensus (sigma: the threshold over the chi-square bound).
-    Some(refine_pose(world, pixels, cam, &pose, threshold / CHI2_2DOF_95.sqrt()))
+    let mask = (0..n).map(|i| error2(&pose, i) <= t2).collect();
+    Some((pose, mask))
+}
+
+/// PnP: [`p3p_ransac`] (reprojection threshold `threshold` pixels), then motion-only BA
+/// started from its consensus. `None` with fewer than 4 correspondences or no usable sample.
+pub fn pnp_ransac(
+    world: &[Point3<f64>],
+    pixels: &[[f64; 2]],
+    cam: &Camera,
+    threshold: f64,
+    max_iterations: usize,
+    rng: &mut SplitMix64,
+) -> Option<PoseFit> {
+    let (pose, mask) = p3p_ransac(world, pixels, cam, threshold, max_iterations, rng)?;
+    let sigma = threshold / CHI2_2DOF_95.sqrt();
+    let obs: Vec<PoseObservation> =
+        world.iter().zip(pixels).map(|(p, uv)| PoseObservation { point: *p, uv: *uv, sigma, depth: None }).collect();
+    Some(optimize_pose(&obs, cam, 0.0, &pose, Some(mask)))
 }
 
 #[cfg(test)]
@@ -351,7 +449,7 @@ mod tests {
     fn degenerate_input_gives_no_pose_and_no_panic() {
         let (w, p, cam, _) = scene(10, 3);
         assert!(pnp_dlt(&w[..5], &p[..5], &cam).is_none());
-        assert!(pnp_ransac(&w[..5], &p[..5], &cam, 2.0, 100, &mut SplitMix64::new(0)).is_none());
+        assert!(pnp_ransac(&w[..3], &p[..3], &cam, 2.0, 100, &mut SplitMix64::new(0)).is_none());
         let same = vec![Point3::new(1.0, 1.0, 3.0); 10];
         assert!(pnp_dlt(&same, &p, &cam).is_none());
         let fit = refine_pose(&[], &[], &cam, &Isometry3::identity(), 1.0);

@@ -186,7 +186,8 @@ pub fn umeyama(x: &[Vector3<f64>], y: &[Vector3<f64>], with_scale: bool) -> Opti
 }
 
 fn rotation_angle_deg(r: &Matrix3<f64>) -> f64 {
-    UnitQuaternion::from_matrix(r).angle().to_degrees()
+    // Bounded iterations: nalgebra's `from_matrix` loops until convergence, forever on NaN.
+    UnitQuaternion::from_matrix_eps(r, f64::EPSILON, 100, UnitQuaternion::identity()).angle().to_degrees()
 }
 
 /// Evaluate `est` against `gt`.

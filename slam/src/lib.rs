@@ -1,0 +1,24 @@
+//! dynaflow's SLAM back-end as a plain library, with no engine or async dependency (the
+//! `pnp_track` and `local_map` operators are thin wrappers around it).
+//!
+//! - `map`: the sparse map's plain data: key frames, map points, observations, and the
+//!   [`map::SparseMap`] batch that tracking and local mapping exchange.
+//! - `tracker`: ORB-SLAM-style tracking of an RGB-D frame against the local map: guided
+//!   projection search from a constant-velocity prediction, descriptor matching with P3P
+//!   RANSAC as the fallback and for relocalisation, motion-only BA, key-frame decisions,
+//!   tracking loss and new maps.
+//! - `local_map`: ORB-SLAM's local mapping: covisibility, the local window, local BA, culling
+//!   of bad observations and points.
+//! - `ba`: sparse bundle adjustment (Levenberg-Marquardt, Schur complement on the points,
+//!   Huber kernel).
+//! - `eval`: trajectory evaluation (association, Umeyama alignment, ATE and RPE) as evo does it.
+
+pub mod ba;
+pub mod eval;
+pub mod local_map;
+pub mod map;
+pub mod tracker;
+
+pub use local_map::{LocalMapConfig, LocalMapper};
+pub use map::{Feature, KeyFrameInfo, MapPoint, Observation, SparseMap};
+pub use tracker::{TrackState, Tracker, TrackerConfig, TrackingResult};

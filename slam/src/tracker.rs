@@ -1,0 +1,493 @@
+//! ORB-SLAM-style tracking of RGB-D frames against a local map.
+//!
+//! Per frame: predict the pose with a constant-velocity model; project the local map points
+//! and match each to the best keypoint within a search radius (Hamming distance, ratio test;
+//! ORB-SLAM's `SearchByProjection`), widening the radius once when too few survive; refine by
+//! motion-only BA (pixels plus depth as ORB-SLAM2's virtual right coordinate, Huber, four
+//! re-classification rounds). When that still fails, match descriptors against the whole
+//! local map and solve P3P inside RANSAC (relocalisation against the recent key frames). A
+//! frame with too few inliers is *lost*: its pose follows the motion model; after
+//! `reset_after` lost frames in a row a new map starts at the dead-reckoned pose (so the
+//! trajectory stays in one frame, and the jump is reported).
+//!
+//! Key frames follow ORB-SLAM2's rules for RGB-D (tracked points fall below 75 % of the
+//! reference key frame's, or too few close points are tracked while many are not, or
+//! `max_frames` passed); a key frame creates map points from depth for its unmatched
+//! keypoints (ORB-SLAM2's `CreateNewKeyFrame` makes only the close ones and triangulates the
+//! rest in local mapping; there is no triangulation here, so depth gives all of them) and is
+//! handed to local mapping as a [`SparseMap`] batch. Every observation with a depth is an
+//! RGB-D observation in BA (pixel plus virtual right coordinate), as in ORB-SLAM2.
+
+use std::collections::{BTreeMap, BTreeSet};
+
+use dynaflow_vision::geometry::{Camera, PoseObservation, SplitMix64, optimize_pose, p3p_ransac, renormalised};
+use dynaflow_vision::matching::{GridIndex, MatchConfig, hamming, match_brute_force};
+use nalgebra::{Isometry3, Point3};
+
+use crate::map::{Feature, KeyFrameInfo, MapPoint, Observation, SparseMap, sigma};
+
+/// Tracking settings (defaults: ORB-SLAM2's for an RGB-D camera, see [`TrackerConfig::rgbd`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrackerConfig {
+    /// `fx` times the virtual baseline (ORB-SLAM2 `bf`; TUM configs: 40 = 525 px x 7.6 cm).
+    pub bf: f64,
+    /// "Close" depth for the key-frame rule (ORB-SLAM2 `ThDepth` x baseline: 40 x 8 cm = 3.2 m).
+    pub th_depth: f64,
+    /// Depths beyond this are not used at all (Kinect noise grows with the square).
+    pub max_depth: f64,
+    /// ORB pyramid scale factor.
+    pub scale_factor: f64,
+    /// Projection search radius, pixels at level 0 (ORB-SLAM2's motion-model search: 15).
+    pub search_radius: f64,
+    /// Largest Hamming distance of a match (ORB-SLAM `TH_HIGH`).
+    pub max_distance: u32,
+    /// Ratio of best to second-best distance in the projection search.
+    pub ratio: f32,
+    /// Fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30).
+    pub min_inliers: usize,
+    /// P3P RANSAC reprojection threshold, pixels at level 0.
+    pub ransac_threshold: f64,
+    /// Points with depth a frame needs to start a map (ORB-SLAM2 wants 500 keypoints).
+    pub min_init_points: usize,
+    /// A key frame at least this often, frames (ORB-SLAM: the frame rate).
+    pub max_frames: u64,
+    /// Lost frames in a row after which a new map starts.
+    pub reset_after: u32,
+}
+
+impl TrackerConfig {
+    /// ORB-SLAM2's RGB-D settings for focal length `fx` (virtual baseline 8 cm).
+    pub fn rgbd(fx: f64) -> Self {
+        Self {
+            bf: fx * 0.08,
+            th_depth: 40.0 * 0.08,
+            max_depth: 6.0,
+            scale_factor: 1.2,
+            search_radius: 15.0,
+            max_distance: 100,
+            ratio: 0.8,
+            min_inliers: 30,
+            ransac_threshold: 3.0,
+            min_init_points: 100,
+            max_frames: 30,
+            reset_after: 5,
+        }
+    }
+}
+
+/// How a frame was tracked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrackState {
+    /// No map yet and this frame could not start one (too few points with depth).
+    NotInitialised,
+    /// This frame started a map (the first, or a new one after tracking was lost).
+    NewMap,
+    /// Tracked by projection search from the motion model.
+    Tracked,
+    /// Tracked by descriptor matching and P3P RANSAC against the local map.
+    Relocalised,
+    /// Not tracked: the pose follows the motion model.
+    Lost,
+}
+
+impl TrackState {
+    /// A number for plots: 0 not initialised, 1 new map, 2 tracked, 3 relocalised, 4 lost.
+    pub fn code(self) -> f64 {
+        match self {
+            TrackState::NotInitialised => 0.0,
+            TrackState::NewMap => 1.0,
+            TrackState::Tracked => 2.0,
+            TrackState::Relocalised => 3.0,
+            TrackState::Lost => 4.0,
+        }
+    }
+}
+
+/// What [`Tracker::track`] found for one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackingResult {
+    /// `world_from_cam`, `None` before the first map.
+    pub pose: Option<Isometry3<f64>>,
+    /// Outcome.
+    pub state: TrackState,
+    /// Map points matched to keypoints.
+    pub matches: usize,
+    /// Matches that are inliers after motion-only BA.
+    pub inliers: usize,
+    /// Map points the tracker holds.
+    pub map_points: usize,
+    /// Map number (increments with each new map).
+    pub map_id: u32,
+    /// A new key frame for local mapping.
+    pub keyframe: Option<SparseMap>,
+    /// Per feature: the map point it was matched to as an inlier.
+    pub matched: Vec<Option<u64>>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct TPoint {
+    position: Point3<f64>,
+    descriptor: [u8; 32],
+    first_keyframe: u64,
+}
+
+/// Tracking state across frames.
+#[derive(Debug)]
+pub struct Tracker {
+    config: TrackerConfig,
+    cam: Camera,
+    width: f64,
+    height: f64,
+    rng: SplitMix64,
+    map_id: u32,
+    initialised: bool,
+    points: BTreeMap<u64, TPoint>,
+    next_point: u64,
+    next_keyframe: u64,
+    /// `world_from_cam` of the previous frame.
+    last: Option<Isometry3<f64>>,
+    /// `prev_from_cur` of the last tracked motion.
+    velocity: Isometry3<f64>,
+    frames_since_kf: u64,
+    ref_tracked: usize,
+    /// First key frame of the current map.
+    first_keyframe: u64,
+    lost_run: u32,
+}
+
+impl Tracker {
+    /// A tracker for images `width` x `height` from camera `cam`; `seed` drives RANSAC.
+    pub fn new(config: TrackerConfig, cam: Camera, width: usize, height: usize, seed: u64) -> Self {
+        Self {
+            config,
+            cam,
+            width: width as f64,
+            height: height as f64,
+            rng: SplitMix64::new(seed),
+            map_id: 0,
+            initialised: false,
+            points: BTreeMap::new(),
+            next_point: 0,
+            next_keyframe: 0,
+            last: None,
+            velocity: Isometry3::identity(),
+            frames_since_kf: 0,
+            ref_tracked: 0,
+            first_keyframe: 0,
+            lost_run: 0,
+        }
+    }
+
+    /// The current map number.
+    pub fn map_id(&self) -> u32 {
+        self.map_id
+    }
+
+    /// Take local mapping's refined local map (ignored if it is of an older map).
+    pub fn apply_map_update(&mut self, update: &SparseMap) {
+        if update.map_id != self.map_id || !self.initialised {
+            return;
+        }
+        let newest = update.keyframes.iter().map(|k| k.id).max().unwrap_or(0);
+        let incoming: BTreeSet<u64> = update.points.iter().map(|p| p.id).collect();
+        for p in &update.points {
+            self.points.insert(
+                p.id,
+                TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe },
+            );
+        }
+        // Keep what local mapping holds in its window, and what it has not seen yet.
+        self.points.retain(|id, p| incoming.contains(id) || p.first_keyframe > newest);
+        for id in &update.removed {
+            self.points.remove(id);
+        }
+    }
+
+    /// Track one frame.
+    pub fn track(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
+        let predicted = self.last.map(|l| renormalised(&(l * self.velocity)));
+        if !self.initialised {
+            return self.start_map(stamp, features, predicted.unwrap_or_else(Isometry3::identity), TrackState::NewMap);
+        }
+        let predicted = predicted.unwrap_or_else(Isometry3::identity);
+        let mut fit = self.track_projection(features, &predicted, self.config.search_radius);
+        if fit.as_ref().is_none_or(|f| f.inliers < self.config.min_inliers) {
+            fit = self.track_projection(features, &predicted, 3.0 * self.config.search_radius);
+        }
+        let mut state = TrackState::Tracked;
+        if fit.as_ref().is_none_or(|f| f.inliers < self.config.min_inliers) {
+            fit = self.relocalise(features);
+            state = TrackState::Relocalised;
+        }
+        let finite = |f: &Fit| {
+            let (t, q) = (f.world_from_cam.translation.vector, f.world_from_cam.rotation.coords);
+            t.iter().chain(q.iter()).all(|v| v.is_finite())
+        };
+        match fit.filter(|f| f.inliers >= self.config.min_inliers && finite(f)) {
+            Some(f) => {
+                self.lost_run = 0;
+                // After a relocalisation the motion since the last frame is unknown (ORB-SLAM
+                // tracks the next frame against the reference key frame, without velocity).
+                self.velocity = match (state, self.last) {
+                    (TrackState::Tracked, Some(last)) => renormalised(&(last.inverse() * f.world_from_cam)),
+                    _ => Isometry3::identity(),
+                };
+                self.last = Some(f.world_from_cam);
+                self.frames_since_kf += 1;
+                let keyframe = self.need_keyframe(features, &f).then(|| self.make_keyframe(stamp, features, &f));
+                TrackingResult {
+                    pose: Some(f.world_from_cam),
+                    state,
+                    matches: f.matches,
+                    inliers: f.inliers,
+                    map_points: self.points.len(),
+                    map_id: self.map_id,
+                    keyframe,
+                    matched: f.matched,
+                }
+            }
+            None => {
+                self.lost_run += 1;
+                self.last = Some(predicted);
+                if self.lost_run > self.config.reset_after {
+                    let r = self.start_map(stamp, features, predicted, TrackState::NewMap);
+                    if r.state == TrackState::NewMap {
+                        return r;
+                    }
+                }
+                TrackingResult {
+                    pose: Some(predicted),
+                    state: TrackState::Lost,
+                    matches: 0,
+                    inliers: 0,
+                    map_points: self.points.len(),
+                    map_id: self.map_id,
+                    keyframe: None,
+                    matched: vec![None; features.len()],
+                }
+            }
+        }
+    }
+
+    fn usable(&self, f: &Feature) -> Option<f64> {
+        f.depth.filter(|&d| !f.dynamic && d > 0.0 && d <= self.config.max_depth)
+    }
+
+    /// Start a map at `world_from_cam` from this frame's points with depth.
+    fn start_map(
+        &mut self,
+        stamp: f64,
+        features: &[Feature],
+        world_from_cam: Isometry3<f64>,
+        state: TrackState,
+    ) -> TrackingResult {
+        let with_depth = features.iter().filter(|f| self.usable(f).is_some()).count();
+        if with_depth < self.config.min_init_points {
+            return TrackingResult {
+                pose: self.last,
+                state: if self.initialised { TrackState::Lost } else { TrackState::NotInitialised },
+                matches: 0,
+                inliers: 0,
+                map_points: self.points.len(),
+                map_id: self.map_id,
+                keyframe: None,
+                matched: vec![None; features.len()],
+            };
+        }
+        self.map_id += 1;
+        self.points.clear();
+        self.first_keyframe = self.next_keyframe;
+        self.initialised = true;
+        self.lost_run = 0;
+        self.last = Some(world_from_cam);
+        self.velocity = Isometry3::identity();
+        let fit = Fit { world_from_cam, matches: 0, inliers: 0, matched: vec![None; features.len()] };
+        let keyframe = Some(self.make_keyframe(stamp, features, &fit));
+        TrackingResult {
+            pose: Some(world_from_cam),
+            state,
+            matches: 0,
+            inliers: 0,
+            map_points: self.points.len(),
+            map_id: self.map_id,
+            keyframe,
+            matched: vec![None; features.len()],
+        }
+    }
+
+    /// Guided search around the predicted pose, then motion-only BA.
+    fn track_projection(&self, features: &[Feature], predicted: &Isometry3<f64>, radius: f64) -> Option<Fit> {
+        let cam_from_world = predicted.inverse();
+        let static_idx: Vec<usize> = (0..features.len()).filter(|&i| !features[i].dynamic).collect();
+        let pts: Vec<[f32; 2]> =
+            static_idx.iter().map(|&i| [features[i].uv[0] as f32, features[i].uv[1] as f32]).collect();
+        let grid = GridIndex::new(&pts, self.width.ceil() as usize, self.height.ceil() as usize, 32.0);
+        // Best map point per feature: (point id, distance).
+        let mut best: Vec<Option<(u64, u32)>> = vec![None; features.len()];
+        for (&id, p) in &self.points {
+            let pc = cam_from_world * p.position;
+            let Some(uv) = self.cam.project(&pc) else { continue };
+            if !(uv[0] >= 0.0 && uv[0] < self.width && uv[1] >= 0.0 && uv[1] < self.height) {
+                continue;
+            }
+            let (mut d1, mut d2, mut i1) = (u32::MAX, u32::MAX, usize::MAX);
+            for c in grid.within([uv[0] as f32, uv[1] as f32], radius as f32) {
+                let fi = static_idx[c as usize];
+                let d = hamming(&p.descriptor, &features[fi].descriptor);
+                if d < d1 {
+                    (d2, d1, i1) = (d1, d, fi);
+                } else if d < d2 {
+                    d2 = d;
+                }
+            }
+            if i1 == usize::MAX || d1 > self.config.max_distance {
+                continue;
+            }
+            if d2 != u32::MAX && d1 as f32 > self.config.ratio * d2 as f32 {
+                continue;
+            }
+            if best[i1].is_none_or(|(_, d)| d1 < d) {
+                best[i1] = Some((id, d1));
+            }
+        }
+        let pairs: Vec<(usize, u64)> = best.iter().enumerate().filter_map(|(i, b)| b.map(|(id, _)| (i, id))).collect();
+        if pairs.len() < 4 {
+            return None;
+        }
+        Some(self.optimise(features, &pairs, &cam_from_world, None))
+    }
+
+    /// Descriptor matching against every local point (cross-checked, ratio 0.9, `TH_HIGH`),
+    /// P3P RANSAC and motion-only BA; then, as ORB-SLAM's relocalisation does, a projection
+    /// search from that pose for the matches descriptors alone missed, and BA again.
+    fn relocalise(&mut self, features: &[Feature]) -> Option<Fit> {
+        let static_idx: Vec<usize> = (0..features.len()).filter(|&i| !features[i].dynamic).collect();
+        let query: Vec<[u8; 32]> = static_idx.iter().map(|&i| features[i].descriptor).collect();
+        let ids: Vec<u64> = self.points.keys().copied().collect();
+        let train: Vec<[u8; 32]> = self.points.values().map(|p| p.descriptor).collect();
+        let config = MatchConfig {
+            ratio: 0.9,
+            max_distance: self.config.max_distance,
+            cross_check: true,
+            ..MatchConfig::default()
+        };
+        let matches = match_brute_force(&query, &train, None, &config);
+        let pairs: Vec<(usize, u64)> =
+            matches.iter().map(|m| (static_idx[m.query as usize], ids[m.train as usize])).collect();
+        // ORB-SLAM tries PnP from 15 matches on.
+        if pairs.len() < 15 {
+            return None;
+        }
+        let world: Vec<Point3<f64>> =
+            pairs.iter().filter_map(|(_, id)| self.points.get(id).map(|p| p.position)).collect();
+        let pixels: Vec<[f64; 2]> = pairs.iter().map(|&(i, _)| features[i].uv).collect();
+        let (pose, mask) = p3p_ransac(&world, &pixels, &self.cam, self.config.ransac_threshold, 300, &mut self.rng)?;
+        let fit = self.optimise(features, &pairs, &pose, Some(mask));
+        if fit.inliers < 10 {
+            return Some(fit);
+        }
+        let guided = self.track_projection(features, &fit.world_from_cam, 0.5 * self.config.search_radius);
+        Some(match guided {
+            Some(g) if g.inliers > fit.inliers => g,
+            _ => fit,
+        })
+    }
+
+    fn optimise(
+        &self,
+        features: &[Feature],
+        pairs: &[(usize, u64)],
+        cam_from_world: &Isometry3<f64>,
+        mask: Option<Vec<bool>>,
+    ) -> Fit {
+        let obs: Vec<PoseObservation> = pairs
+            .iter()
+            .filter_map(|&(i, id)| {
+                let f = &features[i];
+                let p = self.points.get(&id)?;
+                Some(PoseObservation {
+                    point: p.position,
+                    uv: f.uv,
+                    sigma: sigma(self.config.scale_factor, f.octave),
+                    depth: f.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth),
+                })
+            })
+            .collect();
+        let fit = optimize_pose(&obs, &self.cam, self.config.bf, cam_from_world, mask);
+        let mut matched = vec![None; features.len()];
+        let mut inliers = 0;
+        for (&(i, id), &ok) in pairs.iter().zip(&fit.inliers) {
+            if ok {
+                matched[i] = Some(id);
+                inliers += 1;
+            }
+        }
+        Fit { world_from_cam: renormalised(&fit.pose.inverse()), matches: pairs.len(), inliers, matched }
+    }
+
+    fn need_keyframe(&self, features: &[Feature], fit: &Fit) -> bool {
+        let close = |f: &Feature| f.depth.is_some_and(|d| d > 0.0 && d <= self.config.th_depth) && !f.dynamic;
+        let tracked_close = features.iter().zip(&fit.matched).filter(|(f, m)| m.is_some() && close(f)).count();
+        let untracked_close = features.iter().zip(&fit.matched).filter(|(f, m)| m.is_none() && close(f)).count();
+        let need_close = tracked_close < 100 && untracked_close > 70;
+        // ORB-SLAM2 also asks whether local mapping is idle; in lockstep it always is.
+        let fewer = (fit.inliers as f64) < 0.75 * self.ref_tracked as f64;
+        (fewer || need_close || self.frames_since_kf >= self.config.max_frames) && fit.inliers > 15
+    }
+
+    /// A key frame: observations of the matched points, new points from depth.
+    fn make_keyframe(&mut self, stamp: f64, features: &[Feature], fit: &Fit) -> SparseMap {
+        let id = self.next_keyframe;
+        self.next_keyframe += 1;
+        self.frames_since_kf = 0;
+        let info = KeyFrameInfo { id, stamp, world_from_cam: fit.world_from_cam };
+        let depth_of = |f: &Feature| f.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth);
+        let mut observations = Vec::new();
+        for (f, m) in features.iter().zip(&fit.matched) {
+            if let Some(pid) = m {
+                observations.push(Observation {
+                    keyframe: id,
+                    point: *pid,
+                    uv: f.uv,
+                    depth: depth_of(f),
+                    octave: f.octave,
+                });
+            }
+        }
+        // New points: every unmatched keypoint with depth. ORB-SLAM2 creates only the close ones
+        // here (at least 100) and triangulates the rest between key frames in local mapping;
+        // with no triangulation step, depth gives all of them (as its RGB-D initialisation does).
+        let mut candidates: Vec<(f64, usize)> = features
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| fit.matched[*i].is_none())
+            .filter_map(|(i, f)| self.usable(f).map(|d| (d, i)))
+            .collect();
+        candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        let mut points = Vec::new();
+        for &(d, i) in &candidates {
+            let f = &features[i];
+            let pc =
+                Point3::new((f.uv[0] - self.cam.cx) / self.cam.fx * d, (f.uv[1] - self.cam.cy) / self.cam.fy * d, d);
+            let position = fit.world_from_cam * pc;
+            let pid = self.next_point;
+            self.next_point += 1;
+            self.points.insert(pid, TPoint { position, descriptor: f.descriptor, first_keyframe: id });
+            points.push(MapPoint { id: pid, position, descriptor: f.descriptor, observations: 1, first_keyframe: id });
+            observations.push(Observation { keyframe: id, point: pid, uv: f.uv, depth: depth_of(f), octave: f.octave });
+        }
+        // The reference for the next decision: points of this key frame seen twice (ORB-SLAM2's
+        // `TrackedMapPoints(nMinObs)`), all of them while the map has at most two key frames.
+        self.ref_tracked = fit.inliers + if id <= self.first_keyframe + 1 { points.len() } else { 0 };
+        SparseMap { map_id: self.map_id, keyframes: vec![info], points, observations, removed: Vec::new() }
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Fit {
+    world_from_cam: Isometry3<f64>,
+    matches: usize,
+    inliers: usize,
+    matched: Vec<Option<u64>>,
+}
