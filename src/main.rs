@@ -11,6 +11,7 @@ macro_rules! say {
 }
 
 mod commands;
+mod plot;
 
 use std::path::PathBuf;
 use std::process::ExitCode;

@@ -161,3 +161,39 @@ fn eval_cli_reports_and_rejects_bad_input() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("no timestamps"));
 }
+
+#[test]
+fn eval_plot_is_a_png_of_both_panels_and_a_bad_path_is_an_error() {
+    let fixtures = common::repo().join("tests/fixtures/slambook2_trajectories");
+    let dir = common::TempDir::new("eval-plot");
+    let png = dir.path().join("ate.png");
+    let out = common::bin()
+        .args(["eval", "--gt"])
+        .arg(fixtures.join("groundtruth.txt"))
+        .arg("--est")
+        .arg(fixtures.join("estimated.txt"))
+        .arg("--plot")
+        .arg(&png)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let img = image::open(&png).unwrap().into_rgb8();
+    assert_eq!(img.dimensions(), (1400, 600));
+    // Both curves are drawn: black (ground truth) and red (estimate) in the top view on the
+    // left, blue (ATE over time) on the right.
+    let count = |x0: u32, x1: u32, want: [u8; 3]| {
+        img.enumerate_pixels().filter(|(x, _, p)| (x0..x1).contains(x) && p.0 == want).count()
+    };
+    assert!(count(0, 620, [255, 0, 0]) > 200, "estimate curve");
+    assert!(count(620, 1400, [0, 0, 255]) > 200, "ATE curve");
+    let out = common::bin()
+        .args(["eval", "--gt"])
+        .arg(fixtures.join("groundtruth.txt"))
+        .arg("--est")
+        .arg(fixtures.join("estimated.txt"))
+        .args(["--plot", "/nonexistent/dir/ate.png"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/dir/ate.png"));
+}

@@ -105,6 +105,10 @@ pub struct Evaluation {
     pub rpe_rotation_deg: Stats,
     /// RPE step in frames.
     pub rpe_delta: usize,
+    /// Per associated pose: ground-truth stamp, ground-truth position, aligned estimated
+    /// position, ATE (for plots; not serialised).
+    #[serde(skip)]
+    pub series: Vec<(f64, Vector3<f64>, Vector3<f64>, f64)>,
 }
 
 /// evo's association (`sync.associate_trajectories`, nearest time): every pose of the shorter
@@ -252,6 +256,13 @@ pub fn evaluate(
         rpe_translation: Stats::of(&rt),
         rpe_rotation_deg: Stats::of(&rr),
         rpe_delta: delta,
+        series: ig
+            .iter()
+            .zip(&gp)
+            .zip(&aligned)
+            .zip(&ate)
+            .map(|(((&i, g), (_, e)), &d)| (gt[i].0, *g, *e, d))
+            .collect(),
     })
 }
 

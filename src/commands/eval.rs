@@ -30,6 +30,9 @@ pub struct EvalArgs {
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// Also write a plot (PNG): top view of both trajectories and the ATE over time.
+    #[arg(long, value_name = "OUT.png")]
+    pub plot: Option<PathBuf>,
 }
 
 fn row(name: &str, unit: &str, s: &Stats) -> String {
@@ -56,6 +59,13 @@ pub fn eval(args: &EvalArgs) -> u8 {
             return EXIT_BAD_INPUT;
         }
     };
+    if let Some(path) = &args.plot {
+        let title = format!("{} vs {}", args.est.display(), args.gt.display());
+        if let Err(e) = crate::plot::evaluation(&result, &title, path) {
+            eprintln!("error: {e}");
+            return crate::EXIT_FAILED;
+        }
+    }
     // Written with errors ignored: a closed pipe (`| head`) is not a failure of the evaluation.
     let mut out = std::io::stdout().lock();
     if args.json {

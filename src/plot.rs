@@ -1,0 +1,102 @@
+//! Plots written as PNG: `dynaflow eval --plot` (top view of both trajectories, ATE over time).
+
+use std::path::Path;
+use std::sync::OnceLock;
+
+use dynaflow_slam::eval::Evaluation;
+use nalgebra::{Matrix3, Vector3};
+use plotters::prelude::*;
+use plotters::style::{FontStyle, register_font};
+
+/// DejaVu Sans (see `assets/fonts/SOURCE.md`): plots need no system font.
+const FONT: &[u8] = include_bytes!("../assets/fonts/DejaVuSans.ttf");
+const FAMILY: &str = "sans-serif";
+
+fn fonts() -> Result<(), String> {
+    static DONE: OnceLock<Result<(), String>> = OnceLock::new();
+    DONE.get_or_init(|| register_font(FAMILY, FontStyle::Normal, FONT).map_err(|_| "embedded font is invalid".into()))
+        .clone()
+}
+
+/// The two directions the ground truth moves most along (a "top view" that works whatever
+/// axis the world calls up), as unit vectors.
+fn view_axes(points: &[Vector3<f64>]) -> (Vector3<f64>, Vector3<f64>) {
+    let n = points.len().max(1) as f64;
+    let mean = points.iter().sum::<Vector3<f64>>() / n;
+    let cov = points.iter().fold(Matrix3::zeros(), |c, p| c + (p - mean) * (p - mean).transpose()) / n;
+    let eig = cov.symmetric_eigen();
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let (a, b) = (eig.eigenvectors.column(order[0]).into_owned(), eig.eigenvectors.column(order[1]).into_owned());
+    if a.iter().chain(b.iter()).all(|v| v.is_finite()) { (a, b) } else { (Vector3::x(), Vector3::y()) }
+}
+
+fn range(values: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    if lo.is_finite() && hi.is_finite() { (lo, hi) } else { (0.0, 1.0) }
+}
+
+/// Write the evaluation plot to `path` (PNG, 1400 x 600).
+pub fn evaluation(e: &Evaluation, title: &str, path: &Path) -> Result<(), String> {
+    fonts()?;
+    let (w, h) = (1400u32, 600u32);
+    let mut buf = vec![0u8; (w * h * 3) as usize];
+    let gt: Vec<Vector3<f64>> = e.series.iter().map(|s| s.1).collect();
+    let (ax, ay) = view_axes(&gt);
+    let plane = |p: &Vector3<f64>| (p.dot(&ax), p.dot(&ay));
+    let g2: Vec<(f64, f64)> = gt.iter().map(plane).collect();
+    let e2: Vec<(f64, f64)> = e.series.iter().map(|s| plane(&s.2)).collect();
+    let t0 = e.series.first().map_or(0.0, |s| s.0);
+    let errs: Vec<(f64, f64)> = e.series.iter().map(|s| (s.0 - t0, s.3)).collect();
+    let draw = |buf: &mut [u8]| -> Result<(), Box<dyn std::error::Error>> {
+        let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let root = root.titled(title, (FAMILY, 24))?;
+        let (left, right) = root.split_horizontally(620);
+        // Equal scales on both axes.
+        let (x0, x1) = range(g2.iter().chain(&e2).map(|p| p.0));
+        let (y0, y1) = range(g2.iter().chain(&e2).map(|p| p.1));
+        let half = 0.55 * (x1 - x0).max(y1 - y0).max(1e-3);
+        let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+        let mut top = ChartBuilder::on(&left)
+            .caption("top view (plane of largest motion)", (FAMILY, 18))
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(cx - half..cx + half, cy - half..cy + half)?;
+        top.configure_mesh().x_desc("m").y_desc("m").label_style((FAMILY, 13)).draw()?;
+        top.draw_series(LineSeries::new(g2.iter().copied(), BLACK.stroke_width(2)))?
+            .label("ground truth")
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.stroke_width(2)));
+        top.draw_series(LineSeries::new(e2.iter().copied(), RED.stroke_width(2)))?
+            .label(format!("estimate ({:?}-aligned)", e.align).to_lowercase())
+            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+        top.configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
+            .label_font((FAMILY, 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+        let tmax = errs.last().map_or(1.0, |p| p.0).max(1e-3);
+        let emax = errs.iter().map(|p| p.1).fold(0.0, f64::max).max(1e-6) * 1.1;
+        let mut err = ChartBuilder::on(&right)
+            .caption(
+                format!(
+                    "ATE over time: rmse {:.4} m, median {:.4} m, max {:.4} m",
+                    e.ate.rmse, e.ate.median, e.ate.max
+                ),
+                (FAMILY, 18),
+            )
+            .margin(15)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..tmax, 0.0..emax)?;
+        err.configure_mesh().x_desc("time (s)").y_desc("ATE (m)").label_style((FAMILY, 13)).draw()?;
+        err.draw_series(LineSeries::new(errs.iter().copied(), BLUE.stroke_width(2)))?;
+        root.present()?;
+        Ok(())
+    };
+    draw(&mut buf).map_err(|e| format!("cannot draw the plot: {e}"))?;
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or("plot buffer has the wrong size")?;
+    img.save(path).map_err(|e| format!("cannot write {}: {e}", path.display()))
+}
