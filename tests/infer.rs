@@ -1,0 +1,155 @@
+//! Inference (issue 12): the ONNX reader and the reference CPU executor on both vendored
+//! detectors, raw outputs against onnxruntime on real images, YOLOX-nano's detections on
+//! the real Kinect frames, and corrupt model files.
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+mod common;
+#[path = "common/frontend.rs"]
+mod frontend;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+use dynaflow_infer::cpu::{SUPPORTED, Tensor, run};
+use dynaflow_infer::detect::{decode_yolox, letterbox_bgr, nms};
+use dynaflow_infer::onnx::{OnnxError, load, parse};
+
+fn yolox() -> PathBuf {
+    common::repo().join("models/yolox_nano/yolox_nano.onnx")
+}
+fn fastestdet() -> PathBuf {
+    common::repo().join("models/fastestdet/FastestDet.onnx")
+}
+
+fn rgb(path: &Path) -> (Vec<u8>, usize, usize) {
+    let img = image::open(path).unwrap().into_rgb8();
+    let (w, h) = img.dimensions();
+    (img.into_raw(), w as usize, h as usize)
+}
+
+/// FastestDet's input: plain resize to 352, BGR, /255 (nearest, enough for a comparison).
+fn fastestdet_input(rgb: &[u8], w: usize, h: usize) -> Vec<f32> {
+    let s = 352;
+    let mut out = vec![0.0f32; 3 * s * s];
+    for y in 0..s {
+        for x in 0..s {
+            let (sx, sy) = (x * w / s, y * h / s);
+            for c in 0..3 {
+                out[(2 - c) * s * s + y * s + x] = f32::from(rgb[(sy * w + sx) * 3 + c]) / 255.0;
+            }
+        }
+    }
+    out
+}
+
+fn ort(python: &Path, model: &Path, input: &[f32], shape: &[usize], dir: &Path) -> Vec<Vec<f32>> {
+    let inp = dir.join("input.f32");
+    std::fs::write(&inp, input.iter().flat_map(|v| v.to_le_bytes()).collect::<Vec<u8>>()).unwrap();
+    let dims = shape.iter().map(ToString::to_string).collect::<Vec<_>>().join(",");
+    let prefix = dir.join("ort");
+    let o = Command::new(python)
+        .arg(common::repo().join("tests/peers/onnx_ort.py"))
+        .arg(model)
+        .arg(&inp)
+        .arg(&dims)
+        .arg(&prefix)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "onnxruntime: {}", String::from_utf8_lossy(&o.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    (0..v["shapes"].as_array().unwrap().len())
+        .map(|k| {
+            let b = std::fs::read(format!("{}.{k}.f32", prefix.display())).unwrap();
+            b.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect()
+        })
+        .collect()
+}
+
+#[test]
+fn both_models_parse_and_use_only_supported_ops() {
+    for (path, input, output) in
+        [(yolox(), vec![1, 3, 416, 416], vec![1, 3549, 85]), (fastestdet(), vec![1, 3, 352, 352], vec![1, 85, 22, 22])]
+    {
+        let m = load(&path).unwrap();
+        assert_eq!(m.opset, 11, "{}", path.display());
+        let shape: Vec<i64> = m.inputs[0].shape.iter().map(|d| d.unwrap()).collect();
+        assert_eq!(shape, input.iter().map(|&d| d as i64).collect::<Vec<_>>());
+        let out: Vec<i64> = m.outputs[0].shape.iter().map(|d| d.unwrap()).collect();
+        assert_eq!(out, output.iter().map(|&d| d as i64).collect::<Vec<_>>());
+        for n in &m.nodes {
+            assert!(SUPPORTED.contains(&n.op_type.as_str()), "{}: {}", path.display(), n.op_type);
+        }
+    }
+}
+
+#[test]
+fn reference_executor_equals_onnxruntime_on_real_images() {
+    let Some(python) = frontend::python_with("onnxruntime, numpy") else { return };
+    let dir = common::TempDir::new("infer-ort");
+    let images = [frontend::ch7()[0].clone(), common::repo().join("tests/fixtures/slambook2_dense_rgbd/color/1.png")];
+    let (ym, fm) = (load(&yolox()).unwrap(), load(&fastestdet()).unwrap());
+    for img in &images {
+        let (px, w, h) = rgb(img);
+        let (x, _) = letterbox_bgr(&px, w, h, 416);
+        let ours = run(&ym, &[("images", Tensor::F32 { shape: vec![1, 3, 416, 416], data: x.clone() })]).unwrap();
+        let theirs = ort(&python, &yolox(), &x, &[1, 3, 416, 416], dir.path());
+        let (a, b) = (ours[0].floats(), &theirs[0]);
+        assert_eq!(a.len(), b.len());
+        let max = a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+        eprintln!("YOLOX-nano {}: max |ours - onnxruntime| = {max:e}", img.display());
+        assert!(max <= 1e-3, "YOLOX {}: {max}", img.display());
+
+        let x = fastestdet_input(&px, w, h);
+        let name = fm.inputs[0].name.clone();
+        let ours = run(&fm, &[(name.as_str(), Tensor::F32 { shape: vec![1, 3, 352, 352], data: x.clone() })]).unwrap();
+        let theirs = ort(&python, &fastestdet(), &x, &[1, 3, 352, 352], dir.path());
+        let (a, b) = (ours[0].floats(), &theirs[0]);
+        let max = a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+        eprintln!("FastestDet {}: max |ours - onnxruntime| = {max:e}", img.display());
+        assert!(max <= 1e-3, "FastestDet {}: {max}", img.display());
+    }
+}
+
+#[test]
+fn yolox_finds_what_a_person_sees_on_the_kinect_frames() {
+    let names: Vec<String> = std::fs::read_to_string(common::repo().join("models/yolox_nano/coco.names"))
+        .unwrap()
+        .lines()
+        .map(str::to_string)
+        .collect();
+    let m = load(&yolox()).unwrap();
+    let mut seen = Vec::new();
+    for img in frontend::ch7() {
+        let (px, w, h) = rgb(&img);
+        let (x, lb) = letterbox_bgr(&px, w, h, 416);
+        let out = run(&m, &[("images", Tensor::F32 { shape: vec![1, 3, 416, 416], data: x })]).unwrap();
+        let dets = nms(decode_yolox(&out[0].floats(), 80, &lb, 0.3), 0.45);
+        let labels: Vec<String> = dets.iter().map(|d| format!("{} {:.2}", names[d.class], d.score)).collect();
+        eprintln!("{}: {labels:?}", img.display());
+        seen.push(dets.iter().map(|d| names[d.class].clone()).collect::<Vec<_>>());
+    }
+    // Two views of the same desk: the same objects are found in both.
+    for want in ["tvmonitor", "keyboard", "mouse", "cup"] {
+        assert!(seen.iter().all(|s| s.iter().any(|n| n == want)), "{want} not found in every frame: {seen:?}");
+    }
+}
+
+#[test]
+fn corrupt_and_truncated_models_are_errors_not_panics() {
+    let bytes = std::fs::read(fastestdet()).unwrap();
+    // Every prefix length class: header, inside the graph, inside an initializer, near the end.
+    for cut in [0, 1, 7, 100, 1000, 50_000, bytes.len() / 2, bytes.len() - 10, bytes.len() - 1] {
+        match parse(&bytes[..cut]) {
+            Err(OnnxError::Malformed(_)) => {}
+            other => panic!("cut at {cut}: {:?}", other.map(|m| m.nodes.len())),
+        }
+    }
+    let mut flipped = bytes.clone();
+    for i in (0..flipped.len()).step_by(9973) {
+        flipped[i] ^= 0x5a;
+        let _ = parse(&flipped);
+    }
+    assert!(matches!(load(Path::new("/nonexistent/model.onnx")), Err(OnnxError::Io { .. })));
+    let text = load(&common::repo().join("README.md"));
+    assert!(text.is_err(), "a text file is not a model");
+}
