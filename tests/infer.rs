@@ -153,3 +153,43 @@ fn corrupt_and_truncated_models_are_errors_not_panics() {
     let text = load(&common::repo().join("README.md"));
     assert!(text.is_err(), "a text file is not a model");
 }
+
+#[test]
+fn detect_graph_runs_on_real_frames_and_bad_models_are_clear_errors() {
+    let dir = common::TempDir::new("infer-graph");
+    let graph = common::repo().join("graphs/detect.yaml");
+    let fixture = common::repo().join("tests/fixtures/slambook2_rgbd_pair");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "jsonl", "--intrinsics", "fr2", "--out"])
+        .arg(dir.path())
+        .arg("--input")
+        .arg(&fixture)
+        .arg(&graph)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let log = std::fs::read_to_string(dir.path().join("detect.messages.jsonl")).unwrap();
+    let counts: Vec<u64> = log
+        .lines()
+        .map(|l| serde_json::from_str::<serde_json::Value>(l).unwrap())
+        .filter(|m| m["node"] == "detector")
+        .map(|m| m["summary"]["count"].as_u64().unwrap())
+        .collect();
+    assert_eq!(counts.len(), 2);
+    assert!(counts.iter().all(|&c| c >= 4), "{counts:?}");
+    // A missing file and a file that is not a model: exit 2, the file named.
+    for (model, says) in
+        [("/nonexistent/model.onnx", "cannot read /nonexistent/model.onnx"), ("../README.md", "not a valid ONNX model")]
+    {
+        let out = common::bin()
+            .args(["run", "--no-progress", "--record", "none", "--frames", "1", "--out"])
+            .arg(dir.path())
+            .args(["--set", &format!("detector.model={model}")])
+            .arg(&graph)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_ne!(out.status.code(), Some(0), "{model}");
+        assert!(err.contains(says), "{model}: {err}");
+    }
+}

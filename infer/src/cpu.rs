@@ -366,17 +366,34 @@ fn conv(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
                 for ky in 0..kh {
                     for kx in 0..kw {
                         let wv = w[((oc * cg + icg) * kh + ky) * kw + kx];
+                        // Output columns whose input column is inside the image: no test in
+                        // the inner loop (it vectorises at stride 1).
+                        let off = (kx * dw) as isize - p[1] as isize;
+                        let lo = if off >= 0 { 0 } else { ((-off) as usize).div_ceil(sw) };
+                        let last = wd as isize - 1 - off;
+                        if last < 0 {
+                            continue;
+                        }
+                        let hi = ((last as usize) / sw + 1).min(ow);
+                        if lo >= hi {
+                            continue;
+                        }
                         for oy in 0..oh {
                             let iy = (oy * sh + ky * dh) as isize - p[0] as isize;
                             if iy < 0 || iy >= h as isize {
                                 continue;
                             }
                             let row = &xin[iy as usize * wd..(iy as usize + 1) * wd];
-                            let orow = &mut plane[oy * ow..(oy + 1) * ow];
-                            for (ox, o) in orow.iter_mut().enumerate() {
-                                let ix = (ox * sw + kx * dw) as isize - p[1] as isize;
-                                if ix >= 0 && ix < wd as isize {
-                                    *o += wv * row[ix as usize];
+                            let orow = &mut plane[oy * ow + lo..oy * ow + hi];
+                            let start = (lo * sw) as isize + off;
+                            if sw == 1 {
+                                let src = &row[start as usize..start as usize + orow.len()];
+                                for (o, &v) in orow.iter_mut().zip(src) {
+                                    *o += wv * v;
+                                }
+                            } else {
+                                for (k, o) in orow.iter_mut().enumerate() {
+                                    *o += wv * row[start as usize + k * sw];
                                 }
                             }
                         }

@@ -25,16 +25,18 @@ pub struct Letterbox {
     pub size: usize,
 }
 
-/// Letterbox an RGB8 image (`width x height`) into YOLOX's input: NCHW, BGR, 0..255, `size` x
-/// `size`, bilinear resize with pixel centres aligned (OpenCV's `INTER_LINEAR`), grey 114
-/// padding right and below.
-pub fn letterbox_bgr(rgb: &[u8], width: usize, height: usize, size: usize) -> (Vec<f32>, Letterbox) {
-    let mut out = vec![114.0f32; 3 * size * size];
-    if width == 0 || height == 0 || rgb.len() < 3 * width * height {
-        return (out, Letterbox { scale: 1.0, size });
-    }
-    let scale = (size as f32 / width as f32).min(size as f32 / height as f32);
-    let (nw, nh) = (((width as f32 * scale) as usize).min(size), ((height as f32 * scale) as usize).min(size));
+/// Bilinear resize of RGB8 (`width x height`) to `nw x nh` with pixel centres aligned
+/// (OpenCV's `INTER_LINEAR`), written top-left into BGR planes of side `size`, each value
+/// passed through `map`.
+fn resize_into(
+    rgb: &[u8],
+    width: usize,
+    height: usize,
+    (nw, nh): (usize, usize),
+    size: usize,
+    out: &mut [f32],
+    map: impl Fn(f32) -> f32,
+) {
     let (fx, fy) = (width as f32 / nw.max(1) as f32, height as f32 / nh.max(1) as f32);
     for y in 0..nh {
         let sy = ((y as f32 + 0.5) * fy - 0.5).clamp(0.0, (height - 1) as f32);
@@ -48,11 +50,24 @@ pub fn letterbox_bgr(rgb: &[u8], width: usize, height: usize, size: usize) -> (V
                 let p = |yy: usize, xx: usize| f32::from(rgb[(yy * width + xx) * 3 + c]);
                 let v = (1.0 - wy) * ((1.0 - wx) * p(y0, x0) + wx * p(y0, x1))
                     + wy * ((1.0 - wx) * p(y1, x0) + wx * p(y1, x1));
-                // BGR planes: channel 0 is blue.
-                out[(2 - c) * size * size + y * size + x] = v.round();
+                // BGR planes: plane 0 is blue (source channel 2).
+                out[(2 - c) * size * size + y * size + x] = map(v);
             }
         }
     }
+}
+
+/// Letterbox an RGB8 image (`width x height`) into YOLOX's input: NCHW, BGR, 0..255, `size` x
+/// `size`, bilinear resize with pixel centres aligned (OpenCV's `INTER_LINEAR`), grey 114
+/// padding right and below.
+pub fn letterbox_bgr(rgb: &[u8], width: usize, height: usize, size: usize) -> (Vec<f32>, Letterbox) {
+    let mut out = vec![114.0f32; 3 * size * size];
+    if width == 0 || height == 0 || rgb.len() < 3 * width * height {
+        return (out, Letterbox { scale: 1.0, size });
+    }
+    let scale = (size as f32 / width as f32).min(size as f32 / height as f32);
+    let (nw, nh) = (((width as f32 * scale) as usize).min(size), ((height as f32 * scale) as usize).min(size));
+    resize_into(rgb, width, height, (nw, nh), size, &mut out, f32::round);
     (out, Letterbox { scale, size })
 }
 
@@ -85,6 +100,57 @@ pub fn decode_yolox(output: &[f32], classes: usize, lb: &Letterbox, threshold: f
             bbox: [(cx - w / 2.0) * k, (cy - h / 2.0) * k, (cx + w / 2.0) * k, (cy + h / 2.0) * k],
         });
     }
+    out
+}
+
+/// Decode FastestDet's raw output (`(5 + classes) x g x g`, one cell per grid position) for an
+/// image `width x height`: objectness in channel 0, box offsets `tanh` (x, y) and sizes
+/// `sigmoid` (w, h) normalised to the image, class probabilities after; score
+/// `obj^0.6 * cls^0.4` (the authors' weighting).
+pub fn decode_fastestdet(
+    output: &[f32],
+    classes: usize,
+    grid: usize,
+    width: f32,
+    height: f32,
+    threshold: f32,
+) -> Vec<Detection> {
+    let cells = grid * grid;
+    let mut out = Vec::new();
+    if output.len() < (5 + classes) * cells {
+        return out;
+    }
+    let at = |ch: usize, cell: usize| output[ch * cells + cell];
+    let sigmoid = |v: f32| 1.0 / (1.0 + (-v).exp());
+    for cell in 0..cells {
+        let (row, col) = (cell / grid, cell % grid);
+        let obj = at(0, cell);
+        let Some((class, cls)) = (0..classes).map(|k| (k, at(5 + k, cell))).max_by(|a, b| a.1.total_cmp(&b.1)) else {
+            continue;
+        };
+        let score = obj.max(0.0).powf(0.6) * cls.max(0.0).powf(0.4);
+        if score < threshold || score.is_nan() {
+            continue;
+        }
+        let cx = (col as f32 + at(1, cell).tanh()) / grid as f32;
+        let cy = (row as f32 + at(2, cell).tanh()) / grid as f32;
+        let (w, h) = (sigmoid(at(3, cell)), sigmoid(at(4, cell)));
+        out.push(Detection {
+            class,
+            score,
+            bbox: [(cx - w / 2.0) * width, (cy - h / 2.0) * height, (cx + w / 2.0) * width, (cy + h / 2.0) * height],
+        });
+    }
+    out
+}
+
+/// Resize RGB8 to FastestDet's input (`size x size`, no letterbox), bilinear, BGR, 0..1.
+pub fn resize_bgr_unit(rgb: &[u8], width: usize, height: usize, size: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; 3 * size * size];
+    if width == 0 || height == 0 || rgb.len() < 3 * width * height {
+        return out;
+    }
+    resize_into(rgb, width, height, (size, size), size, &mut out, |v| v / 255.0);
     out
 }
 

@@ -9,6 +9,7 @@
 pub mod culling;
 pub mod decode;
 mod frontend;
+pub mod inference;
 pub mod synth;
 pub mod tracking;
 mod util;
@@ -33,5 +34,6 @@ pub fn registry() -> Registry {
     r.register(culling::ORACLE_BOXES);
     r.register(tracking::PNP_TRACK);
     r.register(tracking::LOCAL_MAP);
+    r.register(inference::DETECT);
     r
 }

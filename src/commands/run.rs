@@ -26,7 +26,12 @@ pub fn run(args: &RunArgs) -> u8 {
     }
     let source = match &args.input {
         None => None,
-        Some(dir) => match dynaflow_operators::decode::detect_layout(dir, args.intrinsics.as_deref()) {
+        // Relative to the working directory, as typed (graph params resolve against the graph
+        // file's folder, so the source gets an absolute path).
+        Some(dir) => match dynaflow_operators::decode::detect_layout(
+            &std::path::absolute(dir).unwrap_or_else(|_| dir.clone()),
+            args.intrinsics.as_deref(),
+        ) {
             Ok(layout) => Some(SourceOverride {
                 op: layout.op.to_owned(),
                 params: layout.params.into_iter().map(|(k, v)| (k.to_owned(), v)).collect(),
