@@ -74,6 +74,8 @@ enum Command {
     Diff(commands::diff::DiffArgs),
     /// Evaluate a trajectory against ground truth (TUM files): ATE and RPE, as evo computes them.
     Eval(commands::eval::EvalArgs),
+    /// Run an ONNX detector on images: detections per image as JSON lines.
+    Infer(commands::infer::InferArgs),
     /// Generate a semi-synthetic dynamic RGB-D sequence in the TUM layout, with ground truth.
     Synth(commands::synth::SynthArgs),
     /// Open a `.rrd` recording in the rerun viewer (if installed).
@@ -209,6 +211,7 @@ fn main() -> ExitCode {
         Command::Diff(args) => commands::diff::diff(&args),
         Command::Eval(args) => commands::eval::eval(&args),
         Command::Synth(args) => commands::synth::synth(&args),
+        Command::Infer(args) => commands::infer::infer(&args),
         Command::View { file } => commands::view::view(&file),
         Command::Graph { graph, format, variant } => {
             commands::graph::graph(&graph, matches!(format, GraphFormat::Dot), variant)

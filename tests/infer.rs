@@ -193,3 +193,27 @@ fn detect_graph_runs_on_real_frames_and_bad_models_are_clear_errors() {
         assert!(err.contains(says), "{model}: {err}");
     }
 }
+
+#[test]
+fn infer_command_prints_json_per_image_for_both_models() {
+    let img = frontend::ch7()[1].clone();
+    let out = common::bin().arg("infer").arg(&img).output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((v["width"].as_u64(), v["height"].as_u64()), (Some(640), Some(480)));
+    let classes: Vec<&str> = v["detections"].as_array().unwrap().iter().map(|d| d["class"].as_str().unwrap()).collect();
+    assert!(classes.contains(&"tvmonitor") && classes.contains(&"keyboard"), "{classes:?}");
+    let out = common::bin()
+        .args(["infer", "--decoder", "fastestdet", "--model"])
+        .arg(fastestdet())
+        .arg(&img)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let classes: Vec<&str> = v["detections"].as_array().unwrap().iter().map(|d| d["class"].as_str().unwrap()).collect();
+    assert!(classes.contains(&"tvmonitor"), "FastestDet: {classes:?}");
+    let out = common::bin().args(["infer", "/nonexistent.png"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent.png"));
+}

@@ -154,6 +154,79 @@ pub fn resize_bgr_unit(rgb: &[u8], width: usize, height: usize, size: usize) -> 
     out
 }
 
+/// Which output decoding (and input preparation) a model needs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Decoder {
+    /// YOLOX: letterbox, BGR 0..255, grid decoding.
+    Yolox,
+    /// FastestDet: plain resize, BGR 0..1, tanh/sigmoid decoding.
+    FastestDet,
+}
+
+/// A loaded detector: the model, its square input side, the decoding.
+#[derive(Clone, Debug)]
+pub struct Detector {
+    model: crate::onnx::Model,
+    input_name: String,
+    side: usize,
+    decoder: Decoder,
+}
+
+impl Detector {
+    /// Check that `model` runs here (every op supported) and takes a fixed `1x3xSxS` input.
+    pub fn new(model: crate::onnx::Model, decoder: Decoder) -> Result<Self, String> {
+        crate::cpu::check_ops(&model).map_err(|e| e.to_string())?;
+        let input = model.inputs.first().ok_or("the model has no input")?;
+        let dims: Vec<usize> = input.shape.iter().map(|d| d.unwrap_or(0).max(0) as usize).collect();
+        let side = match dims.as_slice() {
+            [1, 3, h, w] if h == w && *h > 0 => *h,
+            _ => {
+                return Err(format!(
+                    "model input `{}` has shape {:?}; a detector takes a fixed square 1x3xSxS input",
+                    input.name, input.shape
+                ));
+            }
+        };
+        Ok(Self { input_name: input.name.clone(), model, side, decoder })
+    }
+
+    /// Detections in an RGB8 image (`width x height`), above `score`, after class-wise NMS at
+    /// `iou`, clipped to the image.
+    pub fn detect(
+        &self,
+        rgb: &[u8],
+        width: usize,
+        height: usize,
+        classes: usize,
+        score: f32,
+        iou: f32,
+    ) -> Result<Vec<Detection>, crate::cpu::RunError> {
+        let s = self.side;
+        let (x, lb) = match self.decoder {
+            Decoder::Yolox => letterbox_bgr(rgb, width, height, s),
+            Decoder::FastestDet => (resize_bgr_unit(rgb, width, height, s), Letterbox { scale: 1.0, size: s }),
+        };
+        let input = crate::cpu::Tensor::F32 { shape: vec![1, 3, s, s], data: x };
+        let out = crate::cpu::run(&self.model, &[(self.input_name.as_str(), input)])?;
+        let raw = out.first().map(crate::cpu::Tensor::floats).unwrap_or_default();
+        let dets = match self.decoder {
+            Decoder::Yolox => decode_yolox(&raw, classes, &lb, score),
+            Decoder::FastestDet => {
+                let grid = out.first().map_or(0, |t| t.shape().last().copied().unwrap_or(0));
+                decode_fastestdet(&raw, classes, grid, width as f32, height as f32, score)
+            }
+        };
+        let (w, h) = (width as f32, height as f32);
+        Ok(nms(dets, iou)
+            .into_iter()
+            .map(|d| Detection {
+                bbox: [d.bbox[0].max(0.0), d.bbox[1].max(0.0), d.bbox[2].min(w), d.bbox[3].min(h)],
+                ..d
+            })
+            .collect())
+    }
+}
+
 fn iou(a: &[f32; 4], b: &[f32; 4]) -> f32 {
     let iw = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);
     let ih = (a[3].min(b[3]) - a[1].max(b[1])).max(0.0);

@@ -35,5 +35,6 @@ pub fn registry() -> Registry {
     r.register(tracking::PNP_TRACK);
     r.register(tracking::LOCAL_MAP);
     r.register(inference::DETECT);
+    r.register(inference::BOX_TO_MASK);
     r
 }

@@ -3,6 +3,7 @@
 pub mod diff;
 pub mod eval;
 pub mod graph;
+pub mod infer;
 pub mod ops;
 pub mod run;
 pub mod synth;

@@ -259,6 +259,63 @@ pub fn in_any_box(points: &[[f32; 2]], boxes: &[LabelledBox]) -> Vec<bool> {
     points.iter().map(|&p| boxes.iter().any(|b| inside(&b.bbox, p))).collect()
 }
 
+/// Per pixel of a `width x height` depth image: the index + 1 of the box whose object it
+/// belongs to, 0 for none. A box's object is its dominant foreground depth: the depths
+/// inside it histogrammed in `bin` metre bins, the nearest bin holding at least half as many
+/// pixels as the fullest one (a person in front of a wall: the person, not the wall behind);
+/// pixels within `tolerance` metres of that depth are the object's. Pixels without depth
+/// stay 0. Later boxes overwrite earlier ones where they overlap (callers pass boxes in
+/// ascending score, so the best box wins).
+pub fn box_depth_mask(
+    boxes: &[[f32; 4]],
+    depth: &[f32],
+    width: usize,
+    height: usize,
+    bin: f32,
+    tolerance: f32,
+) -> Vec<u16> {
+    let mut mask = vec![0u16; width * height];
+    if depth.len() < width * height || bin <= 0.0 || bin.is_nan() {
+        return mask;
+    }
+    for (k, b) in boxes.iter().enumerate() {
+        let x0 = (b[0].max(0.0) as usize).min(width);
+        let y0 = (b[1].max(0.0) as usize).min(height);
+        let x1 = (b[2].max(0.0).ceil() as usize).min(width);
+        let y1 = (b[3].max(0.0).ceil() as usize).min(height);
+        let mut hist: Vec<u32> = Vec::new();
+        for y in y0..y1 {
+            for &d in &depth[y * width + x0..y * width + x1] {
+                if d > 0.0 && d.is_finite() {
+                    let i = (d / bin) as usize;
+                    if i < 4096 {
+                        if hist.len() <= i {
+                            hist.resize(i + 1, 0);
+                        }
+                        hist[i] += 1;
+                    }
+                }
+            }
+        }
+        let Some(&top) = hist.iter().max() else { continue };
+        if top == 0 {
+            continue;
+        }
+        let Some(front) = hist.iter().position(|&c| 2 * c >= top) else { continue };
+        let centre = (front as f32 + 0.5) * bin;
+        let id = u16::try_from(k + 1).unwrap_or(u16::MAX);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let d = depth[y * width + x];
+                if d > 0.0 && (d - centre).abs() <= tolerance {
+                    mask[y * width + x] = id;
+                }
+            }
+        }
+    }
+    mask
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

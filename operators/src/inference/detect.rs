@@ -7,14 +7,13 @@ use dynaflow_engine::op::{
     Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
     PortSpec,
 };
-use dynaflow_infer::cpu::{self, Tensor};
-use dynaflow_infer::detect::{Letterbox, decode_fastestdet, decode_yolox, letterbox_bgr, nms, resize_bgr_unit};
-use dynaflow_infer::onnx::{self, Model};
+use dynaflow_infer::detect::{Decoder, Detector};
+use dynaflow_infer::onnx;
 
 /// The default model, vendored under `models/yolox_nano/` (Apache-2.0, see its SOURCE.md).
-const YOLOX_NANO: &[u8] = include_bytes!("../../../models/yolox_nano/yolox_nano.onnx");
+pub const YOLOX_NANO: &[u8] = include_bytes!("../../../models/yolox_nano/yolox_nano.onnx");
 /// COCO-80 class names (index 0 = person).
-const COCO_NAMES: &str = include_str!("../../../models/yolox_nano/coco.names");
+pub const COCO_NAMES: &str = include_str!("../../../models/yolox_nano/coco.names");
 
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -75,29 +74,16 @@ pub const DETECT: OpSpec = OpSpec {
         } else {
             onnx::load(&p.resolve_path(&c.model)).map_err(|e| OpError::Input(e.to_string()))?
         };
-        cpu::check_ops(&model).map_err(|e| OpError::Input(e.to_string()))?;
-        let input = model.inputs.first().ok_or_else(|| OpError::Input("the model has no input".into()))?;
-        let dims: Vec<usize> = input.shape.iter().map(|d| d.unwrap_or(0).max(0) as usize).collect();
-        let side = match dims.as_slice() {
-            [1, 3, h, w] if h == w && *h > 0 => *h,
-            _ => {
-                return Err(OpError::Input(format!(
-                    "model input `{}` has shape {:?}; `detect` takes a fixed square 1x3xSxS input",
-                    input.name, input.shape
-                )));
-            }
-        };
-        let input_name = input.name.clone();
+        let decoder = if c.decoder == "fastestdet" { Decoder::FastestDet } else { Decoder::Yolox };
+        let detector = Detector::new(model, decoder).map_err(OpError::Input)?;
         let names: Vec<Arc<str>> = COCO_NAMES.lines().map(Arc::from).collect();
-        Ok(Instance::Transform(Box::new(Detect { config: c, model, input_name, side, names })))
+        Ok(Instance::Transform(Box::new(Detect { config: c, detector, names })))
     },
 };
 
 struct Detect {
     config: Config,
-    model: Model,
-    input_name: String,
-    side: usize,
+    detector: Detector,
     names: Vec<Arc<str>>,
 }
 
@@ -105,7 +91,7 @@ impl Operator for Detect {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let msg = inputs.require("image")?;
         let Body::Image(img) = &msg.body else { return Err(OpError::Input("`image` is not an image".into())) };
-        let (w, h, s) = (img.width as usize, img.height as usize, self.side);
+        let (w, h) = (img.width as usize, img.height as usize);
         let grey_as_rgb: Vec<u8>;
         let rgb: &[u8] = match img.format {
             PixelFormat::Rgb8 => &img.data,
@@ -114,28 +100,13 @@ impl Operator for Detect {
                 &grey_as_rgb
             }
         };
-        let yolox = self.config.decoder == "yolox";
-        let (x, lb) = if yolox {
-            letterbox_bgr(rgb, w, h, s)
-        } else {
-            (resize_bgr_unit(rgb, w, h, s), Letterbox { scale: 1.0, size: s })
-        };
-        let out =
-            cpu::run(&self.model, &[(self.input_name.as_str(), Tensor::F32 { shape: vec![1, 3, s, s], data: x })])
-                .map_err(|e| OpError::Input(e.to_string()))?;
-        let raw = out.first().map(Tensor::floats).unwrap_or_default();
-        let classes = self.names.len();
-        let threshold = self.config.score_threshold as f32;
-        let dets = if yolox {
-            decode_yolox(&raw, classes, &lb, threshold)
-        } else {
-            let grid = out.first().map_or(0, |t| t.shape().last().copied().unwrap_or(0));
-            decode_fastestdet(&raw, classes, grid, w as f32, h as f32, threshold)
-        };
-        let detections = nms(dets, self.config.nms_iou as f32)
+        let (score, iou) = (self.config.score_threshold as f32, self.config.nms_iou as f32);
+        let found =
+            self.detector.detect(rgb, w, h, self.names.len(), score, iou).map_err(|e| OpError::Input(e.to_string()))?;
+        let detections = found
             .into_iter()
             .map(|d| Detection {
-                bbox: [d.bbox[0].max(0.0), d.bbox[1].max(0.0), d.bbox[2].min(w as f32), d.bbox[3].min(h as f32)],
+                bbox: d.bbox,
                 class_id: d.class as u32,
                 label: self.names.get(d.class).cloned().unwrap_or_else(|| Arc::from(format!("class{}", d.class))),
                 score: d.score,

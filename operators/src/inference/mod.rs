@@ -1,6 +1,9 @@
 //! Neural-network inference, a thin wrapper over `dynaflow-infer`: `detect` (an ONNX
-//! detector: YOLOX or FastestDet decoding, class-wise NMS).
+//! detector: YOLOX or FastestDet decoding, class-wise NMS) and `box_to_mask` (boxes and depth
+//! to a mask, so mask-based culling runs with a detector).
 
+mod box_mask;
 mod detect;
 
-pub use detect::DETECT;
+pub use box_mask::BOX_TO_MASK;
+pub use detect::{COCO_NAMES, DETECT, YOLOX_NANO};
