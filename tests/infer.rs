@@ -217,3 +217,91 @@ fn infer_command_prints_json_per_image_for_both_models() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent.png"));
 }
+
+#[test]
+fn keyframe_gate_fires_each_rule_and_counts_them() {
+    use std::sync::Arc;
+
+    use dynaflow_engine::msg::{Body, Header, Image, Message, PixelFormat, Scalars};
+    use dynaflow_engine::op::{Context, Inputs, Instance, Params};
+    use rand_core::SeedableRng;
+
+    let spec = *dynaflow::registry().get("keyframe_gate").unwrap();
+    let params = Params::new(serde_json::json!({"dynamic_below": 10, "max_gap": 4}).as_object().unwrap().clone(), None);
+    let Ok(Instance::Transform(mut op)) = (spec.build)(&params) else { panic!("gate did not build") };
+    let mut ctx = Context {
+        node: Arc::from("gate"),
+        seed: 0,
+        rng: rand_chacha::ChaCha8Rng::seed_from_u64(0),
+        out_dir: None,
+        stem: Arc::from("t"),
+        realtime: false,
+        report: None,
+    };
+    let header = |seq: u64| Header { seq, stamp: seq as f64, frame_id: Arc::from("camera") };
+    let msg = |seq: u64, body: Body| Some(Arc::new(Message::new(header(seq), body)));
+    let scalars =
+        |v: &[(&str, f64)]| Body::Scalars(Scalars { values: v.iter().map(|(k, x)| (Arc::from(*k), *x)).collect() });
+    let image = Body::Image(Image { width: 1, height: 1, format: PixelFormat::Rgb8, data: vec![0, 0, 0] });
+    // (tracking state, key frame flag, dynamic count) of the previous frame; expected rule.
+    type Frame = (Option<(f64, f64)>, Option<f64>, u8);
+    let frames: [Frame; 9] = [
+        (None, None, 1),                   // first
+        (Some((2.0, 0.0)), Some(50.0), 0), // tracked, many dynamic points: skip
+        (Some((2.0, 0.0)), Some(50.0), 0),
+        (Some((2.0, 0.0)), Some(50.0), 0),
+        (Some((2.0, 0.0)), Some(50.0), 5), // fourth frame since the last inference: gap
+        (Some((3.0, 0.0)), Some(50.0), 2), // relocalised
+        (Some((2.0, 0.0)), Some(5.0), 3),  // few dynamic points
+        (Some((2.0, 1.0)), Some(50.0), 4), // tracking key frame
+        (Some((2.0, 0.0)), Some(50.0), 0),
+    ];
+    for (seq, (tracking, dynamic, want)) in frames.iter().enumerate() {
+        let seq = seq as u64;
+        let inputs = Inputs::new(
+            seq,
+            vec![
+                ("image", msg(seq, image.clone())),
+                ("tracking", tracking.and_then(|(s, k)| msg(seq, scalars(&[("state", s), ("keyframe", k)])))),
+                ("counts", dynamic.and_then(|d| msg(seq, scalars(&[("dynamic", d)])))),
+            ],
+        );
+        let out = op.process(&mut ctx, &inputs).unwrap();
+        let (mut rule, mut passed) = (None, false);
+        for (port, m) in out.iter() {
+            match (port, &m.body) {
+                ("stats", Body::Scalars(s)) => rule = s.values.iter().find(|(k, _)| &**k == "rule").map(|(_, v)| *v),
+                ("image", _) => passed = true,
+                _ => {}
+            }
+        }
+        assert_eq!(rule, Some(f64::from(*want)), "frame {seq}");
+        assert_eq!(passed, *want != 0, "frame {seq}");
+    }
+    op.stop(&mut ctx).unwrap();
+    let r = ctx.report.unwrap();
+    assert_eq!(r["frames"], 9);
+    assert_eq!(r["inferred"], 5);
+    for (k, n) in [("first", 1), ("gap", 1), ("relocalised", 1), ("few_dynamic", 1), ("keyframe", 1), ("skipped", 4)] {
+        assert_eq!(r["rules"][k], n, "{k}: {r}");
+    }
+}
+
+#[test]
+fn detector_gate_graph_runs_and_reports_its_gate() {
+    let dir = common::TempDir::new("infer-gate");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--frames", "8", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/detector_gate.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("detector_gate.summary.json")).unwrap()).unwrap();
+    let gate = s["nodes"].as_array().unwrap().iter().find(|n| n["node"] == "gate").unwrap();
+    let rules = gate["report"]["rules"].as_object().unwrap();
+    assert_eq!(rules.values().map(|v| v.as_u64().unwrap()).sum::<u64>(), 8);
+    assert_eq!(gate["report"]["frames"], 8);
+    assert!(s["ate"]["rmse"].as_f64().is_some());
+}

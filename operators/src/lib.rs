@@ -36,5 +36,6 @@ pub fn registry() -> Registry {
     r.register(tracking::LOCAL_MAP);
     r.register(inference::DETECT);
     r.register(inference::BOX_TO_MASK);
+    r.register(inference::KEYFRAME_GATE);
     r
 }

@@ -1,9 +1,12 @@
 //! Neural-network inference, a thin wrapper over `dynaflow-infer`: `detect` (an ONNX
 //! detector: YOLOX or FastestDet decoding, class-wise NMS) and `box_to_mask` (boxes and depth
-//! to a mask, so mask-based culling runs with a detector).
+//! to a mask, so mask-based culling runs with a detector), `keyframe_gate` (MG-SLAM's key
+//! segmentation frames: which frames go to inference).
 
 mod box_mask;
 mod detect;
+mod gate;
 
 pub use box_mask::BOX_TO_MASK;
 pub use detect::{COCO_NAMES, DETECT, YOLOX_NANO};
+pub use gate::KEYFRAME_GATE;
