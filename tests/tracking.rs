@@ -160,22 +160,25 @@ fn relative_poses_on_the_slambook2_frames_match_the_given_ones() {
     assert!(found.contains(&(1, 3)) && found.contains(&(3, 1)), "found {found:?}, lost {lost:?}");
 }
 
+/// Run `graphs/orb_baseline.yaml` with `extra` arguments into `out`; its summary.
+fn baseline_summary(extra: &[&str], out: &Path) -> serde_json::Value {
+    let o = common::bin()
+        .args(["run", "--no-progress", "--record", "none"])
+        .args(extra)
+        .arg("--out")
+        .arg(out)
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    serde_json::from_str(&std::fs::read_to_string(out.join("orb_baseline.summary.json")).unwrap()).unwrap()
+}
+
 #[test]
 fn baseline_is_deterministic_in_lockstep_and_runs_in_realtime() {
     let dir = common::TempDir::new("tracking-determinism");
-    let digests = |sub: &str| {
-        let out = dir.path().join(sub);
-        let o = common::bin()
-            .args(["run", "--no-progress", "--record", "none", "--digest", "--frames", "40", "--out"])
-            .arg(&out)
-            .arg(common::repo().join("graphs/orb_baseline.yaml"))
-            .output()
-            .unwrap();
-        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
-        let s: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("orb_baseline.summary.json")).unwrap()).unwrap();
-        s["digests"].clone()
-    };
+    let digests =
+        |sub: &str| baseline_summary(&["--digest", "--frames", "40"], &dir.path().join(sub))["digests"].clone();
     let (a, b) = (digests("a"), digests("b"));
     for port in ["track/pose", "track/keyframe", "track/stats", "mapping/points", "mapping/stats"] {
         assert!(a[port]["count"].as_u64().unwrap() > 0, "{port}: {a}");
@@ -184,15 +187,6 @@ fn baseline_is_deterministic_in_lockstep_and_runs_in_realtime() {
 
     // Paced at sensor rate, tracking reads the newest map it has (`join: latest`) and never
     // waits for local mapping; the run completes and still reports its ATE.
-    let out = dir.path().join("rt");
-    let o = common::bin()
-        .args(["run", "--no-progress", "--record", "none", "--realtime", "--frames", "30", "--out"])
-        .arg(&out)
-        .arg(common::repo().join("graphs/orb_baseline.yaml"))
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("orb_baseline.summary.json")).unwrap()).unwrap();
+    let s = baseline_summary(&["--realtime", "--frames", "30"], &dir.path().join("rt"));
     assert!(s["ate"]["rmse"].as_f64().is_some(), "{s}");
 }

@@ -256,17 +256,22 @@ impl Tracker {
                         return r;
                     }
                 }
-                TrackingResult {
-                    pose: Some(predicted),
-                    state: TrackState::Lost,
-                    matches: 0,
-                    inliers: 0,
-                    map_points: self.points.len(),
-                    map_id: self.map_id,
-                    keyframe: None,
-                    matched: vec![None; features.len()],
-                }
+                self.untracked(Some(predicted), TrackState::Lost, features.len())
             }
+        }
+    }
+
+    /// The result of a frame that was not tracked.
+    fn untracked(&self, pose: Option<Isometry3<f64>>, state: TrackState, features: usize) -> TrackingResult {
+        TrackingResult {
+            pose,
+            state,
+            matches: 0,
+            inliers: 0,
+            map_points: self.points.len(),
+            map_id: self.map_id,
+            keyframe: None,
+            matched: vec![None; features],
         }
     }
 
@@ -284,16 +289,8 @@ impl Tracker {
     ) -> TrackingResult {
         let with_depth = features.iter().filter(|f| self.usable(f).is_some()).count();
         if with_depth < self.config.min_init_points {
-            return TrackingResult {
-                pose: self.last,
-                state: if self.initialised { TrackState::Lost } else { TrackState::NotInitialised },
-                matches: 0,
-                inliers: 0,
-                map_points: self.points.len(),
-                map_id: self.map_id,
-                keyframe: None,
-                matched: vec![None; features.len()],
-            };
+            let state = if self.initialised { TrackState::Lost } else { TrackState::NotInitialised };
+            return self.untracked(self.last, state, features.len());
         }
         self.map_id += 1;
         self.points.clear();

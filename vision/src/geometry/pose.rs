@@ -284,6 +284,11 @@ pub fn optimize_pose(
     PoseFit { pose, inliers: inlier, errors }
 }
 
+/// Pixel-only observations with one sigma.
+fn pixel_observations(world: &[Point3<f64>], pixels: &[[f64; 2]], sigma: f64) -> Vec<PoseObservation> {
+    world.iter().zip(pixels).map(|(p, uv)| PoseObservation { point: *p, uv: *uv, sigma, depth: None }).collect()
+}
+
 /// [`optimize_pose`] on pixels alone with one sigma for all (pixels, sigma `sigma`).
 pub fn refine_pose(
     world: &[Point3<f64>],
@@ -292,9 +297,7 @@ pub fn refine_pose(
     initial: &Isometry3<f64>,
     sigma: f64,
 ) -> PoseFit {
-    let obs: Vec<PoseObservation> =
-        world.iter().zip(pixels).map(|(p, uv)| PoseObservation { point: *p, uv: *uv, sigma, depth: None }).collect();
-    optimize_pose(&obs, cam, 0.0, initial, None)
+    optimize_pose(&pixel_observations(world, pixels, sigma), cam, 0.0, initial, None)
 }
 
 /// The unit bearing of a pixel.
@@ -377,9 +380,7 @@ pub fn pnp_ransac(
 ) -> Option<PoseFit> {
     let (pose, mask) = p3p_ransac(world, pixels, cam, threshold, max_iterations, rng)?;
     let sigma = threshold / CHI2_2DOF_95.sqrt();
-    let obs: Vec<PoseObservation> =
-        world.iter().zip(pixels).map(|(p, uv)| PoseObservation { point: *p, uv: *uv, sigma, depth: None }).collect();
-    Some(optimize_pose(&obs, cam, 0.0, &pose, Some(mask)))
+    Some(optimize_pose(&pixel_observations(world, pixels, sigma), cam, 0.0, &pose, Some(mask)))
 }
 
 #[cfg(test)]
