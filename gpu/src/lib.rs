@@ -3,16 +3,22 @@
 //! against `dynaflow-infer`'s reference executor on odd shapes.
 //!
 //! - [`Gpu`]: instance, adapter and device, with a clear error when there is no adapter.
-//! - `kernels`: `conv2d` (groups, strides, padding, dilation, fused SiLU / sigmoid / ReLU) and
-//!   `binary` (element-wise add and multiply).
+//! - `kernels`: `conv2d` (groups, strides, padding, dilation, fused SiLU / sigmoid / ReLU),
+//!   `binary` (add, multiply), `unary`, `gather` (slices, transposes), `copy_block` (concat),
+//!   `maxpool`, `resize` (nearest).
+//! - [`GpuModel`]: a whole ONNX model node by node (YOLOX-nano today: its raw outputs equal
+//!   the reference within 8e-5 on real images).
 //!
 //! Still to come (issue 12): planning a whole model at load time (buffers and bind groups
-//! allocated once, Concat made free, one submit per frame), the remaining ops, register-tiled
-//! GEMM for 1x1 convolutions, timestamp queries.
+//! allocated once, Conv + activation fused, Concat made free, one submit per frame),
+//! FastestDet's remaining ops (AveragePool, Pad, float Gather, Softmax), register-tiled GEMM
+//! for 1x1 convolutions, timestamp queries.
 
 mod kernels;
+mod model;
 
 pub use kernels::{Activation, BinaryOp, Conv2d, ConvShape};
+pub use model::GpuModel;
 
 /// Why the GPU cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -129,7 +135,7 @@ impl Gpu {
     }
 
     /// A uniform buffer holding `words`.
-    fn uniform(&self, words: &[u32]) -> wgpu::Buffer {
+    pub(crate) fn uniform(&self, words: &[u32]) -> wgpu::Buffer {
         use wgpu::util::DeviceExt;
         let bytes: Vec<u8> = words.iter().flat_map(|v| v.to_le_bytes()).collect();
         self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
@@ -141,7 +147,7 @@ impl Gpu {
 
     /// Record and submit one compute dispatch of `pipeline` over `invocations` threads
     /// (workgroups of 64, spread over x and y to stay under the 65 535 limit).
-    fn dispatch(&self, pipeline: &wgpu::ComputePipeline, bind: &wgpu::BindGroup, invocations: usize) {
+    pub(crate) fn dispatch(&self, pipeline: &wgpu::ComputePipeline, bind: &wgpu::BindGroup, invocations: usize) {
         let groups = invocations.div_ceil(64).max(1) as u32;
         let x = groups.min(65_535);
         let y = groups.div_ceil(x);

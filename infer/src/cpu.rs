@@ -33,7 +33,8 @@ impl Tensor {
             Tensor::F32 { shape, .. } | Tensor::I64 { shape, .. } => shape,
         }
     }
-    fn from_data(t: &TensorData) -> Self {
+    /// A tensor holding an initializer's or constant's values.
+    pub fn from_data(t: &TensorData) -> Self {
         let shape = t.dims.iter().map(|&d| d as usize).collect();
         if t.floats.is_empty() && !t.ints.is_empty() {
             Tensor::I64 { shape, data: t.ints.clone() }
@@ -204,6 +205,11 @@ fn binary(args: &[Option<&Tensor>], f: impl Fn(f32, f32) -> f32) -> Result<Tenso
 
 fn pads_of(n: &Node, k: usize) -> Vec<usize> {
     n.ints("pads").map_or(vec![0; 2 * k], |p| p.iter().map(|&v| v.max(0) as usize).collect())
+}
+
+/// One node on host tensors (also what a GPU executor uses for shape arithmetic).
+pub fn eval_node(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
+    eval(n, args)
 }
 
 fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {

@@ -56,7 +56,7 @@ impl ConvShape {
     }
 }
 
-fn pipeline(gpu: &Gpu, source: &str, label: &str) -> wgpu::ComputePipeline {
+pub(crate) fn pipeline(gpu: &Gpu, source: &str, label: &str) -> wgpu::ComputePipeline {
     let module = gpu.device.create_shader_module(wgpu::ShaderModuleDescriptor {
         label: Some(label),
         source: wgpu::ShaderSource::Wgsl(source.into()),
@@ -71,7 +71,7 @@ fn pipeline(gpu: &Gpu, source: &str, label: &str) -> wgpu::ComputePipeline {
     })
 }
 
-fn bind(gpu: &Gpu, pipeline: &wgpu::ComputePipeline, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
+pub(crate) fn bind(gpu: &Gpu, pipeline: &wgpu::ComputePipeline, buffers: &[&wgpu::Buffer]) -> wgpu::BindGroup {
     let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
         .iter()
         .enumerate()

@@ -1,0 +1,36 @@
+// Max pooling, NCHW, padding excluded from the maximum (ONNX MaxPool).
+struct Params {
+    planes: u32, h: u32, w: u32, oh: u32,
+    ow: u32, kh: u32, kw: u32, sh: u32,
+    sw: u32, ph: u32, pw: u32, pad0: u32,
+}
+
+@group(0) @binding(0) var<storage, read> x: array<f32>;
+@group(0) @binding(1) var<storage, read_write> y: array<f32>;
+@group(0) @binding(2) var<uniform> p: Params;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let idx = gid.x + gid.y * nwg.x * 64u;
+    if (idx >= p.planes * p.oh * p.ow) {
+        return;
+    }
+    let ox = idx % p.ow;
+    let oy = (idx / p.ow) % p.oh;
+    let plane = idx / (p.ow * p.oh);
+    var acc = -3.4028235e38;
+    for (var ky = 0u; ky < p.kh; ky++) {
+        let iy = i32(oy * p.sh + ky) - i32(p.ph);
+        if (iy < 0 || iy >= i32(p.h)) {
+            continue;
+        }
+        for (var kx = 0u; kx < p.kw; kx++) {
+            let ix = i32(ox * p.sw + kx) - i32(p.pw);
+            if (ix < 0 || ix >= i32(p.w)) {
+                continue;
+            }
+            acc = max(acc, x[(plane * p.h + u32(iy)) * p.w + u32(ix)]);
+        }
+    }
+    y[idx] = acc;
+}

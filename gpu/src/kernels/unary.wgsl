@@ -1,0 +1,21 @@
+// Element-wise activation: op 1 SiLU, 2 sigmoid, 3 ReLU.
+struct Params { len: u32, op: u32, pad0: u32, pad1: u32 }
+
+@group(0) @binding(0) var<storage, read> x: array<f32>;
+@group(0) @binding(1) var<storage, read_write> y: array<f32>;
+@group(0) @binding(2) var<uniform> p: Params;
+
+@compute @workgroup_size(64)
+fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
+    let i = gid.x + gid.y * nwg.x * 64u;
+    if (i >= p.len) {
+        return;
+    }
+    let v = x[i];
+    switch p.op {
+        case 1u: { y[i] = v / (1.0 + exp(-v)); }
+        case 2u: { y[i] = 1.0 / (1.0 + exp(-v)); }
+        case 3u: { y[i] = max(v, 0.0); }
+        default: { y[i] = v; }
+    }
+}

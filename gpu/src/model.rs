@@ -1,0 +1,377 @@
+//! A whole ONNX model on the GPU, node by node: float activations stay in GPU buffers,
+//! weights are uploaded once at load, shape arithmetic (`Shape`, `Constant`, integer
+//! `Gather`/`Unsqueeze`...) runs on the host with the reference executor's own code. One
+//! dispatch per node for now; planning (fusion, one submit per frame, buffers reused) is next.
+
+use std::collections::HashMap;
+
+use dynaflow_infer::cpu::{Tensor, eval_node};
+use dynaflow_infer::onnx::{Model, Node};
+
+use crate::kernels::{bind, pipeline};
+use crate::{Activation, Conv2d, ConvShape, Gpu, GpuError};
+
+/// A value during a run.
+enum Value {
+    /// Float tensor in a GPU buffer.
+    Gpu { buf: std::sync::Arc<wgpu::Buffer>, shape: Vec<usize> },
+    /// Host tensor (weights, shapes, indices).
+    Host(Tensor),
+}
+
+impl Value {
+    fn shape(&self) -> &[usize] {
+        match self {
+            Value::Gpu { shape, .. } => shape,
+            Value::Host(t) => t.shape(),
+        }
+    }
+}
+
+/// A model loaded onto a GPU.
+pub struct GpuModel {
+    gpu: Gpu,
+    model: Model,
+    weights: HashMap<String, wgpu::Buffer>,
+    conv: Conv2d,
+    unary: wgpu::ComputePipeline,
+    binary: wgpu::ComputePipeline,
+    gather: wgpu::ComputePipeline,
+    copy_block: wgpu::ComputePipeline,
+    maxpool: wgpu::ComputePipeline,
+    resize: wgpu::ComputePipeline,
+}
+
+impl std::fmt::Debug for GpuModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuModel").field("adapter", &self.gpu.adapter).field("nodes", &self.model.nodes.len()).finish()
+    }
+}
+
+fn strides(shape: &[usize]) -> Vec<usize> {
+    let mut s = vec![1; shape.len()];
+    for i in (0..shape.len().saturating_sub(1)).rev() {
+        s[i] = s[i + 1] * shape[i + 1];
+    }
+    s
+}
+
+fn u32s(v: &[usize]) -> Result<Vec<u32>, GpuError> {
+    v.iter().map(|&x| u32::try_from(x).map_err(|_| GpuError::Shape("dimension over u32".into()))).collect()
+}
+
+impl GpuModel {
+    /// Upload `model`'s float initializers and compile the kernels.
+    pub fn new(gpu: Gpu, model: Model) -> Self {
+        let weights = model
+            .initializers
+            .iter()
+            .filter(|(_, t)| !t.floats.is_empty())
+            .map(|(k, t)| (k.clone(), gpu.upload(&t.floats)))
+            .collect();
+        Self {
+            conv: Conv2d::new(&gpu),
+            unary: pipeline(&gpu, include_str!("kernels/unary.wgsl"), "unary"),
+            binary: pipeline(&gpu, include_str!("kernels/binary.wgsl"), "binary"),
+            gather: pipeline(&gpu, include_str!("kernels/gather.wgsl"), "gather"),
+            copy_block: pipeline(&gpu, include_str!("kernels/copy_block.wgsl"), "copy_block"),
+            maxpool: pipeline(&gpu, include_str!("kernels/maxpool.wgsl"), "maxpool"),
+            resize: pipeline(&gpu, include_str!("kernels/resize.wgsl"), "resize"),
+            weights,
+            gpu,
+            model,
+        }
+    }
+
+    /// The adapter it runs on.
+    pub fn adapter(&self) -> &str {
+        &self.gpu.adapter
+    }
+
+    fn simple(&self, p: &wgpu::ComputePipeline, bufs: &[&wgpu::Buffer], words: &[u32], n: usize) {
+        let params = self.gpu.uniform(words);
+        let mut all: Vec<&wgpu::Buffer> = bufs.to_vec();
+        all.push(&params);
+        let group = bind(&self.gpu, p, &all);
+        self.gpu.dispatch(p, &group, n);
+    }
+
+    /// Run on the named float inputs; the graph outputs, downloaded.
+    pub fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, GpuError> {
+        let mut env: HashMap<String, Value> = HashMap::new();
+        for (k, t) in &self.model.initializers {
+            env.insert(k.clone(), Value::Host(Tensor::from_data(t)));
+        }
+        for (k, t) in inputs {
+            let buf = std::sync::Arc::new(self.gpu.upload(&t.floats()));
+            env.insert((*k).to_string(), Value::Gpu { buf, shape: t.shape().to_vec() });
+        }
+        for n in &self.model.nodes {
+            let err = |m: String| GpuError::Shape(format!("node {}: {m}", n.label()));
+            let args: Vec<Option<&Value>> =
+                n.inputs.iter().map(|i| if i.is_empty() { None } else { env.get(i) }).collect();
+            if n.inputs.iter().zip(&args).any(|(i, a)| !i.is_empty() && a.is_none()) {
+                return Err(err("an input is not computed before this node".into()));
+            }
+            let on_gpu = args.iter().flatten().any(|v| matches!(v, Value::Gpu { .. }));
+            let out = if !on_gpu || n.op_type == "Shape" {
+                let host: Vec<Option<Tensor>> = args
+                    .iter()
+                    .map(|a| {
+                        a.map(|v| match v {
+                            Value::Host(t) => t.clone(),
+                            // `Shape` only looks at the shape.
+                            Value::Gpu { shape, .. } => Tensor::F32 { shape: shape.clone(), data: Vec::new() },
+                        })
+                    })
+                    .collect();
+                let refs: Vec<Option<&Tensor>> = host.iter().map(Option::as_ref).collect();
+                eval_node(n, &refs).map_err(err)?.into_iter().map(Value::Host).collect()
+            } else {
+                vec![self.node(n, &args).map_err(|e| match e {
+                    GpuError::Shape(m) => err(m),
+                    other => other,
+                })?]
+            };
+            for (name, v) in n.outputs.iter().zip(out) {
+                env.insert(name.clone(), v);
+            }
+        }
+        self.model
+            .outputs
+            .iter()
+            .map(|o| match env.remove(&o.name) {
+                Some(Value::Gpu { buf, shape }) => {
+                    let len = shape.iter().product();
+                    Ok(Tensor::F32 { data: self.gpu.download(&buf, len)?, shape })
+                }
+                Some(Value::Host(t)) => Ok(t),
+                None => Err(GpuError::Shape(format!("output `{}` never computed", o.name))),
+            })
+            .collect()
+    }
+
+    fn gpu_arg<'a>(args: &'a [Option<&'a Value>], i: usize) -> Result<(&'a wgpu::Buffer, &'a [usize]), GpuError> {
+        match args.get(i).copied().flatten() {
+            Some(Value::Gpu { buf, shape }) => Ok((buf, shape)),
+            _ => Err(GpuError::Shape(format!("input {i} is not a float tensor on the GPU"))),
+        }
+    }
+
+    fn ints(args: &[Option<&Value>], i: usize) -> Option<Vec<i64>> {
+        match args.get(i).copied().flatten() {
+            Some(Value::Host(Tensor::I64 { data, .. })) => Some(data.clone()),
+            Some(Value::Host(Tensor::F32 { data, .. })) => Some(data.iter().map(|&v| v as i64).collect()),
+            _ => None,
+        }
+    }
+
+    fn out(&self, len: usize, shape: Vec<usize>) -> (std::sync::Arc<wgpu::Buffer>, Vec<usize>) {
+        (std::sync::Arc::new(self.gpu.storage(len)), shape)
+    }
+
+    fn node(&self, n: &Node, args: &[Option<&Value>]) -> Result<Value, GpuError> {
+        let attr = |k: &str, d: Vec<i64>| n.ints(k).map_or(d, <[i64]>::to_vec);
+        match n.op_type.as_str() {
+            "Conv" => {
+                let (x, xs) = Self::gpu_arg(args, 0)?;
+                let wname = n.inputs.get(1).cloned().unwrap_or_default();
+                let w = self
+                    .weights
+                    .get(&wname)
+                    .ok_or_else(|| GpuError::Shape("Conv weights must be initializers".into()))?;
+                let ws = args.get(1).copied().flatten().map(Value::shape).unwrap_or(&[]).to_vec();
+                if xs.len() != 4 || ws.len() != 4 {
+                    return Err(GpuError::Shape(format!("Conv on {xs:?} with weights {ws:?}")));
+                }
+                let bias_owned;
+                let bias = match n.inputs.get(2).and_then(|b| self.weights.get(b)) {
+                    Some(b) => b,
+                    None => {
+                        bias_owned = self.gpu.upload(&vec![0.0; ws[0]]);
+                        &bias_owned
+                    }
+                };
+                let p = attr("pads", vec![0; 4]);
+                let st = attr("strides", vec![1, 1]);
+                let dl = attr("dilations", vec![1, 1]);
+                let shape = ConvShape {
+                    input: [xs[0], xs[1], xs[2], xs[3]],
+                    kernel: [ws[0], ws[2], ws[3]],
+                    stride: [st[0] as usize, st[1] as usize],
+                    pads: [p[0] as usize, p[1] as usize, p[2] as usize, p[3] as usize],
+                    dilation: [dl[0] as usize, dl[1] as usize],
+                    group: n.int("group", 1).max(1) as usize,
+                };
+                let (oh, ow) = shape.output()?;
+                let (buf, shape_out) = self.out(xs[0] * ws[0] * oh * ow, vec![xs[0], ws[0], oh, ow]);
+                self.conv.run(&self.gpu, &shape, x, w, bias, &buf, Activation::Identity)?;
+                Ok(Value::Gpu { buf, shape: shape_out })
+            }
+            "Sigmoid" | "Relu" => {
+                let (x, xs) = Self::gpu_arg(args, 0)?;
+                let len: usize = xs.iter().product();
+                let (buf, shape) = self.out(len, xs.to_vec());
+                let op = if n.op_type == "Sigmoid" { 2 } else { 3 };
+                self.simple(&self.unary, &[x, &buf], &[u32s(&[len])?[0], op, 0, 0], len);
+                Ok(Value::Gpu { buf, shape })
+            }
+            "Add" | "Mul" => {
+                let (a, sa) = Self::gpu_arg(args, 0)?;
+                let (b, sb) = Self::gpu_arg(args, 1)?;
+                if sa != sb {
+                    return Err(GpuError::Shape(format!(
+                        "{} of {sa:?} and {sb:?}: broadcasting is not on the GPU yet",
+                        n.op_type
+                    )));
+                }
+                let len: usize = sa.iter().product();
+                let (buf, shape) = self.out(len, sa.to_vec());
+                let op = u32::from(n.op_type == "Mul");
+                self.simple(&self.binary, &[a, b, &buf], &[u32s(&[len])?[0], op, 0, 0], len);
+                Ok(Value::Gpu { buf, shape })
+            }
+            "Concat" => {
+                let parts: Vec<(&wgpu::Buffer, &[usize])> =
+                    (0..args.len()).map(|i| Self::gpu_arg(args, i)).collect::<Result<_, _>>()?;
+                let first = parts.first().ok_or_else(|| GpuError::Shape("Concat of nothing".into()))?.1;
+                let r = first.len() as i64;
+                let axis = n.int("axis", 0);
+                let axis = (if axis < 0 { axis + r } else { axis }) as usize;
+                let mut shape = first.to_vec();
+                shape[axis] = parts.iter().map(|p| p.1[axis]).sum();
+                let outer: usize = first[..axis].iter().product();
+                let inner_dst: usize = shape[axis..].iter().product();
+                let (buf, shape) = self.out(shape.iter().product(), shape);
+                let mut offset = 0;
+                for (src, s) in &parts {
+                    let inner_src: usize = s[axis..].iter().product();
+                    self.simple(
+                        &self.copy_block,
+                        &[src, &buf],
+                        &u32s(&[outer, inner_src, inner_dst, offset])?,
+                        outer * inner_src,
+                    );
+                    offset += inner_src;
+                }
+                Ok(Value::Gpu { buf, shape })
+            }
+            "Slice" | "Transpose" => {
+                let (x, xs) = Self::gpu_arg(args, 0)?;
+                if xs.len() > 4 {
+                    return Err(GpuError::Shape(format!("{} of rank {} (4 at most on the GPU)", n.op_type, xs.len())));
+                }
+                let si = strides(xs);
+                let (out_shape, src_strides, base) = if n.op_type == "Transpose" {
+                    let perm: Vec<usize> = n
+                        .ints("perm")
+                        .map_or_else(|| (0..xs.len()).rev().collect(), |p| p.iter().map(|&v| v as usize).collect());
+                    (
+                        perm.iter().map(|&p| xs[p]).collect::<Vec<_>>(),
+                        perm.iter().map(|&p| si[p]).collect::<Vec<_>>(),
+                        0,
+                    )
+                } else {
+                    let starts = Self::ints(args, 1).ok_or_else(|| GpuError::Shape("Slice without starts".into()))?;
+                    let ends = Self::ints(args, 2).ok_or_else(|| GpuError::Shape("Slice without ends".into()))?;
+                    let axes = Self::ints(args, 3).unwrap_or_else(|| (0..starts.len() as i64).collect());
+                    let steps = Self::ints(args, 4).unwrap_or_else(|| vec![1; starts.len()]);
+                    let mut shape = xs.to_vec();
+                    let mut st = si.clone();
+                    let mut base = 0usize;
+                    for (k, &start) in starts.iter().enumerate() {
+                        let r = xs.len() as i64;
+                        let a = axes.get(k).copied().unwrap_or(k as i64);
+                        let a = (if a < 0 { a + r } else { a }) as usize;
+                        let (dim, step) = (xs[a] as i64, steps.get(k).copied().unwrap_or(1));
+                        if step <= 0 {
+                            return Err(GpuError::Shape("Slice steps <= 0 are not supported".into()));
+                        }
+                        let clamp = |v: i64| if v < 0 { (v + dim).max(0) } else { v.min(dim) };
+                        let (b, e) = (clamp(start), clamp(ends.get(k).copied().unwrap_or(dim)));
+                        shape[a] = if e > b { ((e - b + step - 1) / step) as usize } else { 0 };
+                        base += b as usize * si[a];
+                        st[a] = si[a] * step as usize;
+                    }
+                    (shape, st, base)
+                };
+                // Pad to 4-D on the left.
+                let pad = 4 - out_shape.len();
+                let mut d = vec![1usize; pad];
+                d.extend(&out_shape);
+                let mut s = vec![0usize; pad];
+                s.extend(&src_strides);
+                let len: usize = out_shape.iter().product();
+                let (buf, shape) = self.out(len, out_shape);
+                let words = u32s(&[d[0], d[1], d[2], d[3], s[0], s[1], s[2], s[3], base, len, 0, 0])?;
+                self.simple(&self.gather, &[x, &buf], &words, len);
+                Ok(Value::Gpu { buf, shape })
+            }
+            "MaxPool" => {
+                let (x, xs) = Self::gpu_arg(args, 0)?;
+                let k = attr("kernel_shape", vec![1, 1]);
+                let st = attr("strides", vec![1, 1]);
+                let p = attr("pads", vec![0; 4]);
+                if xs.len() != 4 || n.int("ceil_mode", 0) != 0 {
+                    return Err(GpuError::Shape("MaxPool on 4-D input without ceil_mode only".into()));
+                }
+                let (h, w) = (xs[2], xs[3]);
+                let (kh, kw, sh, sw) = (k[0] as usize, k[1] as usize, st[0].max(1) as usize, st[1].max(1) as usize);
+                let (pt, pl, pb, pr) = (p[0] as usize, p[1] as usize, p[2] as usize, p[3] as usize);
+                let oh =
+                    (h + pt + pb).checked_sub(kh).ok_or_else(|| GpuError::Shape("pool kernel too large".into()))? / sh
+                        + 1;
+                let ow =
+                    (w + pl + pr).checked_sub(kw).ok_or_else(|| GpuError::Shape("pool kernel too large".into()))? / sw
+                        + 1;
+                let planes = xs[0] * xs[1];
+                let (buf, shape) = self.out(planes * oh * ow, vec![xs[0], xs[1], oh, ow]);
+                let words = u32s(&[planes, h, w, oh, ow, kh, kw, sh, sw, pt, pl, 0])?;
+                self.simple(&self.maxpool, &[x, &buf], &words, planes * oh * ow);
+                Ok(Value::Gpu { buf, shape })
+            }
+            "Resize" => {
+                let (x, xs) = Self::gpu_arg(args, 0)?;
+                let scales: Option<Vec<f32>> = match args.get(2).copied().flatten() {
+                    Some(Value::Host(t)) => Some(t.floats()).filter(|v| v.len() == 4),
+                    _ => None,
+                };
+                let mode = (
+                    n.string("mode", "nearest"),
+                    n.string("coordinate_transformation_mode", "half_pixel"),
+                    n.string("nearest_mode", ""),
+                );
+                if xs.len() != 4 || mode.0 != "nearest" || mode.1 != "asymmetric" || mode.2 != "floor" {
+                    return Err(GpuError::Shape(format!(
+                        "Resize {mode:?} is not on the GPU (nearest, asymmetric, floor)"
+                    )));
+                }
+                let sc = scales.ok_or_else(|| GpuError::Shape("Resize needs constant scales on the GPU".into()))?;
+                let (oh, ow) = ((xs[2] as f32 * sc[2]).floor() as usize, (xs[3] as f32 * sc[3]).floor() as usize);
+                let planes = xs[0] * xs[1];
+                let (buf, shape) = self.out(planes * oh * ow, vec![xs[0], xs[1], oh, ow]);
+                let mut words = u32s(&[planes, xs[2], xs[3], oh, ow])?;
+                words.extend([sc[2].to_bits(), sc[3].to_bits(), 0]);
+                self.simple(&self.resize, &[x, &buf], &words, planes * oh * ow);
+                Ok(Value::Gpu { buf, shape })
+            }
+            "Reshape" => {
+                let (x, xs) = match args.first().copied().flatten() {
+                    Some(Value::Gpu { buf, shape }) => (buf.clone(), shape.clone()),
+                    _ => return Err(GpuError::Shape("Reshape input is not on the GPU".into())),
+                };
+                // The shape arithmetic of the reference executor, on an empty stand-in.
+                let total: usize = xs.iter().product();
+                let stand_in = Tensor::F32 { shape: xs, data: vec![0.0; total] };
+                let spec = match args.get(1).copied().flatten() {
+                    Some(Value::Host(t)) => t.clone(),
+                    _ => return Err(GpuError::Shape("Reshape needs a constant shape".into())),
+                };
+                let out = eval_node(n, &[Some(&stand_in), Some(&spec)]).map_err(GpuError::Shape)?;
+                let shape = out.first().map(|t| t.shape().to_vec()).unwrap_or_default();
+                Ok(Value::Gpu { buf: x, shape })
+            }
+            other => Err(GpuError::Shape(format!("op `{other}` is not on the GPU yet"))),
+        }
+    }
+}

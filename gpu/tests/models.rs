@@ -1,0 +1,42 @@
+//! Whole models on the GPU against the reference executor, on real images.
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+use std::path::PathBuf;
+
+use dynaflow_gpu::{Gpu, GpuModel};
+use dynaflow_infer::cpu::{Tensor, run};
+use dynaflow_infer::detect::letterbox_bgr;
+use dynaflow_infer::onnx::load;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+#[test]
+fn yolox_nano_on_the_gpu_equals_the_reference_on_real_images() {
+    let gpu = match Gpu::new() {
+        Ok(g) => g,
+        Err(e) => {
+            assert!(std::env::var_os("DYNAFLOW_REQUIRE_GPU").is_none(), "GPU required: {e}");
+            eprintln!("note: {e}; skipping");
+            return;
+        }
+    };
+    let model = load(&repo().join("models/yolox_nano/yolox_nano.onnx")).unwrap();
+    let on_gpu = GpuModel::new(gpu, model.clone());
+    eprintln!("adapter: {}", on_gpu.adapter());
+    for img in ["tests/fixtures/slambook2_rgbd_pair/rgb/1.png", "tests/fixtures/slambook2_dense_rgbd/color/1.png"] {
+        let rgb = image::open(repo().join(img)).unwrap().into_rgb8();
+        let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+        let (x, _) = letterbox_bgr(rgb.as_raw(), w, h, 416);
+        let input = Tensor::F32 { shape: vec![1, 3, 416, 416], data: x };
+        let want = run(&model, &[("images", input.clone())]).unwrap();
+        let t0 = std::time::Instant::now();
+        let got = on_gpu.run(&[("images", input)]).unwrap();
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        assert_eq!(got[0].shape(), want[0].shape());
+        let d = got[0].floats().iter().zip(want[0].floats()).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        eprintln!("{img}: max |gpu - cpu| = {d:e} ({ms:.0} ms, unplanned, one submit per node)");
+        assert!(d <= 1e-3, "{img}: {d}");
+    }
+}
