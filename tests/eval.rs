@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use dynaflow_operators::decode::read_trajectory;
-use dynaflow_slam::eval::{Align, Evaluation, Stats, evaluate};
+use dynaflow_slam::eval::{Align, Evaluation, RpeDelta, Stats, evaluate_with};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 fn write_tum(path: &Path, poses: &[(f64, Isometry3<f64>)]) {
@@ -90,8 +90,12 @@ fn eval_equals_evo_on_real_and_generated_pairs() {
     let fixtures = common::repo().join("tests/fixtures/slambook2_trajectories");
     let gt = ground_truth(600, 30.0);
     let dense_gt = ground_truth(2000, 100.0);
-    let mut cases: Vec<(PathBuf, PathBuf, usize)> =
-        vec![(fixtures.join("groundtruth.txt"), fixtures.join("estimated.txt"), 1)];
+    let real = (fixtures.join("groundtruth.txt"), fixtures.join("estimated.txt"));
+    // Frames, and metres of travelled path (evo `--delta_unit m`).
+    let mut cases: Vec<(PathBuf, PathBuf, RpeDelta)> = vec![
+        (real.0.clone(), real.1.clone(), RpeDelta::Frames(1)),
+        (real.0.clone(), real.1.clone(), RpeDelta::Meters(0.1)),
+    ];
     for (k, (g, est, delta)) in [
         (&gt, estimate(&gt, 1.0, 0.01, 1, 0..0), 1),
         (&gt, estimate(&gt, 1.0, 0.02, 1, 200..260), 5),
@@ -103,10 +107,21 @@ fn eval_equals_evo_on_real_and_generated_pairs() {
         let (gp, ep) = (dir.path().join(format!("gt{k}.txt")), dir.path().join(format!("est{k}.txt")));
         write_tum(&gp, g);
         write_tum(&ep, &est);
-        cases.push((gp, ep, delta));
+        cases.push((gp.clone(), ep.clone(), RpeDelta::Frames(delta)));
+        if k == 1 {
+            cases.push((gp, ep, RpeDelta::Meters(0.5)));
+        }
     }
-    let job: Vec<serde_json::Value> =
-        cases.iter().map(|(g, e, d)| serde_json::json!({ "gt": g, "est": e, "max_diff": 0.01, "delta": d })).collect();
+    let job: Vec<serde_json::Value> = cases
+        .iter()
+        .map(|(g, e, d)| {
+            let (delta, unit) = match d {
+                RpeDelta::Frames(n) => (serde_json::json!(n), "frames"),
+                RpeDelta::Meters(m) => (serde_json::json!(m), "m"),
+            };
+            serde_json::json!({ "gt": g, "est": e, "max_diff": 0.01, "delta": delta, "unit": unit })
+        })
+        .collect();
     let job_path = dir.path().join("job.json");
     std::fs::write(&job_path, serde_json::Value::Array(job).to_string()).unwrap();
     let out =
@@ -116,8 +131,8 @@ fn eval_equals_evo_on_real_and_generated_pairs() {
     for ((g, e, delta), theirs) in cases.iter().zip(&evo) {
         let (gt, est) = (read_trajectory(g).unwrap(), read_trajectory(e).unwrap());
         for (align, key) in [(Align::Se3, "se3"), (Align::Sim3, "sim3")] {
-            let ours: Evaluation = evaluate(&gt, &est, 0.01, align, *delta).unwrap();
-            let what = format!("{} ({key})", e.display());
+            let ours: Evaluation = evaluate_with(&gt, &est, 0.01, align, *delta).unwrap();
+            let what = format!("{} ({key}, {delta:?})", e.display());
             assert_eq!(ours.matched as u64, theirs["matched"].as_u64().unwrap(), "{what}");
             close(&ours.ate, &theirs[format!("ate_{key}")], &format!("{what} ATE"));
             close(&ours.rpe_translation, &theirs[format!("rpe_t_{key}")], &format!("{what} RPE t"));

@@ -103,8 +103,11 @@ pub struct Evaluation {
     pub rpe_translation: Stats,
     /// RPE rotation over `rpe_delta` frames, degrees.
     pub rpe_rotation_deg: Stats,
-    /// RPE step in frames.
+    /// RPE step in frames (0 when the step is a distance).
     pub rpe_delta: usize,
+    /// RPE step in metres, when it is a distance.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub rpe_delta_m: Option<f64>,
     /// Per associated pose: ground-truth stamp, ground-truth position, aligned estimated
     /// position, ATE (for plots; not serialised).
     #[serde(skip)]
@@ -194,13 +197,34 @@ fn rotation_angle_deg(r: &Matrix3<f64>) -> f64 {
     UnitQuaternion::from_matrix_eps(r, f64::EPSILON, 100, UnitQuaternion::identity()).angle().to_degrees()
 }
 
-/// Evaluate `est` against `gt`.
+/// The RPE step: a number of frames, or a travelled distance.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RpeDelta {
+    /// Consecutive pairs `n` frames apart (evo `--delta n --delta_unit f`).
+    Frames(usize),
+    /// Consecutive pairs at least this many metres apart along the aligned estimate's path
+    /// (evo `--delta d --delta_unit m`, its default consecutive-pairs mode).
+    Meters(f64),
+}
+
+/// Evaluate `est` against `gt`, RPE over `rpe_delta` frames.
 pub fn evaluate(
     gt: &[Stamped],
     est: &[Stamped],
     max_diff: f64,
     align: Align,
     rpe_delta: usize,
+) -> Result<Evaluation, EvalError> {
+    evaluate_with(gt, est, max_diff, align, RpeDelta::Frames(rpe_delta))
+}
+
+/// Evaluate `est` against `gt` with any RPE step.
+pub fn evaluate_with(
+    gt: &[Stamped],
+    est: &[Stamped],
+    max_diff: f64,
+    align: Align,
+    rpe: RpeDelta,
 ) -> Result<Evaluation, EvalError> {
     let gt_t: Vec<f64> = gt.iter().map(|p| p.0).collect();
     let est_t: Vec<f64> = est.iter().map(|p| p.0).collect();
@@ -229,8 +253,23 @@ pub fn evaluate(
         .collect();
     let ate: Vec<f64> = aligned.iter().zip(&gp).map(|((_, p), q)| (p - q).norm()).collect();
     // RPE over consecutive pairs `delta` apart (evo's default, not all pairs).
-    let delta = rpe_delta.max(1);
-    let ids: Vec<usize> = (0..g.len()).step_by(delta).collect();
+    let (delta, ids): (usize, Vec<usize>) = match rpe {
+        RpeDelta::Frames(d) => (d.max(1), (0..g.len()).step_by(d.max(1)).collect()),
+        RpeDelta::Meters(m) => {
+            // evo's `filter_pairs_by_path`: the first pose, then each pose where the path
+            // travelled since the last chosen one reaches `m`.
+            let mut ids = vec![0];
+            let mut path = 0.0;
+            for i in 1..aligned.len() {
+                path += (aligned[i].1 - aligned[i - 1].1).norm();
+                if path >= m {
+                    ids.push(i);
+                    path = 0.0;
+                }
+            }
+            (0, ids)
+        }
+    };
     let (mut rt, mut rr) = (Vec::new(), Vec::new());
     for w in ids.windows(2) {
         let (i, j) = (w[0], w[1]);
@@ -256,6 +295,10 @@ pub fn evaluate(
         rpe_translation: Stats::of(&rt),
         rpe_rotation_deg: Stats::of(&rr),
         rpe_delta: delta,
+        rpe_delta_m: match rpe {
+            RpeDelta::Meters(m) => Some(m),
+            RpeDelta::Frames(_) => None,
+        },
         series: ig
             .iter()
             .zip(&gp)

@@ -4,7 +4,7 @@ use std::io::Write;
 use std::path::PathBuf;
 
 use dynaflow_operators::decode::read_trajectory;
-use dynaflow_slam::eval::{Align, Stats, evaluate};
+use dynaflow_slam::eval::{Align, RpeDelta, Stats, evaluate_with};
 
 use crate::{EXIT_BAD_INPUT, EXIT_OK};
 
@@ -24,9 +24,12 @@ pub struct EvalArgs {
     /// Largest time difference of associated poses, seconds (evo's `--t_max_diff`).
     #[arg(long, default_value_t = 0.01)]
     pub max_diff: f64,
-    /// RPE step in frames (evo's `--delta`, unit frames).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
-    pub rpe_delta: u64,
+    /// RPE step (evo's `--delta`): frames, or metres of travelled path with `--rpe-unit m`.
+    #[arg(long, default_value_t = 1.0)]
+    pub rpe_delta: f64,
+    /// Unit of `--rpe-delta` (evo's `--delta_unit f|m`).
+    #[arg(long, default_value = "frames", value_parser = ["frames", "m"])]
+    pub rpe_unit: String,
     /// Print JSON instead of a table.
     #[arg(long)]
     pub json: bool,
@@ -51,8 +54,21 @@ pub fn eval(args: &EvalArgs) -> u8 {
         "none" => Align::None,
         _ => Align::Se3,
     };
-    let delta = usize::try_from(args.rpe_delta).unwrap_or(1);
-    let result = match evaluate(&gt, &est, args.max_diff, align, delta) {
+    let rpe = if args.rpe_unit == "m" {
+        if args.rpe_delta.is_nan() || args.rpe_delta.is_infinite() || args.rpe_delta <= 0.0 {
+            eprintln!("error: --rpe-delta in metres must be a positive number");
+            return EXIT_BAD_INPUT;
+        }
+        RpeDelta::Meters(args.rpe_delta)
+    } else {
+        if args.rpe_delta.is_nan() || args.rpe_delta < 1.0 || args.rpe_delta.fract() != 0.0 || args.rpe_delta >= 1e9 {
+            eprintln!("error: --rpe-delta in frames must be a whole number >= 1");
+            return EXIT_BAD_INPUT;
+        }
+        RpeDelta::Frames(args.rpe_delta as usize)
+    };
+    let delta = if args.rpe_unit == "m" { format!("{} m", args.rpe_delta) } else { format!("{}", args.rpe_delta) };
+    let result = match evaluate_with(&gt, &est, args.max_diff, align, rpe) {
         Ok(r) => r,
         Err(e) => {
             eprintln!("error: {} vs {}: {e}", args.est.display(), args.gt.display());

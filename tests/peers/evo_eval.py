@@ -23,7 +23,8 @@ for case in json.load(open(sys.argv[1])):
             (metrics.PoseRelation.translation_part, "rpe_t"),
             (metrics.PoseRelation.rotation_angle_deg, "rpe_r"),
         ]:
-            rpe = metrics.RPE(relation, delta=case["delta"], delta_unit=metrics.Unit.frames, all_pairs=False)
+            unit = metrics.Unit.meters if case.get("unit") == "m" else metrics.Unit.frames
+            rpe = metrics.RPE(relation, delta=case["delta"], delta_unit=unit, all_pairs=False)
             rpe.process_data((ref, e))
             res[name + "_" + align] = rpe.get_all_statistics()
     out.append(res)
