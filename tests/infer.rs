@@ -305,3 +305,31 @@ fn detector_gate_graph_runs_and_reports_its_gate() {
     assert_eq!(gate["report"]["frames"], 8);
     assert!(s["ate"]["rmse"].as_f64().is_some());
 }
+
+#[test]
+fn wgpu_backend_gives_the_cpu_detections_or_falls_back_with_a_warning() {
+    let img = frontend::ch7()[0].clone();
+    let classes = |backend: &str, extra: &[&str]| {
+        let out = common::bin().args(["infer", "--backend", backend]).args(extra).arg(&img).output().unwrap();
+        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        let list: Vec<(String, i64)> = v["detections"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|d| (d["class"].as_str().unwrap().to_string(), (d["score"].as_f64().unwrap() * 1000.0).round() as i64))
+            .collect();
+        (list, String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    // YOLOX-nano: every op has a kernel; the same detections and scores (to 1e-3) as the CPU.
+    let (cpu, _) = classes("cpu", &[]);
+    let (gpu, err) = classes("wgpu", &[]);
+    assert_eq!(gpu, cpu, "{err}");
+    if std::env::var_os("DYNAFLOW_REQUIRE_GPU").is_some() {
+        assert!(!err.contains("running on the CPU"), "{err}");
+    }
+    // FastestDet has ops without a GPU kernel yet: the documented fallback, with a warning.
+    let model = fastestdet();
+    let (_, err) = classes("wgpu", &["--decoder", "fastestdet", "--model", model.to_str().unwrap()]);
+    assert!(err.contains("has no GPU kernel yet") && err.contains("running on the CPU"), "{err}");
+}

@@ -18,7 +18,7 @@ mod kernels;
 mod model;
 
 pub use kernels::{Activation, BinaryOp, Conv2d, ConvShape};
-pub use model::GpuModel;
+pub use model::{GPU_OPS, GpuModel};
 
 /// Why the GPU cannot be used.
 #[derive(Debug, thiserror::Error)]

@@ -60,7 +60,22 @@ fn u32s(v: &[usize]) -> Result<Vec<u32>, GpuError> {
     v.iter().map(|&x| u32::try_from(x).map_err(|_| GpuError::Shape("dimension over u32".into()))).collect()
 }
 
+/// Ops with a GPU kernel here.
+pub const GPU_OPS: &[&str] =
+    &["Add", "Concat", "Conv", "MaxPool", "Mul", "Relu", "Reshape", "Resize", "Sigmoid", "Slice", "Transpose"];
+/// Ops run on the host (shape arithmetic on constants).
+const HOST_OPS: &[&str] = &["Constant", "Gather", "Shape", "Unsqueeze"];
+
 impl GpuModel {
+    /// The first op of `model` this executor cannot run, with its node, if any.
+    pub fn unsupported(model: &Model) -> Option<String> {
+        model
+            .nodes
+            .iter()
+            .find(|n| !GPU_OPS.contains(&n.op_type.as_str()) && !HOST_OPS.contains(&n.op_type.as_str()))
+            .map(|n| format!("op `{}` at node {} has no GPU kernel yet", n.op_type, n.label()))
+    }
+
     /// Upload `model`'s float initializers and compile the kernels.
     pub fn new(gpu: Gpu, model: Model) -> Self {
         let weights = model

@@ -201,13 +201,37 @@ impl Detector {
         score: f32,
         iou: f32,
     ) -> Result<Vec<Detection>, crate::cpu::RunError> {
+        let model = &self.model;
+        self.detect_with(rgb, width, height, classes, score, iou, |name, input| {
+            crate::cpu::run(model, &[(name, input)])
+        })
+    }
+
+    /// The model.
+    pub fn model(&self) -> &crate::onnx::Model {
+        &self.model
+    }
+
+    /// [`Detector::detect`] with the model run by `run` (input name, input tensor -> outputs),
+    /// e.g. on a GPU.
+    #[allow(clippy::too_many_arguments)]
+    pub fn detect_with<E>(
+        &self,
+        rgb: &[u8],
+        width: usize,
+        height: usize,
+        classes: usize,
+        score: f32,
+        iou: f32,
+        run: impl FnOnce(&str, crate::cpu::Tensor) -> Result<Vec<crate::cpu::Tensor>, E>,
+    ) -> Result<Vec<Detection>, E> {
         let s = self.side;
         let (x, lb) = match self.decoder {
             Decoder::Yolox => letterbox_bgr(rgb, width, height, s),
             Decoder::FastestDet => (resize_bgr_unit(rgb, width, height, s), Letterbox { scale: 1.0, size: s }),
         };
         let input = crate::cpu::Tensor::F32 { shape: vec![1, 3, s, s], data: x };
-        let out = crate::cpu::run(&self.model, &[(self.input_name.as_str(), input)])?;
+        let out = run(self.input_name.as_str(), input)?;
         let raw = out.first().map(crate::cpu::Tensor::floats).unwrap_or_default();
         let dets = match self.decoder {
             Decoder::Yolox => decode_yolox(&raw, classes, &lb, score),

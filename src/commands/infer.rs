@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use dynaflow_infer::detect::{Decoder, Detector};
 use dynaflow_infer::onnx;
-use dynaflow_operators::inference::{COCO_NAMES, YOLOX_NANO};
+use dynaflow_operators::inference::{COCO_NAMES, YOLOX_NANO, wgpu_or_fallback};
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
@@ -21,8 +21,9 @@ pub struct InferArgs {
     /// Output decoding of the model.
     #[arg(long, default_value = "yolox", value_parser = ["yolox", "fastestdet"])]
     pub decoder: String,
-    /// Where the model runs (`cpu`: the reference executor; the wgpu executor is not built yet).
-    #[arg(long, default_value = "cpu", value_parser = ["cpu"])]
+    /// Where the model runs: `cpu` (the reference executor) or `wgpu` (falls back to `cpu`
+    /// with a warning without an adapter or for an op with no GPU kernel).
+    #[arg(long, default_value = "cpu", value_parser = ["cpu", "wgpu"])]
     pub backend: String,
     /// Score threshold.
     #[arg(long, default_value_t = 0.3)]
@@ -47,6 +48,12 @@ pub fn infer(args: &InferArgs) -> u8 {
         }
     };
     let names: Vec<&str> = COCO_NAMES.lines().collect();
+    let gpu = if args.backend == "wgpu" {
+        // Without an adapter (or for an op with no GPU kernel) this warns and runs on the CPU.
+        wgpu_or_fallback(detector.model()).0
+    } else {
+        None
+    };
     let mut out = std::io::stdout().lock();
     for path in &args.images {
         let img = match image::open(path) {
@@ -57,7 +64,13 @@ pub fn infer(args: &InferArgs) -> u8 {
             }
         };
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let dets = match detector.detect(img.as_raw(), w, h, names.len(), args.score, args.iou) {
+        let found = match &gpu {
+            Some(g) => detector.detect_with(img.as_raw(), w, h, names.len(), args.score, args.iou, |name, input| {
+                g.run(&[(name, input)]).map_err(|e| e.to_string())
+            }),
+            None => detector.detect(img.as_raw(), w, h, names.len(), args.score, args.iou).map_err(|e| e.to_string()),
+        };
+        let dets = match found {
             Ok(d) => d,
             Err(e) => {
                 eprintln!("error: {}: {e}", path.display());

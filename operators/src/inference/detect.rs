@@ -7,6 +7,7 @@ use dynaflow_engine::op::{
     Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
     PortSpec,
 };
+use dynaflow_gpu::{Gpu, GpuModel};
 use dynaflow_infer::detect::{Decoder, Detector};
 use dynaflow_infer::onnx;
 
@@ -20,8 +21,6 @@ pub const COCO_NAMES: &str = include_str!("../../../models/yolox_nano/coco.names
 struct Config {
     model: String,
     decoder: String,
-    /// Only `cpu` exists yet; kept so graphs can name it.
-    #[allow(dead_code)]
     backend: String,
     score_threshold: f64,
     nms_iou: f64,
@@ -49,9 +48,9 @@ pub const DETECT: OpSpec = OpSpec {
         },
         ParamSpec {
             name: "backend",
-            ty: ParamType::Enum { values: &["cpu"] },
+            ty: ParamType::Enum { values: &["cpu", "wgpu"] },
             default: Default::Str("cpu"),
-            doc: "where the model runs: `cpu`, the reference executor",
+            doc: "where the model runs: `cpu` (the reference executor) or `wgpu` (any Vulkan, Metal or DX12 adapter; node by node for now). Without an adapter, or with an op that has no GPU kernel, `wgpu` falls back to `cpu` with a warning (and says so in the summary)",
         },
         ParamSpec {
             name: "score_threshold",
@@ -77,7 +76,9 @@ pub const DETECT: OpSpec = OpSpec {
         let decoder = if c.decoder == "fastestdet" { Decoder::FastestDet } else { Decoder::Yolox };
         let detector = Detector::new(model, decoder).map_err(OpError::Input)?;
         let names: Vec<Arc<str>> = COCO_NAMES.lines().map(Arc::from).collect();
-        Ok(Instance::Transform(Box::new(Detect { config: c, detector, names })))
+        let (gpu, backend) =
+            if c.backend == "wgpu" { wgpu_or_fallback(detector.model()) } else { (None, "cpu".into()) };
+        Ok(Instance::Transform(Box::new(Detect { config: c, detector, names, gpu, backend })))
     },
 };
 
@@ -85,6 +86,25 @@ struct Detect {
     config: Config,
     detector: Detector,
     names: Vec<Arc<str>>,
+    gpu: Option<GpuModel>,
+    /// What runs the model, for the summary.
+    backend: String,
+}
+
+/// The model on the GPU, or `None` and why not (a warning is logged: the documented fallback
+/// to the CPU).
+pub fn wgpu_or_fallback(model: &dynaflow_infer::onnx::Model) -> (Option<GpuModel>, String) {
+    let why = match (GpuModel::unsupported(model), Gpu::new()) {
+        (None, Ok(gpu)) => {
+            let m = GpuModel::new(gpu, model.clone());
+            let name = format!("wgpu: {}", m.adapter());
+            return (Some(m), name);
+        }
+        (Some(op), _) => op,
+        (None, Err(e)) => e.to_string(),
+    };
+    tracing::warn!("backend `wgpu` unavailable ({why}); running on the CPU");
+    (None, format!("cpu (wgpu fallback: {why})"))
 }
 
 impl Operator for Detect {
@@ -101,8 +121,14 @@ impl Operator for Detect {
             }
         };
         let (score, iou) = (self.config.score_threshold as f32, self.config.nms_iou as f32);
-        let found =
-            self.detector.detect(rgb, w, h, self.names.len(), score, iou).map_err(|e| OpError::Input(e.to_string()))?;
+        let classes = self.names.len();
+        let found = match &self.gpu {
+            Some(g) => self.detector.detect_with(rgb, w, h, classes, score, iou, |name, input| {
+                g.run(&[(name, input)]).map_err(|e| e.to_string())
+            }),
+            None => self.detector.detect(rgb, w, h, classes, score, iou).map_err(|e| e.to_string()),
+        }
+        .map_err(OpError::Input)?;
         let detections = found
             .into_iter()
             .map(|d| Detection {
@@ -113,5 +139,10 @@ impl Operator for Detect {
             })
             .collect();
         Ok(Outputs::new().with("detections", msg.header.clone(), Body::Detections(Detections { detections })))
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
+        ctx.report = Some(serde_json::json!({ "backend": self.backend }));
+        Ok(())
     }
 }

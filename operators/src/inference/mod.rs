@@ -8,5 +8,5 @@ mod detect;
 mod gate;
 
 pub use box_mask::BOX_TO_MASK;
-pub use detect::{COCO_NAMES, DETECT, YOLOX_NANO};
+pub use detect::{COCO_NAMES, DETECT, YOLOX_NANO, wgpu_or_fallback};
 pub use gate::KEYFRAME_GATE;
