@@ -5,14 +5,13 @@
 //! - [`Gpu`]: instance, adapter and device, with a clear error when there is no adapter.
 //! - `kernels`: `conv2d` (groups, strides, padding, dilation, fused SiLU / sigmoid / ReLU),
 //!   `binary` (add, multiply), `unary`, `gather` (slices, transposes), `copy_block` (concat),
-//!   `maxpool`, `resize` (nearest).
-//! - [`GpuModel`]: a whole ONNX model node by node (YOLOX-nano today: its raw outputs equal
-//!   the reference within 8e-5 on real images).
+//!   pooling (max, average), `resize` (nearest), `pad` (constant), `softmax`.
+//! - [`GpuModel`]: a whole ONNX model node by node (YOLOX-nano and FastestDet: their raw
+//!   outputs equal the reference within 8e-5 on real images).
 //!
 //! Still to come (issue 12): planning a whole model at load time (buffers and bind groups
 //! allocated once, Conv + activation fused, Concat made free, one submit per frame),
-//! FastestDet's remaining ops (AveragePool, Pad, float Gather, Softmax), register-tiled GEMM
-//! for 1x1 convolutions, timestamp queries.
+//! register-tiled GEMM for 1x1 convolutions, timestamp queries.
 
 mod kernels;
 mod model;

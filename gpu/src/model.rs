@@ -40,6 +40,8 @@ pub struct GpuModel {
     copy_block: wgpu::ComputePipeline,
     maxpool: wgpu::ComputePipeline,
     resize: wgpu::ComputePipeline,
+    pad: wgpu::ComputePipeline,
+    softmax: wgpu::ComputePipeline,
 }
 
 impl std::fmt::Debug for GpuModel {
@@ -61,8 +63,23 @@ fn u32s(v: &[usize]) -> Result<Vec<u32>, GpuError> {
 }
 
 /// Ops with a GPU kernel here.
-pub const GPU_OPS: &[&str] =
-    &["Add", "Concat", "Conv", "MaxPool", "Mul", "Relu", "Reshape", "Resize", "Sigmoid", "Slice", "Transpose"];
+pub const GPU_OPS: &[&str] = &[
+    "Add",
+    "AveragePool",
+    "Concat",
+    "Conv",
+    "Gather",
+    "MaxPool",
+    "Mul",
+    "Pad",
+    "Relu",
+    "Reshape",
+    "Resize",
+    "Sigmoid",
+    "Slice",
+    "Softmax",
+    "Transpose",
+];
 /// Ops run on the host (shape arithmetic on constants).
 const HOST_OPS: &[&str] = &["Constant", "Gather", "Shape", "Unsqueeze"];
 
@@ -92,6 +109,8 @@ impl GpuModel {
             copy_block: pipeline(&gpu, include_str!("kernels/copy_block.wgsl"), "copy_block"),
             maxpool: pipeline(&gpu, include_str!("kernels/maxpool.wgsl"), "maxpool"),
             resize: pipeline(&gpu, include_str!("kernels/resize.wgsl"), "resize"),
+            pad: pipeline(&gpu, include_str!("kernels/pad.wgsl"), "pad"),
+            softmax: pipeline(&gpu, include_str!("kernels/softmax.wgsl"), "softmax"),
             weights,
             gpu,
             model,
@@ -322,7 +341,7 @@ impl GpuModel {
                 self.simple(&self.gather, &[x, &buf], &words, len);
                 Ok(Value::Gpu { buf, shape })
             }
-            "MaxPool" => {
+            "MaxPool" | "AveragePool" => {
                 let (x, xs) = Self::gpu_arg(args, 0)?;
                 let k = attr("kernel_shape", vec![1, 1]);
                 let st = attr("strides", vec![1, 1]);
@@ -341,7 +360,12 @@ impl GpuModel {
                         + 1;
                 let planes = xs[0] * xs[1];
                 let (buf, shape) = self.out(planes * oh * ow, vec![xs[0], xs[1], oh, ow]);
-                let words = u32s(&[planes, h, w, oh, ow, kh, kw, sh, sw, pt, pl, 0])?;
+                let mode = match n.op_type.as_str() {
+                    "MaxPool" => 0,
+                    _ if n.int("count_include_pad", 0) != 0 => 2,
+                    _ => 1,
+                };
+                let words = u32s(&[planes, h, w, oh, ow, kh, kw, sh, sw, pt, pl, mode])?;
                 self.simple(&self.maxpool, &[x, &buf], &words, planes * oh * ow);
                 Ok(Value::Gpu { buf, shape })
             }
@@ -385,6 +409,99 @@ impl GpuModel {
                 let out = eval_node(n, &[Some(&stand_in), Some(&spec)]).map_err(GpuError::Shape)?;
                 let shape = out.first().map(|t| t.shape().to_vec()).unwrap_or_default();
                 Ok(Value::Gpu { buf: x, shape })
+            }
+            "Pad" => {
+                let (x, xs) = Self::gpu_arg(args, 0)?;
+                let pads = n.ints("pads").map(<[i64]>::to_vec).or_else(|| Self::ints(args, 1)).unwrap_or_default();
+                let value = match args.get(2).copied().flatten() {
+                    Some(Value::Host(t)) => t.floats().first().copied().unwrap_or(0.0),
+                    _ => n.float("value", 0.0),
+                };
+                let r = xs.len();
+                if r > 4
+                    || pads.len() != 2 * r
+                    || pads.iter().any(|&p| p < 0)
+                    || n.string("mode", "constant") != "constant"
+                {
+                    return Err(GpuError::Shape(format!(
+                        "Pad {pads:?} of rank {r}: constant, non-negative, rank <= 4 only"
+                    )));
+                }
+                let out_shape: Vec<usize> = (0..r).map(|d| xs[d] + pads[d] as usize + pads[d + r] as usize).collect();
+                let lead = 4 - r;
+                let four = |v: &[usize]| {
+                    let mut o = vec![1usize; lead];
+                    o.extend(v);
+                    o
+                };
+                let (d, i) = (four(&out_shape), four(xs));
+                let mut b = vec![0usize; lead];
+                b.extend(pads[..r].iter().map(|&p| p as usize));
+                let len: usize = out_shape.iter().product();
+                let (buf, shape) = self.out(len, out_shape);
+                let mut words = u32s(&[d[0], d[1], d[2], d[3], i[0], i[1], i[2], i[3], b[0], b[1], b[2], b[3], len])?;
+                words.extend([value.to_bits(), 0, 0]);
+                self.simple(&self.pad, &[x, &buf], &words, len);
+                Ok(Value::Gpu { buf, shape })
+            }
+            "Softmax" => {
+                let (x, xs) = Self::gpu_arg(args, 0)?;
+                let r = xs.len() as i64;
+                let a = n.int("axis", -1);
+                let axis = (if a < 0 { a + r } else { a }) as usize;
+                if axis >= xs.len() {
+                    return Err(GpuError::Shape(format!("Softmax axis {a} of rank {r}")));
+                }
+                let step: usize = xs[axis + 1..].iter().product();
+                let total: usize = xs.iter().product();
+                let rows = total / xs[axis].max(1);
+                let (buf, shape) = self.out(total, xs.to_vec());
+                self.simple(&self.softmax, &[x, &buf], &u32s(&[rows, xs[axis], step, 0])?, rows);
+                Ok(Value::Gpu { buf, shape })
+            }
+            "Gather" => {
+                // A float tensor indexed by one constant index (ShuffleNet's channel split): a
+                // strided gather that drops the axis.
+                let (x, xs) = Self::gpu_arg(args, 0)?;
+                let idx = match args.get(1).copied().flatten() {
+                    Some(Value::Host(t)) if t.shape().is_empty() || t.shape() == [1] => {
+                        Self::ints(args, 1).unwrap_or_default()
+                    }
+                    _ => return Err(GpuError::Shape("Gather on the GPU takes one constant index".into())),
+                };
+                let r = xs.len() as i64;
+                let a = n.int("axis", 0);
+                let axis = (if a < 0 { a + r } else { a }) as usize;
+                let i = idx.first().copied().unwrap_or(0);
+                let i = if i < 0 { i + xs[axis] as i64 } else { i };
+                if axis >= xs.len() || !(0..xs[axis] as i64).contains(&i) {
+                    return Err(GpuError::Shape(format!("Gather index {i} on axis {axis} of {xs:?}")));
+                }
+                let si = strides(xs);
+                let keep: Vec<usize> = (0..xs.len()).filter(|&d| d != axis).collect();
+                let mut out_shape: Vec<usize> = keep.iter().map(|&d| xs[d]).collect();
+                let mut st: Vec<usize> = keep.iter().map(|&d| si[d]).collect();
+                if idx.len() == 1 && args.get(1).copied().flatten().is_some_and(|v| v.shape() == [1]) {
+                    out_shape.insert(axis, 1);
+                    st.insert(axis, 0);
+                }
+                if out_shape.len() > 4 {
+                    return Err(GpuError::Shape(format!(
+                        "Gather output of rank {} (4 at most on the GPU)",
+                        out_shape.len()
+                    )));
+                }
+                let lead = 4 - out_shape.len();
+                let mut d = vec![1usize; lead];
+                d.extend(&out_shape);
+                let mut s = vec![0usize; lead];
+                s.extend(&st);
+                let len: usize = out_shape.iter().product();
+                let (buf, shape) = self.out(len, out_shape);
+                let base = i as usize * si[axis];
+                let words = u32s(&[d[0], d[1], d[2], d[3], s[0], s[1], s[2], s[3], base, len, 0, 0])?;
+                self.simple(&self.gather, &[x, &buf], &words, len);
+                Ok(Value::Gpu { buf, shape })
             }
             other => Err(GpuError::Shape(format!("op `{other}` is not on the GPU yet"))),
         }

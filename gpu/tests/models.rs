@@ -40,3 +40,27 @@ fn yolox_nano_on_the_gpu_equals_the_reference_on_real_images() {
         assert!(d <= 1e-3, "{img}: {d}");
     }
 }
+
+#[test]
+fn fastestdet_on_the_gpu_equals_the_reference_on_a_real_image() {
+    let gpu = match Gpu::new() {
+        Ok(g) => g,
+        Err(e) => {
+            assert!(std::env::var_os("DYNAFLOW_REQUIRE_GPU").is_none(), "GPU required: {e}");
+            return;
+        }
+    };
+    let model = load(&repo().join("models/fastestdet/FastestDet.onnx")).unwrap();
+    assert_eq!(GpuModel::unsupported(&model), None);
+    let name = model.inputs[0].name.clone();
+    let on_gpu = GpuModel::new(gpu, model.clone());
+    let rgb = image::open(repo().join("tests/fixtures/slambook2_rgbd_pair/rgb/2.png")).unwrap().into_rgb8();
+    let x = dynaflow_infer::detect::resize_bgr_unit(rgb.as_raw(), rgb.width() as usize, rgb.height() as usize, 352);
+    let input = Tensor::F32 { shape: vec![1, 3, 352, 352], data: x };
+    let want = run(&model, &[(name.as_str(), input.clone())]).unwrap();
+    let got = on_gpu.run(&[(name.as_str(), input)]).unwrap();
+    assert_eq!(got[0].shape(), want[0].shape());
+    let d = got[0].floats().iter().zip(want[0].floats()).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+    eprintln!("FastestDet: max |gpu - cpu| = {d:e}");
+    assert!(d <= 1e-3, "{d}");
+}

@@ -1,8 +1,9 @@
-// Max pooling, NCHW, padding excluded from the maximum (ONNX MaxPool).
+// Pooling, NCHW: mode 0 max (padding excluded), 1 average over the pixels inside, 2 average
+// counting the padding (ONNX `count_include_pad`).
 struct Params {
     planes: u32, h: u32, w: u32, oh: u32,
     ow: u32, kh: u32, kw: u32, sh: u32,
-    sw: u32, ph: u32, pw: u32, pad0: u32,
+    sw: u32, ph: u32, pw: u32, mode: u32,
 }
 
 @group(0) @binding(0) var<storage, read> x: array<f32>;
@@ -19,6 +20,10 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     let oy = (idx / p.ow) % p.oh;
     let plane = idx / (p.ow * p.oh);
     var acc = -3.4028235e38;
+    if (p.mode != 0u) {
+        acc = 0.0;
+    }
+    var count = 0u;
     for (var ky = 0u; ky < p.kh; ky++) {
         let iy = i32(oy * p.sh + ky) - i32(p.ph);
         if (iy < 0 || iy >= i32(p.h)) {
@@ -29,8 +34,19 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             if (ix < 0 || ix >= i32(p.w)) {
                 continue;
             }
-            acc = max(acc, x[(plane * p.h + u32(iy)) * p.w + u32(ix)]);
+            let v = x[(plane * p.h + u32(iy)) * p.w + u32(ix)];
+            if (p.mode == 0u) {
+                acc = max(acc, v);
+            } else {
+                acc += v;
+            }
+            count += 1u;
         }
+    }
+    if (p.mode == 1u) {
+        acc = acc / f32(max(count, 1u));
+    } else if (p.mode == 2u) {
+        acc = acc / f32(p.kh * p.kw);
     }
     y[idx] = acc;
 }
