@@ -5,7 +5,7 @@
 
 use std::collections::HashMap;
 
-use dynaflow_infer::cpu::{Tensor, eval_node};
+use dynaflow_infer::cpu::{Tensor, eval_node, norm_axis, reshape_shape, slice_plan, strides};
 use dynaflow_infer::onnx::{Model, Node};
 
 use crate::kernels::{bind, pipeline};
@@ -50,12 +50,11 @@ impl std::fmt::Debug for GpuModel {
     }
 }
 
-fn strides(shape: &[usize]) -> Vec<usize> {
-    let mut s = vec![1; shape.len()];
-    for i in (0..shape.len().saturating_sub(1)).rev() {
-        s[i] = s[i + 1] * shape[i + 1];
-    }
-    s
+/// `v` widened to 4 entries on the left with `fill` (callers check the rank is at most 4).
+fn left4(v: &[usize], fill: usize) -> Vec<usize> {
+    let mut o = vec![fill; 4usize.saturating_sub(v.len())];
+    o.extend(v);
+    o
 }
 
 fn u32s(v: &[usize]) -> Result<Vec<u32>, GpuError> {
@@ -200,6 +199,22 @@ impl GpuModel {
         }
     }
 
+    /// `y[o] = x[base + sum_d coord_d(o) * src_strides_d]` for an output of rank <= 4.
+    fn strided_gather(
+        &self,
+        x: &wgpu::Buffer,
+        out_shape: Vec<usize>,
+        src_strides: &[usize],
+        base: usize,
+    ) -> Result<Value, GpuError> {
+        let (d, s) = (left4(&out_shape, 1), left4(src_strides, 0));
+        let len: usize = out_shape.iter().product();
+        let (buf, shape) = self.out(len, out_shape);
+        let words = u32s(&[d[0], d[1], d[2], d[3], s[0], s[1], s[2], s[3], base, len, 0, 0])?;
+        self.simple(&self.gather, &[x, &buf], &words, len);
+        Ok(Value::Gpu { buf, shape })
+    }
+
     fn out(&self, len: usize, shape: Vec<usize>) -> (std::sync::Arc<wgpu::Buffer>, Vec<usize>) {
         (std::sync::Arc::new(self.gpu.storage(len)), shape)
     }
@@ -269,9 +284,7 @@ impl GpuModel {
                 let parts: Vec<(&wgpu::Buffer, &[usize])> =
                     (0..args.len()).map(|i| Self::gpu_arg(args, i)).collect::<Result<_, _>>()?;
                 let first = parts.first().ok_or_else(|| GpuError::Shape("Concat of nothing".into()))?.1;
-                let r = first.len() as i64;
-                let axis = n.int("axis", 0);
-                let axis = (if axis < 0 { axis + r } else { axis }) as usize;
+                let axis = norm_axis(n.int("axis", 0), first.len()).map_err(GpuError::Shape)?;
                 let mut shape = first.to_vec();
                 shape[axis] = parts.iter().map(|p| p.1[axis]).sum();
                 let outer: usize = first[..axis].iter().product();
@@ -308,38 +321,13 @@ impl GpuModel {
                 } else {
                     let starts = Self::ints(args, 1).ok_or_else(|| GpuError::Shape("Slice without starts".into()))?;
                     let ends = Self::ints(args, 2).ok_or_else(|| GpuError::Shape("Slice without ends".into()))?;
-                    let axes = Self::ints(args, 3).unwrap_or_else(|| (0..starts.len() as i64).collect());
-                    let steps = Self::ints(args, 4).unwrap_or_else(|| vec![1; starts.len()]);
-                    let mut shape = xs.to_vec();
-                    let mut st = si.clone();
-                    let mut base = 0usize;
-                    for (k, &start) in starts.iter().enumerate() {
-                        let r = xs.len() as i64;
-                        let a = axes.get(k).copied().unwrap_or(k as i64);
-                        let a = (if a < 0 { a + r } else { a }) as usize;
-                        let (dim, step) = (xs[a] as i64, steps.get(k).copied().unwrap_or(1));
-                        if step <= 0 {
-                            return Err(GpuError::Shape("Slice steps <= 0 are not supported".into()));
-                        }
-                        let clamp = |v: i64| if v < 0 { (v + dim).max(0) } else { v.min(dim) };
-                        let (b, e) = (clamp(start), clamp(ends.get(k).copied().unwrap_or(dim)));
-                        shape[a] = if e > b { ((e - b + step - 1) / step) as usize } else { 0 };
-                        base += b as usize * si[a];
-                        st[a] = si[a] * step as usize;
-                    }
-                    (shape, st, base)
+                    let (axes, steps) = (Self::ints(args, 3), Self::ints(args, 4));
+                    let (lo, step, shape) =
+                        slice_plan(xs, &starts, &ends, axes.as_deref(), steps.as_deref()).map_err(GpuError::Shape)?;
+                    let base = lo.iter().zip(&si).map(|(l, s)| l * s).sum();
+                    (shape, si.iter().zip(&step).map(|(s, k)| s * k).collect(), base)
                 };
-                // Pad to 4-D on the left.
-                let pad = 4 - out_shape.len();
-                let mut d = vec![1usize; pad];
-                d.extend(&out_shape);
-                let mut s = vec![0usize; pad];
-                s.extend(&src_strides);
-                let len: usize = out_shape.iter().product();
-                let (buf, shape) = self.out(len, out_shape);
-                let words = u32s(&[d[0], d[1], d[2], d[3], s[0], s[1], s[2], s[3], base, len, 0, 0])?;
-                self.simple(&self.gather, &[x, &buf], &words, len);
-                Ok(Value::Gpu { buf, shape })
+                self.strided_gather(x, out_shape, &src_strides, base)
             }
             "MaxPool" | "AveragePool" => {
                 let (x, xs) = Self::gpu_arg(args, 0)?;
@@ -399,15 +387,9 @@ impl GpuModel {
                     Some(Value::Gpu { buf, shape }) => (buf.clone(), shape.clone()),
                     _ => return Err(GpuError::Shape("Reshape input is not on the GPU".into())),
                 };
-                // The shape arithmetic of the reference executor, on an empty stand-in.
-                let total: usize = xs.iter().product();
-                let stand_in = Tensor::F32 { shape: xs, data: vec![0.0; total] };
-                let spec = match args.get(1).copied().flatten() {
-                    Some(Value::Host(t)) => t.clone(),
-                    _ => return Err(GpuError::Shape("Reshape needs a constant shape".into())),
-                };
-                let out = eval_node(n, &[Some(&stand_in), Some(&spec)]).map_err(GpuError::Shape)?;
-                let shape = out.first().map(|t| t.shape().to_vec()).unwrap_or_default();
+                let spec =
+                    Self::ints(args, 1).ok_or_else(|| GpuError::Shape("Reshape needs a constant shape".into()))?;
+                let shape = reshape_shape(&xs, &spec).map_err(GpuError::Shape)?;
                 Ok(Value::Gpu { buf: x, shape })
             }
             "Pad" => {
@@ -428,15 +410,8 @@ impl GpuModel {
                     )));
                 }
                 let out_shape: Vec<usize> = (0..r).map(|d| xs[d] + pads[d] as usize + pads[d + r] as usize).collect();
-                let lead = 4 - r;
-                let four = |v: &[usize]| {
-                    let mut o = vec![1usize; lead];
-                    o.extend(v);
-                    o
-                };
-                let (d, i) = (four(&out_shape), four(xs));
-                let mut b = vec![0usize; lead];
-                b.extend(pads[..r].iter().map(|&p| p as usize));
+                let (d, i) = (left4(&out_shape, 1), left4(xs, 1));
+                let b = left4(&pads[..r].iter().map(|&p| p as usize).collect::<Vec<_>>(), 0);
                 let len: usize = out_shape.iter().product();
                 let (buf, shape) = self.out(len, out_shape);
                 let mut words = u32s(&[d[0], d[1], d[2], d[3], i[0], i[1], i[2], i[3], b[0], b[1], b[2], b[3], len])?;
@@ -446,12 +421,7 @@ impl GpuModel {
             }
             "Softmax" => {
                 let (x, xs) = Self::gpu_arg(args, 0)?;
-                let r = xs.len() as i64;
-                let a = n.int("axis", -1);
-                let axis = (if a < 0 { a + r } else { a }) as usize;
-                if axis >= xs.len() {
-                    return Err(GpuError::Shape(format!("Softmax axis {a} of rank {r}")));
-                }
+                let axis = norm_axis(n.int("axis", -1), xs.len()).map_err(GpuError::Shape)?;
                 let step: usize = xs[axis + 1..].iter().product();
                 let total: usize = xs.iter().product();
                 let rows = total / xs[axis].max(1);
@@ -469,9 +439,7 @@ impl GpuModel {
                     }
                     _ => return Err(GpuError::Shape("Gather on the GPU takes one constant index".into())),
                 };
-                let r = xs.len() as i64;
-                let a = n.int("axis", 0);
-                let axis = (if a < 0 { a + r } else { a }) as usize;
+                let axis = norm_axis(n.int("axis", 0), xs.len()).map_err(GpuError::Shape)?;
                 let i = idx.first().copied().unwrap_or(0);
                 let i = if i < 0 { i + xs[axis] as i64 } else { i };
                 if axis >= xs.len() || !(0..xs[axis] as i64).contains(&i) {
@@ -491,17 +459,7 @@ impl GpuModel {
                         out_shape.len()
                     )));
                 }
-                let lead = 4 - out_shape.len();
-                let mut d = vec![1usize; lead];
-                d.extend(&out_shape);
-                let mut s = vec![0usize; lead];
-                s.extend(&st);
-                let len: usize = out_shape.iter().product();
-                let (buf, shape) = self.out(len, out_shape);
-                let base = i as usize * si[axis];
-                let words = u32s(&[d[0], d[1], d[2], d[3], s[0], s[1], s[2], s[3], base, len, 0, 0])?;
-                self.simple(&self.gather, &[x, &buf], &words, len);
-                Ok(Value::Gpu { buf, shape })
+                self.strided_gather(x, out_shape, &st, i as usize * si[axis])
             }
             other => Err(GpuError::Shape(format!("op `{other}` is not on the GPU yet"))),
         }

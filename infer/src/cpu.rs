@@ -110,7 +110,8 @@ pub fn check_ops(model: &Model) -> Result<(), RunError> {
     Ok(())
 }
 
-fn strides(shape: &[usize]) -> Vec<usize> {
+/// Row-major strides of `shape`.
+pub fn strides(shape: &[usize]) -> Vec<usize> {
     let mut s = vec![1; shape.len()];
     for i in (0..shape.len().saturating_sub(1)).rev() {
         s[i] = s[i + 1] * shape[i + 1];
@@ -237,30 +238,7 @@ fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
         "Reshape" => {
             let t = args.first().copied().flatten().ok_or("missing data")?;
             let spec = int_arg(args, 1).ok_or("missing shape")?;
-            let total: usize = t.shape().iter().product();
-            let mut shape: Vec<usize> = Vec::new();
-            let mut infer = None;
-            for (i, &d) in spec.iter().enumerate() {
-                match d {
-                    0 => shape.push(*t.shape().get(i).ok_or("0 in shape beyond the input's rank")?),
-                    -1 => {
-                        infer = Some(i);
-                        shape.push(1);
-                    }
-                    d if d > 0 => shape.push(d as usize),
-                    d => return Err(format!("bad dimension {d} in shape")),
-                }
-            }
-            if let Some(i) = infer {
-                let known: usize = shape.iter().product();
-                if known == 0 || !total.is_multiple_of(known) {
-                    return Err(format!("cannot reshape {:?} to {spec:?}", t.shape()));
-                }
-                shape[i] = total / known;
-            }
-            if shape.iter().product::<usize>() != total {
-                return Err(format!("cannot reshape {:?} to {spec:?}", t.shape()));
-            }
+            let shape = reshape_shape(t.shape(), &spec)?;
             one(match t {
                 Tensor::F32 { data, .. } => Tensor::F32 { shape, data: data.clone() },
                 Tensor::I64 { data, .. } => Tensor::I64 { shape, data: data.clone() },
@@ -331,7 +309,8 @@ fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
     }
 }
 
-fn norm_axis(a: i64, rank: usize) -> Result<usize, String> {
+/// An ONNX axis (negative counts from the end) as an index, checked against `rank`.
+pub fn norm_axis(a: i64, rank: usize) -> Result<usize, String> {
     let r = rank as i64;
     let v = if a < 0 { a + r } else { a };
     if (0..r).contains(&v) { Ok(v as usize) } else { Err(format!("axis {a} out of range for rank {rank}")) }
@@ -476,34 +455,83 @@ fn concat(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
     Ok(Tensor::F32 { shape, data })
 }
 
-fn slice(args: &[Option<&Tensor>]) -> Result<Tensor, String> {
-    let (s, x) = f32_arg(args, 0)?;
-    let starts = int_arg(args, 1).ok_or("Slice without starts")?;
-    let ends = int_arg(args, 2).ok_or("Slice without ends")?;
-    let axes = int_arg(args, 3).unwrap_or_else(|| (0..starts.len() as i64).collect());
-    let steps = int_arg(args, 4).unwrap_or_else(|| vec![1; starts.len()]);
-    let mut lo: Vec<i64> = vec![0; s.len()];
-    let mut step: Vec<i64> = vec![1; s.len()];
+/// The output shape of ONNX `Reshape` of `input` to `spec` (`0` copies a dimension, `-1`
+/// takes what is left).
+pub fn reshape_shape(input: &[usize], spec: &[i64]) -> Result<Vec<usize>, String> {
+    let total: usize = input.iter().product();
+    let mut shape: Vec<usize> = Vec::new();
+    let mut infer = None;
+    for (i, &d) in spec.iter().enumerate() {
+        match d {
+            0 => shape.push(*input.get(i).ok_or("0 in shape beyond the input's rank")?),
+            -1 => {
+                infer = Some(i);
+                shape.push(1);
+            }
+            d if d > 0 => shape.push(d as usize),
+            d => return Err(format!("bad dimension {d} in shape")),
+        }
+    }
+    if let Some(i) = infer {
+        let known: usize = shape.iter().product();
+        if known == 0 || !total.is_multiple_of(known) {
+            return Err(format!("cannot reshape {input:?} to {spec:?}"));
+        }
+        shape[i] = total / known;
+    }
+    if shape.iter().product::<usize>() != total {
+        return Err(format!("cannot reshape {input:?} to {spec:?}"));
+    }
+    Ok(shape)
+}
+
+/// An ONNX `Slice` of a tensor of shape `s` (opset 10+ inputs: `axes` and `steps` default to
+/// all axes and 1): per dimension the first index and the step, and the output shape.
+pub type SlicePlan = (Vec<usize>, Vec<usize>, Vec<usize>);
+
+/// Plan a `Slice` (see [`SlicePlan`]); ends are clamped as ONNX does, steps must be positive.
+pub fn slice_plan(
+    s: &[usize],
+    starts: &[i64],
+    ends: &[i64],
+    axes: Option<&[i64]>,
+    steps: Option<&[i64]>,
+) -> Result<SlicePlan, String> {
+    let mut lo = vec![0usize; s.len()];
+    let mut step = vec![1usize; s.len()];
     let mut shape = s.to_vec();
     for (k, &start) in starts.iter().enumerate() {
-        let a = norm_axis(*axes.get(k).ok_or("axes shorter than starts")?, s.len())?;
-        let (dim, st) = (s[a] as i64, *steps.get(k).unwrap_or(&1));
+        let a = match axes {
+            Some(ax) => *ax.get(k).ok_or("axes shorter than starts")?,
+            None => k as i64,
+        };
+        let a = norm_axis(a, s.len())?;
+        let (dim, st) = (s[a] as i64, steps.and_then(|v| v.get(k).copied()).unwrap_or(1));
         if st <= 0 {
             return Err("Slice steps <= 0 are not supported".into());
         }
         let clamp = |v: i64| if v < 0 { (v + dim).max(0) } else { v.min(dim) };
         let (b, e) = (clamp(start), clamp(*ends.get(k).ok_or("ends shorter than starts")?));
-        lo[a] = b;
-        step[a] = st;
+        lo[a] = b as usize;
+        step[a] = st as usize;
         shape[a] = if e > b { ((e - b + st - 1) / st) as usize } else { 0 };
     }
+    Ok((lo, step, shape))
+}
+
+fn slice(args: &[Option<&Tensor>]) -> Result<Tensor, String> {
+    let (s, x) = f32_arg(args, 0)?;
+    let starts = int_arg(args, 1).ok_or("Slice without starts")?;
+    let ends = int_arg(args, 2).ok_or("Slice without ends")?;
+    let (axes, steps) = (int_arg(args, 3), int_arg(args, 4));
+    let (lo, step, shape) = slice_plan(s, &starts, &ends, axes.as_deref(), steps.as_deref())?;
     let (si, so) = (strides(s), strides(&shape));
     let total: usize = shape.iter().product();
     let data = (0..total)
         .map(|o| {
             let mut src = 0usize;
             for d in 0..shape.len() {
-                src += (lo[d] as usize + ((o / so[d]) % shape[d]) * step[d] as usize) * si[d];
+                src += (lo[d] + ((o / so[d]) % shape[d]) * step[d]) * si[d];
             }
             x[src]
         })
