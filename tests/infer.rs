@@ -1,6 +1,7 @@
-//! Inference (issue 12): the ONNX reader and the reference CPU executor on both vendored
-//! detectors, raw outputs against onnxruntime on real images, YOLOX-nano's detections on
-//! the real Kinect frames, and corrupt model files.
+//! Inference (issue 12): the ONNX reader, the reference executor and the CPU backend (rten)
+//! on both vendored detectors, raw outputs against onnxruntime on real images, YOLOX-nano's
+//! detections on the real Kinect frames, every backend giving the same detections, and
+//! corrupt models or unsupported ops as clear errors.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 mod common;
@@ -13,6 +14,7 @@ use std::process::Command;
 use dynaflow_infer::cpu::{SUPPORTED, Tensor, run};
 use dynaflow_infer::detect::{decode_yolox, letterbox_bgr, nms};
 use dynaflow_infer::onnx::{OnnxError, load, parse};
+use dynaflow_infer::rten_cpu::RtenModel;
 
 fn yolox() -> PathBuf {
     common::repo().join("models/yolox_nano/yolox_nano.onnx")
@@ -82,8 +84,13 @@ fn both_models_parse_and_use_only_supported_ops() {
     }
 }
 
+fn max_abs(a: &[f32], b: &[f32]) -> f32 {
+    assert_eq!(a.len(), b.len());
+    a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max)
+}
+
 #[test]
-fn reference_executor_equals_onnxruntime_on_real_images() {
+fn reference_executor_and_rten_equal_onnxruntime_on_real_images() {
     let Some(python) = frontend::python_with("onnxruntime, numpy") else { return };
     let dir = common::TempDir::new("infer-ort");
     let images = [frontend::ch7()[0].clone(), common::repo().join("tests/fixtures/slambook2_dense_rgbd/color/1.png")];
@@ -93,20 +100,30 @@ fn reference_executor_equals_onnxruntime_on_real_images() {
         let (x, _) = letterbox_bgr(&px, w, h, 416);
         let ours = run(&ym, &[("images", Tensor::F32 { shape: vec![1, 3, 416, 416], data: x.clone() })]).unwrap();
         let theirs = ort(&python, &yolox(), &x, &[1, 3, 416, 416], dir.path());
-        let (a, b) = (ours[0].floats(), &theirs[0]);
-        assert_eq!(a.len(), b.len());
-        let max = a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+        let max = max_abs(&ours[0].floats(), &theirs[0]);
         eprintln!("YOLOX-nano {}: max |ours - onnxruntime| = {max:e}", img.display());
         assert!(max <= 1e-3, "YOLOX {}: {max}", img.display());
+        let rten = RtenModel::load(std::fs::read(yolox()).unwrap()).unwrap();
+        let input = || vec![("images", Tensor::F32 { shape: vec![1, 3, 416, 416], data: x.clone() })];
+        let first = rten.run(&input()).unwrap();
+        let max = max_abs(&first[0].floats(), &theirs[0]);
+        eprintln!("YOLOX-nano {}: max |rten - onnxruntime| = {max:e}", img.display());
+        assert!(max <= 1e-3, "rten YOLOX {}: {max}", img.display());
+        // The CPU backend is deterministic run to run (threads included).
+        assert_eq!(rten.run(&input()).unwrap(), first);
 
         let x = fastestdet_input(&px, w, h);
         let name = fm.inputs[0].name.clone();
         let ours = run(&fm, &[(name.as_str(), Tensor::F32 { shape: vec![1, 3, 352, 352], data: x.clone() })]).unwrap();
         let theirs = ort(&python, &fastestdet(), &x, &[1, 3, 352, 352], dir.path());
-        let (a, b) = (ours[0].floats(), &theirs[0]);
-        let max = a.iter().zip(b).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+        let max = max_abs(&ours[0].floats(), &theirs[0]);
         eprintln!("FastestDet {}: max |ours - onnxruntime| = {max:e}", img.display());
         assert!(max <= 1e-3, "FastestDet {}: {max}", img.display());
+        let rten = RtenModel::load(std::fs::read(fastestdet()).unwrap()).unwrap();
+        let got = rten.run(&[(name.as_str(), Tensor::F32 { shape: vec![1, 3, 352, 352], data: x })]).unwrap();
+        let max = max_abs(&got[0].floats(), &theirs[0]);
+        eprintln!("FastestDet {}: max |rten - onnxruntime| = {max:e}", img.display());
+        assert!(max <= 1e-3, "rten FastestDet {}: {max}", img.display());
     }
 }
 
@@ -319,18 +336,24 @@ fn wgpu_backend_gives_the_cpu_detections_and_falls_back_with_a_warning() {
         let out = cmd.args(["infer", "--backend", backend]).args(extra).arg(&img).output().unwrap();
         assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
         let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        let list: Vec<(String, i64)> = v["detections"]
+        let list: Vec<(String, f64)> = v["detections"]
             .as_array()
             .unwrap()
             .iter()
-            .map(|d| (d["class"].as_str().unwrap().to_string(), (d["score"].as_f64().unwrap() * 1000.0).round() as i64))
+            .map(|d| (d["class"].as_str().unwrap().to_string(), d["score"].as_f64().unwrap()))
             .collect();
         (list, String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    // The same classes in the same order, scores within 1e-3.
+    let same = |a: &[(String, f64)], b: &[(String, f64)]| {
+        a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.0 == y.0 && (x.1 - y.1).abs() <= 1e-3)
     };
     // YOLOX-nano: every op has a kernel; the same detections and scores (to 1e-3) as the CPU.
     let (cpu, _) = classes("cpu", &[]);
     let (gpu, err) = classes("wgpu", &[]);
-    assert_eq!(gpu, cpu, "{err}");
+    assert!(same(&gpu, &cpu), "{gpu:?} vs {cpu:?}: {err}");
+    let (reference, _) = classes("reference", &[]);
+    assert!(same(&reference, &cpu), "{reference:?} vs {cpu:?}");
     if std::env::var_os("DYNAFLOW_REQUIRE_GPU").is_some() {
         assert!(!err.contains("running on the CPU"), "{err}");
     }
@@ -339,9 +362,34 @@ fn wgpu_backend_gives_the_cpu_detections_and_falls_back_with_a_warning() {
     let fd = ["--decoder", "fastestdet", "--model", model.to_str().unwrap()];
     let (cpu, _) = classes("cpu", &fd);
     let (gpu, err) = classes("wgpu", &fd);
-    assert_eq!(gpu, cpu, "{err}");
+    assert!(same(&gpu, &cpu), "{gpu:?} vs {cpu:?}: {err}");
     // No adapter: the documented fallback to the CPU, with a warning; the same detections.
     let (fallback, err) = classes("none", &[]);
     assert!(err.contains("no GPU adapter") && err.contains("running on the CPU"), "{err}");
-    assert_eq!(fallback, classes("cpu", &[]).0);
+    assert!(same(&fallback, &classes("cpu", &[]).0));
+}
+
+#[test]
+fn an_unsupported_op_is_named_on_every_backend() {
+    // FastestDet with its Softmax op renamed: `NodeProto.op_type` is field 4, a 7-byte
+    // string (tag 0x22, length 7); the same length keeps the protobuf valid.
+    let mut bytes = std::fs::read(fastestdet()).unwrap();
+    let at = bytes.windows(9).position(|w| w == b"\x22\x07Softmax").unwrap();
+    bytes[at + 2..at + 9].copy_from_slice(b"Softmay");
+    let dir = common::TempDir::new("infer-unsupported");
+    let model = dir.path().join("odd.onnx");
+    std::fs::write(&model, &bytes).unwrap();
+    let img = frontend::ch7()[0].clone();
+    for (backend, says) in [("reference", "unsupported ONNX op `Softmay`"), ("cpu", "Softmay"), ("wgpu", "Softmay")] {
+        let out = common::bin()
+            .args(["infer", "--decoder", "fastestdet", "--backend", backend, "--model"])
+            .arg(&model)
+            .arg(&img)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        eprintln!("{backend}: {err}");
+        assert_eq!(out.status.code(), Some(2), "{backend}: {err}");
+        assert!(err.contains(says) && !err.contains("panicked"), "{backend}: {err}");
+    }
 }

@@ -1,23 +1,22 @@
-//! dynaflow's wgpu compute executor, first part: the device (any Vulkan, Metal or DX12
-//! adapter; Mesa's lavapipe in CI) and WGSL kernels for the detectors' heavy ops, each tested
-//! against `dynaflow-infer`'s reference executor on odd shapes.
+//! dynaflow's wgpu compute executor: the device (any Vulkan, Metal or DX12 adapter; Mesa's
+//! lavapipe in CI) and a planned executor for ONNX detectors, each kernel tested against
+//! `dynaflow-infer`'s reference executor on odd shapes.
 //!
 //! - [`Gpu`]: instance, adapter and device, with a clear error when there is no adapter.
-//! - `kernels`: `conv2d` (groups, strides, padding, dilation, fused SiLU / sigmoid / ReLU),
-//!   `binary` (add, multiply), `unary`, `gather` (slices, transposes), `copy_block` (concat),
-//!   pooling (max, average), `resize` (nearest), `pad` (constant), `softmax`.
-//! - [`GpuModel`]: a whole ONNX model node by node (YOLOX-nano and FastestDet: their raw
-//!   outputs equal the reference within 8e-5 on real images).
-//!
-//! Still to come (issue 12): planning a whole model at load time (buffers and bind groups
-//! allocated once, Conv + activation fused, Concat made free, one submit per frame),
-//! register-tiled GEMM for 1x1 convolutions, timestamp queries.
+//! - [`GpuModel`]: a whole ONNX model planned at load time (activations fused into
+//!   convolutions, Concat free, one arena, every bind group made once) and run with one submit
+//!   per frame; [`GpuModel::profile`] times each dispatch with timestamp queries.
+//! - `kernels` (WGSL): implicit-GEMM convolution (register-tiled 64x64 tiles, 1x1 and dense
+//!   3x3 alike), direct convolution (grouped, depthwise), `binary` (add, multiply), `unary`,
+//!   `gather` (slices, transposes, one-index gathers), `copy_block` (concat parts that cannot be
+//!   written in place), pooling (max, average), `resize` (nearest), `pad` (constant),
+//!   `softmax`.
 
 mod kernels;
 mod model;
 
-pub use kernels::{Activation, BinaryOp, Conv2d, ConvShape};
-pub use model::{GPU_OPS, GpuModel};
+pub use kernels::{Activation, ConvShape};
+pub use model::{GPU_OPS, GpuModel, KernelTime, PlanStats};
 
 /// Why the GPU cannot be used.
 #[derive(Debug, thiserror::Error)]
@@ -79,6 +78,8 @@ impl Gpu {
                 max_buffer_size: limits.max_buffer_size,
                 ..wgpu::Limits::downlevel_defaults()
             },
+            // Timestamp queries where the adapter has them (`GpuModel::profile`).
+            required_features: adapter.features() & wgpu::Features::TIMESTAMP_QUERY,
             ..wgpu::DeviceDescriptor::default()
         }))
         .map_err(|e| GpuError::Device { adapter: name.clone(), message: e.to_string() })?;
@@ -119,6 +120,12 @@ impl Gpu {
         let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
         self.queue.submit([enc.finish()]);
+        self.read_mapped(&staging, len)
+    }
+
+    /// Map `staging` (a `MAP_READ` buffer the submitted work fills), wait, and read `len`
+    /// little-endian words of `N` bytes.
+    fn read_words<const N: usize>(&self, staging: &wgpu::Buffer, len: usize) -> Result<Vec<[u8; N]>, GpuError> {
         let slice = staging.slice(..);
         let (tx, rx) = std::sync::mpsc::channel();
         slice.map_async(wgpu::MapMode::Read, move |r| {
@@ -127,10 +134,20 @@ impl Gpu {
         self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Readback(e.to_string()))?;
         rx.recv().map_err(|e| GpuError::Readback(e.to_string()))?.map_err(|e| GpuError::Readback(e.to_string()))?;
         let data = slice.get_mapped_range().map_err(|e| GpuError::Readback(e.to_string()))?;
-        let out = data.chunks_exact(4).take(len).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
+        let out = data.chunks_exact(N).take(len).map(|c| c.try_into().unwrap_or([0; N])).collect();
         drop(data);
         staging.unmap();
         Ok(out)
+    }
+
+    /// `len` floats of a mapped-readable buffer.
+    pub(crate) fn read_mapped(&self, staging: &wgpu::Buffer, len: usize) -> Result<Vec<f32>, GpuError> {
+        Ok(self.read_words::<4>(staging, len)?.into_iter().map(f32::from_le_bytes).collect())
+    }
+
+    /// `len` u64 of a mapped-readable buffer (timestamps).
+    pub(crate) fn read_mapped_u64(&self, staging: &wgpu::Buffer, len: usize) -> Result<Vec<u64>, GpuError> {
+        Ok(self.read_words::<8>(staging, len)?.into_iter().map(u64::from_le_bytes).collect())
     }
 
     /// A uniform buffer holding `words`.
@@ -142,21 +159,5 @@ impl Gpu {
             contents: &bytes,
             usage: wgpu::BufferUsages::UNIFORM,
         })
-    }
-
-    /// Record and submit one compute dispatch of `pipeline` over `invocations` threads
-    /// (workgroups of 64, spread over x and y to stay under the 65 535 limit).
-    pub(crate) fn dispatch(&self, pipeline: &wgpu::ComputePipeline, bind: &wgpu::BindGroup, invocations: usize) {
-        let groups = invocations.div_ceil(64).max(1) as u32;
-        let x = groups.min(65_535);
-        let y = groups.div_ceil(x);
-        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        {
-            let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, bind, &[]);
-            pass.dispatch_workgroups(x, y, 1);
-        }
-        self.queue.submit([enc.finish()]);
     }
 }

@@ -1,65 +1,32 @@
-//! A whole ONNX model on the GPU, node by node: float activations stay in GPU buffers,
-//! weights are uploaded once at load, shape arithmetic (`Shape`, `Constant`, integer
-//! `Gather`/`Unsqueeze`...) runs on the host with the reference executor's own code. One
-//! dispatch per node for now; planning (fusion, one submit per frame, buffers reused) is next.
+//! A whole ONNX model planned once at load and run with one submit per frame.
+//!
+//! Planning (in [`GpuModel::with_inputs`]), for fixed input shapes:
+//! 1. **Fusion** on the ONNX graph: `Conv -> Relu`, `Conv -> Sigmoid` and YOLOX's SiLU
+//!    (`Conv -> Sigmoid -> Mul(conv, sigmoid)`) become one convolution with the activation in
+//!    its store, when the intermediate values have no other reader.
+//! 2. **Lowering**: shape arithmetic on constants (`Shape`, integer `Gather`, `Unsqueeze`,
+//!    `Constant`...) runs on the host with the reference executor's own code; every float op
+//!    becomes a kernel with its parameters computed now. Dense convolutions go to the
+//!    register-tiled implicit GEMM, grouped and depthwise ones to the direct kernel.
+//! 3. **Placement**: each value gets a region (buffer, element offset) in an arena allocated
+//!    once. Concat is free: walking the graph backwards, a concatenation's inputs are placed
+//!    inside its output (when the axis is outermost after batch 1), so their producers write
+//!    there directly; `Reshape` is an alias. A part that cannot be placed (a graph input, a
+//!    value two concatenations want, a kernel that would read and write one buffer) is copied.
+//! 4. **Binding**: every bind group, parameter and offset buffer is created once.
+//!
+//! Per frame ([`GpuModel::run`]): one upload per input, one encoder with one compute pass of
+//! every dispatch, one copy of the outputs into a staging buffer, one submit, one read-back.
+//! [`GpuModel::profile`] times every dispatch with timestamp queries where the adapter has them.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
+use std::sync::{Arc, Mutex};
 
 use dynaflow_infer::cpu::{Tensor, eval_node, norm_axis, reshape_shape, slice_plan, strides};
 use dynaflow_infer::onnx::{Model, Node};
 
-use crate::kernels::{bind, pipeline};
-use crate::{Activation, Conv2d, ConvShape, Gpu, GpuError};
-
-/// A value during a run.
-enum Value {
-    /// Float tensor in a GPU buffer.
-    Gpu { buf: std::sync::Arc<wgpu::Buffer>, shape: Vec<usize> },
-    /// Host tensor (weights, shapes, indices).
-    Host(Tensor),
-}
-
-impl Value {
-    fn shape(&self) -> &[usize] {
-        match self {
-            Value::Gpu { shape, .. } => shape,
-            Value::Host(t) => t.shape(),
-        }
-    }
-}
-
-/// A model loaded onto a GPU.
-pub struct GpuModel {
-    gpu: Gpu,
-    model: Model,
-    weights: HashMap<String, wgpu::Buffer>,
-    conv: Conv2d,
-    unary: wgpu::ComputePipeline,
-    binary: wgpu::ComputePipeline,
-    gather: wgpu::ComputePipeline,
-    copy_block: wgpu::ComputePipeline,
-    maxpool: wgpu::ComputePipeline,
-    resize: wgpu::ComputePipeline,
-    pad: wgpu::ComputePipeline,
-    softmax: wgpu::ComputePipeline,
-}
-
-impl std::fmt::Debug for GpuModel {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("GpuModel").field("adapter", &self.gpu.adapter).field("nodes", &self.model.nodes.len()).finish()
-    }
-}
-
-/// `v` widened to 4 entries on the left with `fill` (callers check the rank is at most 4).
-fn left4(v: &[usize], fill: usize) -> Vec<usize> {
-    let mut o = vec![fill; 4usize.saturating_sub(v.len())];
-    o.extend(v);
-    o
-}
-
-fn u32s(v: &[usize]) -> Result<Vec<u32>, GpuError> {
-    v.iter().map(|&x| u32::try_from(x).map_err(|_| GpuError::Shape("dimension over u32".into()))).collect()
-}
+use crate::kernels::{Kernels, Kind, bind};
+use crate::{Activation, ConvShape, Gpu, GpuError};
 
 /// Ops with a GPU kernel here.
 pub const GPU_OPS: &[&str] = &[
@@ -82,6 +49,352 @@ pub const GPU_OPS: &[&str] = &[
 /// Ops run on the host (shape arithmetic on constants).
 const HOST_OPS: &[&str] = &["Constant", "Gather", "Shape", "Unsqueeze"];
 
+/// `v` widened to 4 entries on the left with `fill` (callers check the rank is at most 4).
+fn left4(v: &[usize], fill: usize) -> Vec<usize> {
+    let mut o = vec![fill; 4usize.saturating_sub(v.len())];
+    o.extend(v);
+    o
+}
+
+fn u32s(v: &[usize]) -> Result<Vec<u32>, GpuError> {
+    v.iter().map(|&x| u32::try_from(x).map_err(|_| GpuError::Shape("dimension over u32".into()))).collect()
+}
+
+/// A value while planning.
+enum PVal {
+    /// A float tensor that will live on the GPU (its shape).
+    Gpu(Vec<usize>),
+    /// A host tensor (weights, shapes, indices).
+    Host(Tensor),
+}
+
+/// How many invocations a kernel needs.
+#[derive(Clone, Copy, Debug)]
+enum Grid {
+    /// One invocation per element, workgroups of 64.
+    Flat(usize),
+    /// Implicit GEMM: tiles of `tile` (pixels, channels), one layer of tiles per batch item.
+    Gemm { pixels: usize, channels: usize, batch: usize, tile: [usize; 2] },
+}
+
+impl Grid {
+    fn groups(self) -> Result<[u32; 3], GpuError> {
+        let cap = |v: usize| {
+            u32::try_from(v).ok().filter(|&v| v <= 65_535).ok_or_else(|| GpuError::Shape("dispatch too large".into()))
+        };
+        match self {
+            Grid::Flat(n) => {
+                let groups = n.div_ceil(64).max(1);
+                let x = groups.min(65_535);
+                Ok([cap(x)?, cap(groups.div_ceil(x))?, 1])
+            }
+            Grid::Gemm { pixels, channels, batch, tile } => {
+                Ok([cap(pixels.div_ceil(tile[0]).max(1))?, cap(channels.div_ceil(tile[1]).max(1))?, cap(batch.max(1))?])
+            }
+        }
+    }
+}
+
+/// A float node after lowering.
+enum Lowered {
+    /// A kernel.
+    Kernel {
+        kind: Kind,
+        /// GPU inputs, in binding order.
+        inputs: Vec<String>,
+        weights: Vec<Arc<wgpu::Buffer>>,
+        words: Vec<u32>,
+        grid: Grid,
+    },
+    /// The input under another shape (Reshape).
+    Alias { input: String },
+    /// A concatenation along `axis`.
+    Concat { parts: Vec<(String, Vec<usize>)>, axis: usize },
+}
+
+/// One lowered node with its output.
+struct Planned {
+    label: String,
+    out: String,
+    shape: Vec<usize>,
+    what: Lowered,
+}
+
+/// Where a value lives: arena buffer and element offset.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Region {
+    root: usize,
+    off: usize,
+}
+
+/// One recorded dispatch.
+struct Step {
+    label: String,
+    kind: Kind,
+    bind: wgpu::BindGroup,
+    groups: [u32; 3],
+}
+
+/// A graph output: read back from the GPU, or a host constant.
+enum Out {
+    Gpu { region: Region, shape: Vec<usize>, staging_off: usize },
+    Host(Tensor),
+}
+
+/// What planning did, for reports and benchmarks.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct PlanStats {
+    /// ONNX nodes in the model.
+    pub nodes: usize,
+    /// Dispatches per frame.
+    pub dispatches: usize,
+    /// Activations fused into convolutions.
+    pub fused_activations: usize,
+    /// Concatenation inputs written in place by their producers.
+    pub concat_in_place: usize,
+    /// Concatenation inputs copied.
+    pub concat_copied: usize,
+    /// Bytes of the activation arena (weights excluded).
+    pub arena_bytes: usize,
+    /// Bytes of weights on the GPU.
+    pub weight_bytes: usize,
+}
+
+/// Time of one dispatch, from timestamp queries.
+#[derive(Clone, Debug, PartialEq)]
+pub struct KernelTime {
+    /// The ONNX node (the first of a fused group).
+    pub node: String,
+    /// The kernel.
+    pub kernel: &'static str,
+    /// GPU time in nanoseconds.
+    pub ns: f64,
+}
+
+/// A model planned onto a GPU for fixed input shapes.
+pub struct GpuModel {
+    gpu: Gpu,
+    kernels: Kernels,
+    arena: Vec<wgpu::Buffer>,
+    steps: Vec<Step>,
+    inputs: Vec<(String, Vec<usize>, Region)>,
+    outputs: Vec<Out>,
+    staging: wgpu::Buffer,
+    staging_len: usize,
+    stats: PlanStats,
+    /// Serialises runs (one staging buffer).
+    lock: Mutex<()>,
+}
+
+impl std::fmt::Debug for GpuModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuModel").field("adapter", &self.gpu.adapter).field("stats", &self.stats).finish()
+    }
+}
+
+/// Fuse activations into convolutions: the node list with fused nodes removed, each node's
+/// activation, and how many were fused.
+fn fuse(model: &Model) -> (Vec<Node>, Vec<Activation>, usize) {
+    let mut consumers: HashMap<&str, Vec<usize>> = HashMap::new();
+    for (i, n) in model.nodes.iter().enumerate() {
+        for x in n.inputs.iter().filter(|x| !x.is_empty()) {
+            consumers.entry(x.as_str()).or_default().push(i);
+        }
+    }
+    let graph_out: HashSet<&str> = model.outputs.iter().map(|o| o.name.as_str()).collect();
+    let private = |name: &str| !graph_out.contains(name);
+    let readers = |name: &str| consumers.get(name).cloned().unwrap_or_default();
+    let mut nodes = model.nodes.clone();
+    let mut acts = vec![Activation::Identity; nodes.len()];
+    let mut dropped = vec![false; nodes.len()];
+    let mut fused = 0;
+    for i in 0..nodes.len() {
+        if nodes[i].op_type != "Conv" || nodes[i].outputs.len() != 1 || !private(&nodes[i].outputs[0]) {
+            continue;
+        }
+        let y = nodes[i].outputs[0].clone();
+        let r = readers(&y);
+        let op = |j: usize| model.nodes[j].op_type.as_str();
+        let single = |j: usize| model.nodes[j].outputs.len() == 1 && !dropped[j];
+        let (act, gone): (Activation, Vec<usize>) = match r.as_slice() {
+            [j] if single(*j) && op(*j) == "Relu" => (Activation::Relu, vec![*j]),
+            [j] if single(*j) && op(*j) == "Sigmoid" => (Activation::Sigmoid, vec![*j]),
+            [a, b] => {
+                let (s, m) = if op(*a) == "Sigmoid" { (*a, *b) } else { (*b, *a) };
+                let s_out = model.nodes[s].outputs.first().map(String::as_str).unwrap_or_default();
+                let mut mul_in: Vec<&str> = model.nodes[m].inputs.iter().map(String::as_str).collect();
+                mul_in.sort_unstable();
+                let mut want = vec![y.as_str(), s_out];
+                want.sort_unstable();
+                if op(s) == "Sigmoid"
+                    && op(m) == "Mul"
+                    && single(s)
+                    && single(m)
+                    && private(s_out)
+                    && readers(s_out) == [m]
+                    && mul_in == want
+                {
+                    (Activation::Silu, vec![s, m])
+                } else {
+                    continue;
+                }
+            }
+            _ => continue,
+        };
+        let last = *gone.last().unwrap_or(&i);
+        nodes[i].outputs[0] = model.nodes[last].outputs[0].clone();
+        acts[i] = act;
+        for g in gone {
+            dropped[g] = true;
+        }
+        fused += 1;
+    }
+    let keep: Vec<usize> = (0..nodes.len()).filter(|&i| !dropped[i]).collect();
+    let acts = keep.iter().map(|&i| acts[i]).collect();
+    let nodes = keep.into_iter().map(|i| nodes[i].clone()).collect();
+    (nodes, acts, fused)
+}
+
+/// Regions of every GPU value, the arena sizes (floats), given values that must own their
+/// buffer (`forbidden`).
+fn place(
+    plan: &[Planned],
+    inputs: &[(String, Vec<usize>)],
+    forbidden: &HashSet<String>,
+) -> (HashMap<String, Region>, Vec<usize>) {
+    let mut at: HashMap<String, Region> = HashMap::new();
+    let mut roots: Vec<usize> = Vec::new();
+    let new_root = |roots: &mut Vec<usize>, len: usize| {
+        roots.push(len.max(1));
+        Region { root: roots.len() - 1, off: 0 }
+    };
+    for (name, shape) in inputs {
+        let r = new_root(&mut roots, shape.iter().product());
+        at.insert(name.clone(), r);
+    }
+    let produced: HashSet<&str> = plan.iter().map(|p| p.out.as_str()).collect();
+    let movable =
+        |at: &HashMap<String, Region>, v: &str| produced.contains(v) && !at.contains_key(v) && !forbidden.contains(v);
+    for p in plan.iter().rev() {
+        match &p.what {
+            Lowered::Concat { parts, axis } if p.shape[..*axis].iter().product::<usize>() == 1 => {
+                let r = match at.get(&p.out) {
+                    Some(r) => *r,
+                    None => {
+                        let r = new_root(&mut roots, p.shape.iter().product());
+                        at.insert(p.out.clone(), r);
+                        r
+                    }
+                };
+                let mut off = r.off;
+                for (name, shape) in parts {
+                    if movable(&at, name) {
+                        at.insert(name.clone(), Region { root: r.root, off });
+                    }
+                    off += shape.iter().product::<usize>();
+                }
+            }
+            Lowered::Alias { input } => {
+                if let Some(r) = at.get(&p.out).copied()
+                    && movable(&at, input)
+                {
+                    at.insert(input.clone(), r);
+                }
+            }
+            _ => {}
+        }
+    }
+    for p in plan {
+        if at.contains_key(&p.out) {
+            continue;
+        }
+        let r = match &p.what {
+            Lowered::Alias { input } => at.get(input).copied(),
+            _ => None,
+        };
+        let r = r.unwrap_or_else(|| new_root(&mut roots, p.shape.iter().product()));
+        at.insert(p.out.clone(), r);
+    }
+    (at, roots)
+}
+
+/// A dispatch before binding: kind, read values (region), written region, words, grid.
+struct Dispatch {
+    label: String,
+    kind: Kind,
+    reads: Vec<Region>,
+    weights: Vec<Arc<wgpu::Buffer>>,
+    write: Region,
+    words: Vec<u32>,
+    grid: Grid,
+    /// The value whose placement to give up if this dispatch reads the buffer it writes.
+    owner: String,
+}
+
+/// The dispatches of a placed plan, and the concat statistics (in place, copied).
+fn dispatches(plan: &[Planned], at: &HashMap<String, Region>) -> Result<(Vec<Dispatch>, usize, usize), GpuError> {
+    let get = |v: &str| at.get(v).copied().ok_or_else(|| GpuError::Shape(format!("value `{v}` has no region")));
+    let mut out = Vec::new();
+    let (mut in_place, mut copied) = (0, 0);
+    for p in plan {
+        let write = get(&p.out)?;
+        match &p.what {
+            Lowered::Kernel { kind, inputs, weights, words, grid } => out.push(Dispatch {
+                label: p.label.clone(),
+                kind: *kind,
+                reads: inputs.iter().map(|i| get(i)).collect::<Result<_, _>>()?,
+                weights: weights.clone(),
+                write,
+                words: words.clone(),
+                grid: *grid,
+                owner: p.out.clone(),
+            }),
+            Lowered::Alias { input } => {
+                let src = get(input)?;
+                if src != write {
+                    let len = p.shape.iter().product();
+                    out.push(Dispatch {
+                        label: p.label.clone(),
+                        kind: Kind::CopyBlock,
+                        reads: vec![src],
+                        weights: Vec::new(),
+                        write,
+                        words: u32s(&[1, len, len, 0])?,
+                        grid: Grid::Flat(len),
+                        owner: p.out.clone(),
+                    });
+                }
+            }
+            Lowered::Concat { parts, axis } => {
+                let outer: usize = p.shape[..*axis].iter().product();
+                let inner_dst: usize = p.shape[*axis..].iter().product();
+                let mut offset = 0;
+                for (name, shape) in parts {
+                    let inner_src: usize = shape[*axis..].iter().product();
+                    let src = get(name)?;
+                    if outer == 1 && src == (Region { root: write.root, off: write.off + offset }) {
+                        in_place += 1;
+                    } else {
+                        copied += 1;
+                        out.push(Dispatch {
+                            label: p.label.clone(),
+                            kind: Kind::CopyBlock,
+                            reads: vec![src],
+                            weights: Vec::new(),
+                            write,
+                            words: u32s(&[outer, inner_src, inner_dst, offset])?,
+                            grid: Grid::Flat(outer * inner_src),
+                            owner: p.out.clone(),
+                        });
+                    }
+                    offset += inner_src;
+                }
+            }
+        }
+    }
+    Ok((out, in_place, copied))
+}
+
 impl GpuModel {
     /// The first op of `model` this executor cannot run, with its node, if any.
     pub fn unsupported(model: &Model) -> Option<String> {
@@ -92,28 +405,173 @@ impl GpuModel {
             .map(|n| format!("op `{}` at node {} has no GPU kernel yet", n.op_type, n.label()))
     }
 
-    /// Upload `model`'s float initializers and compile the kernels.
-    pub fn new(gpu: Gpu, model: Model) -> Self {
-        let weights = model
-            .initializers
+    /// Plan `model` for the input shapes its file declares (all fixed).
+    pub fn new(gpu: Gpu, model: &Model) -> Result<Self, GpuError> {
+        let inputs: Vec<(String, Vec<usize>)> = model
+            .inputs
             .iter()
-            .filter(|(_, t)| !t.floats.is_empty())
-            .map(|(k, t)| (k.clone(), gpu.upload(&t.floats)))
-            .collect();
-        Self {
-            conv: Conv2d::new(&gpu),
-            unary: pipeline(&gpu, include_str!("kernels/unary.wgsl"), "unary"),
-            binary: pipeline(&gpu, include_str!("kernels/binary.wgsl"), "binary"),
-            gather: pipeline(&gpu, include_str!("kernels/gather.wgsl"), "gather"),
-            copy_block: pipeline(&gpu, include_str!("kernels/copy_block.wgsl"), "copy_block"),
-            maxpool: pipeline(&gpu, include_str!("kernels/maxpool.wgsl"), "maxpool"),
-            resize: pipeline(&gpu, include_str!("kernels/resize.wgsl"), "resize"),
-            pad: pipeline(&gpu, include_str!("kernels/pad.wgsl"), "pad"),
-            softmax: pipeline(&gpu, include_str!("kernels/softmax.wgsl"), "softmax"),
-            weights,
-            gpu,
-            model,
+            .filter(|i| !model.initializers.contains_key(&i.name))
+            .map(|i| {
+                let dims: Option<Vec<usize>> =
+                    i.shape.iter().map(|d| d.and_then(|v| usize::try_from(v).ok()).filter(|&v| v > 0)).collect();
+                dims.map(|d| (i.name.clone(), d)).ok_or_else(|| {
+                    GpuError::Shape(format!(
+                        "input `{}` has shape {:?}: the GPU plan needs fixed input shapes",
+                        i.name, i.shape
+                    ))
+                })
+            })
+            .collect::<Result<_, _>>()?;
+        let refs: Vec<(&str, Vec<usize>)> = inputs.iter().map(|(n, s)| (n.as_str(), s.clone())).collect();
+        Self::with_inputs(gpu, model, &refs)
+    }
+
+    /// Plan `model` for float inputs of the given shapes (see the module documentation).
+    pub fn with_inputs(gpu: Gpu, model: &Model, inputs: &[(&str, Vec<usize>)]) -> Result<Self, GpuError> {
+        if let Some(why) = Self::unsupported(model) {
+            return Err(GpuError::Shape(why));
         }
+        let (nodes, acts, fused) = fuse(model);
+        let mut weights: HashMap<String, Arc<wgpu::Buffer>> = HashMap::new();
+        let mut weight_bytes = 0;
+        let mut env: HashMap<String, PVal> = HashMap::new();
+        for (k, t) in &model.initializers {
+            env.insert(k.clone(), PVal::Host(Tensor::from_data(t)));
+        }
+        let graph_inputs: Vec<(String, Vec<usize>)> =
+            inputs.iter().map(|(n, s)| ((*n).to_string(), s.clone())).collect();
+        for (name, shape) in &graph_inputs {
+            env.insert(name.clone(), PVal::Gpu(shape.clone()));
+        }
+        let mut plan: Vec<Planned> = Vec::new();
+        for (n, &act) in nodes.iter().zip(&acts) {
+            let err = |m: String| GpuError::Shape(format!("node {}: {m}", n.label()));
+            let args: Vec<Option<(&str, &PVal)>> = n
+                .inputs
+                .iter()
+                .map(|i| if i.is_empty() { None } else { env.get(i).map(|v| (i.as_str(), v)) })
+                .collect();
+            if n.inputs.iter().zip(&args).any(|(i, a)| !i.is_empty() && a.is_none()) {
+                return Err(err("an input is not computed before this node".into()));
+            }
+            let on_gpu = args.iter().flatten().any(|(_, v)| matches!(v, PVal::Gpu(_)));
+            if !on_gpu || n.op_type == "Shape" {
+                let host: Vec<Option<Tensor>> = args
+                    .iter()
+                    .map(|a| {
+                        a.map(|(_, v)| match v {
+                            PVal::Host(t) => t.clone(),
+                            // `Shape` only looks at the shape.
+                            PVal::Gpu(shape) => Tensor::F32 { shape: shape.clone(), data: Vec::new() },
+                        })
+                    })
+                    .collect();
+                let refs: Vec<Option<&Tensor>> = host.iter().map(Option::as_ref).collect();
+                let outs = eval_node(n, &refs).map_err(err)?;
+                for (name, t) in n.outputs.iter().zip(outs) {
+                    env.insert(name.clone(), PVal::Host(t));
+                }
+                continue;
+            }
+            let mut weight = |name: &str, len: usize| -> Arc<wgpu::Buffer> {
+                if let Some(b) = weights.get(name) {
+                    return b.clone();
+                }
+                let data = match model.initializers.get(name) {
+                    Some(t) if !t.floats.is_empty() => t.floats.clone(),
+                    _ => vec![0.0; len],
+                };
+                weight_bytes += 4 * data.len();
+                let b = Arc::new(gpu.upload(&data));
+                weights.insert(name.to_string(), b.clone());
+                b
+            };
+            let (what, shape) = lower(n, act, &args, &mut weight).map_err(|e| match e {
+                GpuError::Shape(m) => err(m),
+                other => other,
+            })?;
+            let out = n.outputs.first().cloned().ok_or_else(|| err("no output".into()))?;
+            env.insert(out.clone(), PVal::Gpu(shape.clone()));
+            plan.push(Planned { label: n.label(), out, shape, what });
+        }
+
+        // Place, giving up in-place writes that would read and write one buffer.
+        let mut forbidden: HashSet<String> = HashSet::new();
+        let (at, roots, list, in_place, copied) = loop {
+            let (at, roots) = place(&plan, &graph_inputs, &forbidden);
+            let (list, in_place, copied) = dispatches(&plan, &at)?;
+            let clash: Vec<String> = list
+                .iter()
+                .filter(|d| d.reads.iter().any(|r| r.root == d.write.root))
+                .map(|d| d.owner.clone())
+                .filter(|o| !forbidden.contains(o))
+                .collect();
+            if clash.is_empty() {
+                break (at, roots, list, in_place, copied);
+            }
+            forbidden.extend(clash);
+            if forbidden.len() > plan.len() {
+                return Err(GpuError::Shape("cannot place the model's values without aliasing".into()));
+            }
+        };
+        if let Some(d) = list.iter().find(|d| d.reads.iter().any(|r| r.root == d.write.root)) {
+            return Err(GpuError::Shape(format!("node {} would read and write one buffer", d.label)));
+        }
+
+        let arena: Vec<wgpu::Buffer> = roots.iter().map(|&len| gpu.storage(len)).collect();
+        let mut kernels = Kernels::default();
+        let mut steps = Vec::with_capacity(list.len());
+        for d in &list {
+            let pipeline = kernels.get(&gpu, d.kind);
+            let params = gpu.uniform(&d.words);
+            let offs = |i: usize| d.reads.get(i).map_or(0, |r| r.off);
+            let offsets = gpu.uniform(&u32s(&[offs(0), offs(1), d.write.off, 0])?);
+            let mut bufs: Vec<&wgpu::Buffer> = d.reads.iter().map(|r| &arena[r.root]).collect();
+            bufs.extend(d.weights.iter().map(|w| w.as_ref()));
+            bufs.push(&arena[d.write.root]);
+            bufs.push(&params);
+            bufs.push(&offsets);
+            let bind = bind(&gpu, pipeline, &bufs);
+            steps.push(Step { label: d.label.clone(), kind: d.kind, bind, groups: d.grid.groups()? });
+        }
+
+        let mut staging_len = 0;
+        let outputs = model
+            .outputs
+            .iter()
+            .map(|o| match (env.remove(&o.name), at.get(&o.name)) {
+                (Some(PVal::Gpu(shape)), Some(&region)) => {
+                    let out = Out::Gpu { region, staging_off: staging_len, shape: shape.clone() };
+                    staging_len += shape.iter().product::<usize>();
+                    Ok(out)
+                }
+                (Some(PVal::Host(t)), _) => Ok(Out::Host(t)),
+                _ => Err(GpuError::Shape(format!("output `{}` never computed", o.name))),
+            })
+            .collect::<Result<Vec<_>, _>>()?;
+        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("outputs"),
+            size: (4 * staging_len.max(1)) as u64,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let inputs = graph_inputs
+            .into_iter()
+            .map(|(name, shape)| {
+                let r = at[&name];
+                (name, shape, r)
+            })
+            .collect();
+        let stats = PlanStats {
+            nodes: model.nodes.len(),
+            dispatches: steps.len(),
+            fused_activations: fused,
+            concat_in_place: in_place,
+            concat_copied: copied,
+            arena_bytes: 4 * roots.iter().sum::<usize>(),
+            weight_bytes,
+        };
+        Ok(Self { gpu, kernels, arena, steps, inputs, outputs, staging, staging_len, stats, lock: Mutex::new(()) })
     }
 
     /// The adapter it runs on.
@@ -121,347 +579,422 @@ impl GpuModel {
         &self.gpu.adapter
     }
 
-    fn simple(&self, p: &wgpu::ComputePipeline, bufs: &[&wgpu::Buffer], words: &[u32], n: usize) {
-        let params = self.gpu.uniform(words);
-        let mut all: Vec<&wgpu::Buffer> = bufs.to_vec();
-        all.push(&params);
-        let group = bind(&self.gpu, p, &all);
-        self.gpu.dispatch(p, &group, n);
+    /// What planning did.
+    pub fn stats(&self) -> &PlanStats {
+        &self.stats
     }
 
-    /// Run on the named float inputs; the graph outputs, downloaded.
+    fn upload_inputs(&self, inputs: &[(&str, Tensor)]) -> Result<(), GpuError> {
+        for (name, shape, r) in &self.inputs {
+            let t = inputs
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, t)| t)
+                .ok_or_else(|| GpuError::Shape(format!("input `{name}` not given")))?;
+            if t.shape() != shape.as_slice() {
+                return Err(GpuError::Shape(format!(
+                    "input `{name}` has shape {:?}; the model was planned for {shape:?}",
+                    t.shape()
+                )));
+            }
+            let bytes: Vec<u8> = t.floats().iter().flat_map(|v| v.to_le_bytes()).collect();
+            self.gpu.queue.write_buffer(&self.arena[r.root], (4 * r.off) as u64, &bytes);
+        }
+        Ok(())
+    }
+
+    fn record(&self, pass: &mut wgpu::ComputePass<'_>, step: &Step) -> Result<(), GpuError> {
+        let pipeline = self
+            .kernels
+            .compiled(step.kind)
+            .ok_or_else(|| GpuError::Shape(format!("kernel {} not compiled", step.kind.name())))?;
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &step.bind, &[]);
+        pass.dispatch_workgroups(step.groups[0], step.groups[1], step.groups[2]);
+        Ok(())
+    }
+
+    /// Run on the named float inputs (the shapes planned for); the graph outputs, read back.
     pub fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, GpuError> {
-        let mut env: HashMap<String, Value> = HashMap::new();
-        for (k, t) in &self.model.initializers {
-            env.insert(k.clone(), Value::Host(Tensor::from_data(t)));
-        }
-        for (k, t) in inputs {
-            let buf = std::sync::Arc::new(self.gpu.upload(&t.floats()));
-            env.insert((*k).to_string(), Value::Gpu { buf, shape: t.shape().to_vec() });
-        }
-        for n in &self.model.nodes {
-            let err = |m: String| GpuError::Shape(format!("node {}: {m}", n.label()));
-            let args: Vec<Option<&Value>> =
-                n.inputs.iter().map(|i| if i.is_empty() { None } else { env.get(i) }).collect();
-            if n.inputs.iter().zip(&args).any(|(i, a)| !i.is_empty() && a.is_none()) {
-                return Err(err("an input is not computed before this node".into()));
-            }
-            let on_gpu = args.iter().flatten().any(|v| matches!(v, Value::Gpu { .. }));
-            let out = if !on_gpu || n.op_type == "Shape" {
-                let host: Vec<Option<Tensor>> = args
-                    .iter()
-                    .map(|a| {
-                        a.map(|v| match v {
-                            Value::Host(t) => t.clone(),
-                            // `Shape` only looks at the shape.
-                            Value::Gpu { shape, .. } => Tensor::F32 { shape: shape.clone(), data: Vec::new() },
-                        })
-                    })
-                    .collect();
-                let refs: Vec<Option<&Tensor>> = host.iter().map(Option::as_ref).collect();
-                eval_node(n, &refs).map_err(err)?.into_iter().map(Value::Host).collect()
-            } else {
-                vec![self.node(n, &args).map_err(|e| match e {
-                    GpuError::Shape(m) => err(m),
-                    other => other,
-                })?]
-            };
-            for (name, v) in n.outputs.iter().zip(out) {
-                env.insert(name.clone(), v);
+        let _guard = self.lock.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        self.upload_inputs(inputs)?;
+        let mut enc = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("frame") });
+        {
+            let mut pass =
+                enc.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("model"), timestamp_writes: None });
+            for s in &self.steps {
+                self.record(&mut pass, s)?;
             }
         }
-        self.model
+        for o in &self.outputs {
+            if let Out::Gpu { region, shape, staging_off } = o {
+                let len: usize = shape.iter().product();
+                enc.copy_buffer_to_buffer(
+                    &self.arena[region.root],
+                    (4 * region.off) as u64,
+                    &self.staging,
+                    (4 * staging_off) as u64,
+                    Some((4 * len) as u64),
+                );
+            }
+        }
+        self.gpu.queue.submit([enc.finish()]);
+        let all = self.gpu.read_mapped(&self.staging, self.staging_len)?;
+        Ok(self
             .outputs
             .iter()
-            .map(|o| match env.remove(&o.name) {
-                Some(Value::Gpu { buf, shape }) => {
-                    let len = shape.iter().product();
-                    Ok(Tensor::F32 { data: self.gpu.download(&buf, len)?, shape })
+            .map(|o| match o {
+                Out::Gpu { shape, staging_off, .. } => {
+                    let len: usize = shape.iter().product();
+                    Tensor::F32 { shape: shape.clone(), data: all[*staging_off..staging_off + len].to_vec() }
                 }
-                Some(Value::Host(t)) => Ok(t),
-                None => Err(GpuError::Shape(format!("output `{}` never computed", o.name))),
+                Out::Host(t) => t.clone(),
             })
-            .collect()
+            .collect())
     }
 
-    fn gpu_arg<'a>(args: &'a [Option<&'a Value>], i: usize) -> Result<(&'a wgpu::Buffer, &'a [usize]), GpuError> {
+    /// GPU time of every dispatch of one run (each in its own compute pass with timestamp
+    /// writes, so the figures include a pass boundary each); an error where the adapter has no
+    /// timestamp queries.
+    pub fn profile(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<KernelTime>, GpuError> {
+        if !self.gpu.device.features().contains(wgpu::Features::TIMESTAMP_QUERY) {
+            return Err(GpuError::Shape(format!("adapter `{}` has no timestamp queries", self.gpu.adapter)));
+        }
+        let _guard = self.lock.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        self.upload_inputs(inputs)?;
+        let period = f64::from(self.gpu.queue.get_timestamp_period());
+        let mut times = Vec::with_capacity(self.steps.len());
+        for chunk in self.steps.chunks(1024) {
+            let count = 2 * chunk.len() as u32;
+            let set = self.gpu.device.create_query_set(&wgpu::QuerySetDescriptor {
+                label: Some("profile"),
+                ty: wgpu::QueryType::Timestamp,
+                count,
+            });
+            let size = 8 * u64::from(count);
+            let resolve = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps"),
+                size,
+                usage: wgpu::BufferUsages::QUERY_RESOLVE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
+            });
+            let read = self.gpu.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("timestamps read"),
+                size,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let mut enc = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+            for (i, s) in chunk.iter().enumerate() {
+                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+                    label: None,
+                    timestamp_writes: Some(wgpu::ComputePassTimestampWrites {
+                        query_set: &set,
+                        beginning_of_pass_write_index: Some(2 * i as u32),
+                        end_of_pass_write_index: Some(2 * i as u32 + 1),
+                    }),
+                });
+                self.record(&mut pass, s)?;
+            }
+            enc.resolve_query_set(&set, 0..count, &resolve, 0);
+            enc.copy_buffer_to_buffer(&resolve, 0, &read, 0, Some(size));
+            self.gpu.queue.submit([enc.finish()]);
+            let words = self.gpu.read_mapped_u64(&read, count as usize)?;
+            for (s, t) in chunk.iter().zip(words.chunks_exact(2)) {
+                times.push(KernelTime {
+                    node: s.label.clone(),
+                    kernel: s.kind.name(),
+                    ns: t[1].saturating_sub(t[0]) as f64 * period,
+                });
+            }
+        }
+        Ok(times)
+    }
+}
+
+/// The lowering of one float node: what it becomes and its output shape.
+fn lower(
+    n: &Node,
+    act: Activation,
+    args: &[Option<(&str, &PVal)>],
+    weight: &mut dyn FnMut(&str, usize) -> Arc<wgpu::Buffer>,
+) -> Result<(Lowered, Vec<usize>), GpuError> {
+    let gpu_arg = |i: usize| -> Result<(String, Vec<usize>), GpuError> {
         match args.get(i).copied().flatten() {
-            Some(Value::Gpu { buf, shape }) => Ok((buf, shape)),
+            Some((name, PVal::Gpu(shape))) => Ok((name.to_string(), shape.clone())),
             _ => Err(GpuError::Shape(format!("input {i} is not a float tensor on the GPU"))),
         }
-    }
-
-    fn ints(args: &[Option<&Value>], i: usize) -> Option<Vec<i64>> {
-        match args.get(i).copied().flatten() {
-            Some(Value::Host(Tensor::I64 { data, .. })) => Some(data.clone()),
-            Some(Value::Host(Tensor::F32 { data, .. })) => Some(data.iter().map(|&v| v as i64).collect()),
-            _ => None,
+    };
+    let host = |i: usize| match args.get(i).copied().flatten() {
+        Some((_, PVal::Host(t))) => Some(t),
+        _ => None,
+    };
+    let ints = |i: usize| -> Option<Vec<i64>> {
+        match host(i)? {
+            Tensor::I64 { data, .. } => Some(data.clone()),
+            Tensor::F32 { data, .. } => Some(data.iter().map(|&v| v as i64).collect()),
         }
-    }
-
-    /// `y[o] = x[base + sum_d coord_d(o) * src_strides_d]` for an output of rank <= 4.
-    fn strided_gather(
-        &self,
-        x: &wgpu::Buffer,
-        out_shape: Vec<usize>,
-        src_strides: &[usize],
-        base: usize,
-    ) -> Result<Value, GpuError> {
+    };
+    let attr = |k: &str, d: Vec<i64>| n.ints(k).map_or(d, <[i64]>::to_vec);
+    let kernel = |kind, inputs: Vec<String>, words: Vec<u32>, len: usize| Lowered::Kernel {
+        kind,
+        inputs,
+        weights: Vec::new(),
+        words,
+        grid: Grid::Flat(len),
+    };
+    let gather = |x: String, out_shape: Vec<usize>, src_strides: &[usize], base: usize| {
         let (d, s) = (left4(&out_shape, 1), left4(src_strides, 0));
         let len: usize = out_shape.iter().product();
-        let (buf, shape) = self.out(len, out_shape);
         let words = u32s(&[d[0], d[1], d[2], d[3], s[0], s[1], s[2], s[3], base, len, 0, 0])?;
-        self.simple(&self.gather, &[x, &buf], &words, len);
-        Ok(Value::Gpu { buf, shape })
-    }
-
-    fn out(&self, len: usize, shape: Vec<usize>) -> (std::sync::Arc<wgpu::Buffer>, Vec<usize>) {
-        (std::sync::Arc::new(self.gpu.storage(len)), shape)
-    }
-
-    fn node(&self, n: &Node, args: &[Option<&Value>]) -> Result<Value, GpuError> {
-        let attr = |k: &str, d: Vec<i64>| n.ints(k).map_or(d, <[i64]>::to_vec);
-        match n.op_type.as_str() {
-            "Conv" => {
-                let (x, xs) = Self::gpu_arg(args, 0)?;
-                let wname = n.inputs.get(1).cloned().unwrap_or_default();
-                let w = self
-                    .weights
-                    .get(&wname)
-                    .ok_or_else(|| GpuError::Shape("Conv weights must be initializers".into()))?;
-                let ws = args.get(1).copied().flatten().map(Value::shape).unwrap_or(&[]).to_vec();
-                if xs.len() != 4 || ws.len() != 4 {
-                    return Err(GpuError::Shape(format!("Conv on {xs:?} with weights {ws:?}")));
-                }
-                let bias_owned;
-                let bias = match n.inputs.get(2).and_then(|b| self.weights.get(b)) {
-                    Some(b) => b,
-                    None => {
-                        bias_owned = self.gpu.upload(&vec![0.0; ws[0]]);
-                        &bias_owned
-                    }
+        Ok::<_, GpuError>((kernel(Kind::Gather, vec![x], words, len), out_shape))
+    };
+    match n.op_type.as_str() {
+        "Conv" => {
+            let (x, xs) = gpu_arg(0)?;
+            let wname = n.inputs.get(1).cloned().unwrap_or_default();
+            let ws = match host(1) {
+                Some(t) if matches!(t, Tensor::F32 { .. }) => t.shape().to_vec(),
+                _ => return Err(GpuError::Shape("Conv weights must be float initializers".into())),
+            };
+            if xs.len() != 4 || ws.len() != 4 {
+                return Err(GpuError::Shape(format!("Conv on {xs:?} with weights {ws:?}")));
+            }
+            let p = attr("pads", vec![0; 4]);
+            let st = attr("strides", vec![1, 1]);
+            let dl = attr("dilations", vec![1, 1]);
+            let nonneg = |v: &[i64]| v.iter().map(|&x| usize::try_from(x).ok()).collect::<Option<Vec<usize>>>();
+            let (Some(p), Some(st), Some(dl)) = (nonneg(&p), nonneg(&st), nonneg(&dl)) else {
+                return Err(GpuError::Shape("negative Conv attribute".into()));
+            };
+            if p.len() != 4 || st.len() != 2 || dl.len() != 2 {
+                return Err(GpuError::Shape("Conv attributes of the wrong length".into()));
+            }
+            let shape = ConvShape {
+                input: [xs[0], xs[1], xs[2], xs[3]],
+                kernel: [ws[0], ws[2], ws[3]],
+                stride: [st[0].max(1), st[1].max(1)],
+                pads: [p[0], p[1], p[2], p[3]],
+                dilation: [dl[0].max(1), dl[1].max(1)],
+                group: n.int("group", 1).max(1) as usize,
+            };
+            let (oh, ow) = shape.output()?;
+            if ws[1] * shape.group != xs[1] {
+                return Err(GpuError::Shape(format!("Conv weights {ws:?} do not fit input {xs:?}")));
+            }
+            let w = weight(&wname, 0);
+            let bias_name =
+                n.inputs.get(2).filter(|b| !b.is_empty()).cloned().unwrap_or_else(|| format!("{wname}#zero-bias"));
+            let b = weight(&bias_name, ws[0]);
+            let out = vec![xs[0], ws[0], oh, ow];
+            // Both convolution kernels share these sixteen words; the direct one adds four.
+            let k = xs[1] * ws[2] * ws[3];
+            let (sd, dd) = (shape.stride, shape.dilation);
+            let mut words = u32s(&[
+                xs[1],
+                xs[2],
+                xs[3],
+                ws[0],
+                oh,
+                ow,
+                ws[2],
+                ws[3],
+                sd[0],
+                sd[1],
+                p[0],
+                p[1],
+                dd[0],
+                dd[1],
+                act as usize,
+                k,
+            ])?;
+            let (kind, grid) = if shape.group == 1 {
+                // Few output channels (a stem): narrower, wider tiles instead of wasting most of
+                // a 64-channel one.
+                let (kind, tile) = match ws[0] {
+                    0..=16 => (Kind::ConvGemm16, [256, 16]),
+                    17..=32 => (Kind::ConvGemm32, [128, 32]),
+                    _ => (Kind::ConvGemm, [64, 64]),
                 };
-                let p = attr("pads", vec![0; 4]);
-                let st = attr("strides", vec![1, 1]);
-                let dl = attr("dilations", vec![1, 1]);
-                let shape = ConvShape {
-                    input: [xs[0], xs[1], xs[2], xs[3]],
-                    kernel: [ws[0], ws[2], ws[3]],
-                    stride: [st[0] as usize, st[1] as usize],
-                    pads: [p[0] as usize, p[1] as usize, p[2] as usize, p[3] as usize],
-                    dilation: [dl[0] as usize, dl[1] as usize],
-                    group: n.int("group", 1).max(1) as usize,
-                };
-                let (oh, ow) = shape.output()?;
-                let (buf, shape_out) = self.out(xs[0] * ws[0] * oh * ow, vec![xs[0], ws[0], oh, ow]);
-                self.conv.run(&self.gpu, &shape, x, w, bias, &buf, Activation::Identity)?;
-                Ok(Value::Gpu { buf, shape: shape_out })
-            }
-            "Sigmoid" | "Relu" => {
-                let (x, xs) = Self::gpu_arg(args, 0)?;
-                let len: usize = xs.iter().product();
-                let (buf, shape) = self.out(len, xs.to_vec());
-                let op = if n.op_type == "Sigmoid" { 2 } else { 3 };
-                self.simple(&self.unary, &[x, &buf], &[u32s(&[len])?[0], op, 0, 0], len);
-                Ok(Value::Gpu { buf, shape })
-            }
-            "Add" | "Mul" => {
-                let (a, sa) = Self::gpu_arg(args, 0)?;
-                let (b, sb) = Self::gpu_arg(args, 1)?;
-                if sa != sb {
-                    return Err(GpuError::Shape(format!(
-                        "{} of {sa:?} and {sb:?}: broadcasting is not on the GPU yet",
-                        n.op_type
-                    )));
-                }
-                let len: usize = sa.iter().product();
-                let (buf, shape) = self.out(len, sa.to_vec());
-                let op = u32::from(n.op_type == "Mul");
-                self.simple(&self.binary, &[a, b, &buf], &[u32s(&[len])?[0], op, 0, 0], len);
-                Ok(Value::Gpu { buf, shape })
-            }
-            "Concat" => {
-                let parts: Vec<(&wgpu::Buffer, &[usize])> =
-                    (0..args.len()).map(|i| Self::gpu_arg(args, i)).collect::<Result<_, _>>()?;
-                let first = parts.first().ok_or_else(|| GpuError::Shape("Concat of nothing".into()))?.1;
-                let axis = norm_axis(n.int("axis", 0), first.len()).map_err(GpuError::Shape)?;
-                let mut shape = first.to_vec();
-                shape[axis] = parts.iter().map(|p| p.1[axis]).sum();
-                let outer: usize = first[..axis].iter().product();
-                let inner_dst: usize = shape[axis..].iter().product();
-                let (buf, shape) = self.out(shape.iter().product(), shape);
-                let mut offset = 0;
-                for (src, s) in &parts {
-                    let inner_src: usize = s[axis..].iter().product();
-                    self.simple(
-                        &self.copy_block,
-                        &[src, &buf],
-                        &u32s(&[outer, inner_src, inner_dst, offset])?,
-                        outer * inner_src,
-                    );
-                    offset += inner_src;
-                }
-                Ok(Value::Gpu { buf, shape })
-            }
-            "Slice" | "Transpose" => {
-                let (x, xs) = Self::gpu_arg(args, 0)?;
-                if xs.len() > 4 {
-                    return Err(GpuError::Shape(format!("{} of rank {} (4 at most on the GPU)", n.op_type, xs.len())));
-                }
-                let si = strides(xs);
-                let (out_shape, src_strides, base) = if n.op_type == "Transpose" {
-                    let perm: Vec<usize> = n
-                        .ints("perm")
-                        .map_or_else(|| (0..xs.len()).rev().collect(), |p| p.iter().map(|&v| v as usize).collect());
-                    (
-                        perm.iter().map(|&p| xs[p]).collect::<Vec<_>>(),
-                        perm.iter().map(|&p| si[p]).collect::<Vec<_>>(),
-                        0,
-                    )
-                } else {
-                    let starts = Self::ints(args, 1).ok_or_else(|| GpuError::Shape("Slice without starts".into()))?;
-                    let ends = Self::ints(args, 2).ok_or_else(|| GpuError::Shape("Slice without ends".into()))?;
-                    let (axes, steps) = (Self::ints(args, 3), Self::ints(args, 4));
-                    let (lo, step, shape) =
-                        slice_plan(xs, &starts, &ends, axes.as_deref(), steps.as_deref()).map_err(GpuError::Shape)?;
-                    let base = lo.iter().zip(&si).map(|(l, s)| l * s).sum();
-                    (shape, si.iter().zip(&step).map(|(s, k)| s * k).collect(), base)
-                };
-                self.strided_gather(x, out_shape, &src_strides, base)
-            }
-            "MaxPool" | "AveragePool" => {
-                let (x, xs) = Self::gpu_arg(args, 0)?;
-                let k = attr("kernel_shape", vec![1, 1]);
-                let st = attr("strides", vec![1, 1]);
-                let p = attr("pads", vec![0; 4]);
-                if xs.len() != 4 || n.int("ceil_mode", 0) != 0 {
-                    return Err(GpuError::Shape("MaxPool on 4-D input without ceil_mode only".into()));
-                }
-                let (h, w) = (xs[2], xs[3]);
-                let (kh, kw, sh, sw) = (k[0] as usize, k[1] as usize, st[0].max(1) as usize, st[1].max(1) as usize);
-                let (pt, pl, pb, pr) = (p[0] as usize, p[1] as usize, p[2] as usize, p[3] as usize);
-                let oh =
-                    (h + pt + pb).checked_sub(kh).ok_or_else(|| GpuError::Shape("pool kernel too large".into()))? / sh
-                        + 1;
-                let ow =
-                    (w + pl + pr).checked_sub(kw).ok_or_else(|| GpuError::Shape("pool kernel too large".into()))? / sw
-                        + 1;
-                let planes = xs[0] * xs[1];
-                let (buf, shape) = self.out(planes * oh * ow, vec![xs[0], xs[1], oh, ow]);
-                let mode = match n.op_type.as_str() {
-                    "MaxPool" => 0,
-                    _ if n.int("count_include_pad", 0) != 0 => 2,
-                    _ => 1,
-                };
-                let words = u32s(&[planes, h, w, oh, ow, kh, kw, sh, sw, pt, pl, mode])?;
-                self.simple(&self.maxpool, &[x, &buf], &words, planes * oh * ow);
-                Ok(Value::Gpu { buf, shape })
-            }
-            "Resize" => {
-                let (x, xs) = Self::gpu_arg(args, 0)?;
-                let scales: Option<Vec<f32>> = match args.get(2).copied().flatten() {
-                    Some(Value::Host(t)) => Some(t.floats()).filter(|v| v.len() == 4),
-                    _ => None,
-                };
-                let mode = (
-                    n.string("mode", "nearest"),
-                    n.string("coordinate_transformation_mode", "half_pixel"),
-                    n.string("nearest_mode", ""),
-                );
-                if xs.len() != 4 || mode.0 != "nearest" || mode.1 != "asymmetric" || mode.2 != "floor" {
-                    return Err(GpuError::Shape(format!(
-                        "Resize {mode:?} is not on the GPU (nearest, asymmetric, floor)"
-                    )));
-                }
-                let sc = scales.ok_or_else(|| GpuError::Shape("Resize needs constant scales on the GPU".into()))?;
-                let (oh, ow) = ((xs[2] as f32 * sc[2]).floor() as usize, (xs[3] as f32 * sc[3]).floor() as usize);
-                let planes = xs[0] * xs[1];
-                let (buf, shape) = self.out(planes * oh * ow, vec![xs[0], xs[1], oh, ow]);
-                let mut words = u32s(&[planes, xs[2], xs[3], oh, ow])?;
-                words.extend([sc[2].to_bits(), sc[3].to_bits(), 0]);
-                self.simple(&self.resize, &[x, &buf], &words, planes * oh * ow);
-                Ok(Value::Gpu { buf, shape })
-            }
-            "Reshape" => {
-                let (x, xs) = match args.first().copied().flatten() {
-                    Some(Value::Gpu { buf, shape }) => (buf.clone(), shape.clone()),
-                    _ => return Err(GpuError::Shape("Reshape input is not on the GPU".into())),
-                };
-                let spec =
-                    Self::ints(args, 1).ok_or_else(|| GpuError::Shape("Reshape needs a constant shape".into()))?;
-                let shape = reshape_shape(&xs, &spec).map_err(GpuError::Shape)?;
-                Ok(Value::Gpu { buf: x, shape })
-            }
-            "Pad" => {
-                let (x, xs) = Self::gpu_arg(args, 0)?;
-                let pads = n.ints("pads").map(<[i64]>::to_vec).or_else(|| Self::ints(args, 1)).unwrap_or_default();
-                let value = match args.get(2).copied().flatten() {
-                    Some(Value::Host(t)) => t.floats().first().copied().unwrap_or(0.0),
-                    _ => n.float("value", 0.0),
-                };
-                let r = xs.len();
-                if r > 4
-                    || pads.len() != 2 * r
-                    || pads.iter().any(|&p| p < 0)
-                    || n.string("mode", "constant") != "constant"
-                {
-                    return Err(GpuError::Shape(format!(
-                        "Pad {pads:?} of rank {r}: constant, non-negative, rank <= 4 only"
-                    )));
-                }
-                let out_shape: Vec<usize> = (0..r).map(|d| xs[d] + pads[d] as usize + pads[d + r] as usize).collect();
-                let (d, i) = (left4(&out_shape, 1), left4(xs, 1));
-                let b = left4(&pads[..r].iter().map(|&p| p as usize).collect::<Vec<_>>(), 0);
-                let len: usize = out_shape.iter().product();
-                let (buf, shape) = self.out(len, out_shape);
-                let mut words = u32s(&[d[0], d[1], d[2], d[3], i[0], i[1], i[2], i[3], b[0], b[1], b[2], b[3], len])?;
-                words.extend([value.to_bits(), 0, 0]);
-                self.simple(&self.pad, &[x, &buf], &words, len);
-                Ok(Value::Gpu { buf, shape })
-            }
-            "Softmax" => {
-                let (x, xs) = Self::gpu_arg(args, 0)?;
-                let axis = norm_axis(n.int("axis", -1), xs.len()).map_err(GpuError::Shape)?;
-                let step: usize = xs[axis + 1..].iter().product();
-                let total: usize = xs.iter().product();
-                let rows = total / xs[axis].max(1);
-                let (buf, shape) = self.out(total, xs.to_vec());
-                self.simple(&self.softmax, &[x, &buf], &u32s(&[rows, xs[axis], step, 0])?, rows);
-                Ok(Value::Gpu { buf, shape })
-            }
-            "Gather" => {
-                // A float tensor indexed by one constant index (ShuffleNet's channel split): a
-                // strided gather that drops the axis.
-                let (x, xs) = Self::gpu_arg(args, 0)?;
-                let idx = match args.get(1).copied().flatten() {
-                    Some(Value::Host(t)) if t.shape().is_empty() || t.shape() == [1] => {
-                        Self::ints(args, 1).unwrap_or_default()
-                    }
-                    _ => return Err(GpuError::Shape("Gather on the GPU takes one constant index".into())),
-                };
-                let axis = norm_axis(n.int("axis", 0), xs.len()).map_err(GpuError::Shape)?;
-                let i = idx.first().copied().unwrap_or(0);
-                let i = if i < 0 { i + xs[axis] as i64 } else { i };
-                if axis >= xs.len() || !(0..xs[axis] as i64).contains(&i) {
-                    return Err(GpuError::Shape(format!("Gather index {i} on axis {axis} of {xs:?}")));
-                }
-                let si = strides(xs);
-                let keep: Vec<usize> = (0..xs.len()).filter(|&d| d != axis).collect();
-                let mut out_shape: Vec<usize> = keep.iter().map(|&d| xs[d]).collect();
-                let mut st: Vec<usize> = keep.iter().map(|&d| si[d]).collect();
-                if idx.len() == 1 && args.get(1).copied().flatten().is_some_and(|v| v.shape() == [1]) {
-                    out_shape.insert(axis, 1);
-                    st.insert(axis, 0);
-                }
-                if out_shape.len() > 4 {
-                    return Err(GpuError::Shape(format!(
-                        "Gather output of rank {} (4 at most on the GPU)",
-                        out_shape.len()
-                    )));
-                }
-                self.strided_gather(x, out_shape, &st, i as usize * si[axis])
-            }
-            other => Err(GpuError::Shape(format!("op `{other}` is not on the GPU yet"))),
+                (kind, Grid::Gemm { pixels: oh * ow, channels: ws[0], batch: xs[0], tile })
+            } else {
+                words.extend(u32s(&[xs[0], shape.group, 0, 0])?);
+                (Kind::ConvDirect, Grid::Flat(xs[0] * ws[0] * oh * ow))
+            };
+            Ok((Lowered::Kernel { kind, inputs: vec![x], weights: vec![w, b], words, grid }, out))
         }
+        "Sigmoid" | "Relu" => {
+            let (x, xs) = gpu_arg(0)?;
+            let len: usize = xs.iter().product();
+            let op = if n.op_type == "Sigmoid" { 2 } else { 3 };
+            Ok((kernel(Kind::Unary, vec![x], vec![u32s(&[len])?[0], op, 0, 0], len), xs))
+        }
+        "Add" | "Mul" => {
+            let (a, sa) = gpu_arg(0)?;
+            let (b, sb) = gpu_arg(1)?;
+            if sa != sb {
+                return Err(GpuError::Shape(format!(
+                    "{} of {sa:?} and {sb:?}: broadcasting is not on the GPU yet",
+                    n.op_type
+                )));
+            }
+            let len: usize = sa.iter().product();
+            let op = u32::from(n.op_type == "Mul");
+            Ok((kernel(Kind::Binary, vec![a, b], vec![u32s(&[len])?[0], op, 0, 0], len), sa))
+        }
+        "Concat" => {
+            let parts: Vec<(String, Vec<usize>)> = (0..args.len()).map(gpu_arg).collect::<Result<_, _>>()?;
+            let first = &parts.first().ok_or_else(|| GpuError::Shape("Concat of nothing".into()))?.1;
+            let axis = norm_axis(n.int("axis", 0), first.len()).map_err(GpuError::Shape)?;
+            let mut shape = first.clone();
+            if parts.iter().any(|(_, s)| {
+                s.len() != first.len() || s.iter().zip(first.iter()).enumerate().any(|(d, (a, b))| d != axis && a != b)
+            }) {
+                return Err(GpuError::Shape("Concat of mismatched shapes".into()));
+            }
+            shape[axis] = parts.iter().map(|p| p.1[axis]).sum();
+            Ok((Lowered::Concat { parts, axis }, shape))
+        }
+        "Slice" | "Transpose" => {
+            let (x, xs) = gpu_arg(0)?;
+            if xs.len() > 4 {
+                return Err(GpuError::Shape(format!("{} of rank {} (4 at most on the GPU)", n.op_type, xs.len())));
+            }
+            let si = strides(&xs);
+            if n.op_type == "Transpose" {
+                let perm: Vec<usize> = n
+                    .ints("perm")
+                    .map_or_else(|| (0..xs.len()).rev().collect(), |p| p.iter().map(|&v| v as usize).collect());
+                if perm.len() != xs.len() || perm.iter().any(|&p| p >= xs.len()) {
+                    return Err(GpuError::Shape(format!("Transpose perm {perm:?} of rank {}", xs.len())));
+                }
+                let shape = perm.iter().map(|&p| xs[p]).collect();
+                let st: Vec<usize> = perm.iter().map(|&p| si[p]).collect();
+                return gather(x, shape, &st, 0);
+            }
+            let starts = ints(1).ok_or_else(|| GpuError::Shape("Slice without constant starts".into()))?;
+            let ends = ints(2).ok_or_else(|| GpuError::Shape("Slice without constant ends".into()))?;
+            let (axes, steps) = (ints(3), ints(4));
+            let (lo, step, shape) =
+                slice_plan(&xs, &starts, &ends, axes.as_deref(), steps.as_deref()).map_err(GpuError::Shape)?;
+            let base = lo.iter().zip(&si).map(|(l, s)| l * s).sum();
+            let st: Vec<usize> = si.iter().zip(&step).map(|(s, k)| s * k).collect();
+            gather(x, shape, &st, base)
+        }
+        "MaxPool" | "AveragePool" => {
+            let (x, xs) = gpu_arg(0)?;
+            let k = attr("kernel_shape", vec![1, 1]);
+            let st = attr("strides", vec![1, 1]);
+            let p = attr("pads", vec![0; 4]);
+            if xs.len() != 4 || n.int("ceil_mode", 0) != 0 || k.len() != 2 || st.len() != 2 || p.len() != 4 {
+                return Err(GpuError::Shape("pooling on 4-D input without ceil_mode only".into()));
+            }
+            if k.iter().chain(&st).chain(&p).any(|&v| v < 0) {
+                return Err(GpuError::Shape("negative pooling attribute".into()));
+            }
+            let (h, w) = (xs[2], xs[3]);
+            let (kh, kw, sh, sw) = (k[0] as usize, k[1] as usize, st[0].max(1) as usize, st[1].max(1) as usize);
+            let (pt, pl, pb, pr) = (p[0] as usize, p[1] as usize, p[2] as usize, p[3] as usize);
+            let too_big = || GpuError::Shape("pool kernel too large".into());
+            let oh = (h + pt + pb).checked_sub(kh).ok_or_else(too_big)? / sh + 1;
+            let ow = (w + pl + pr).checked_sub(kw).ok_or_else(too_big)? / sw + 1;
+            let planes = xs[0] * xs[1];
+            let mode = match n.op_type.as_str() {
+                "MaxPool" => 0,
+                _ if n.int("count_include_pad", 0) != 0 => 2,
+                _ => 1,
+            };
+            let words = u32s(&[planes, h, w, oh, ow, kh, kw, sh, sw, pt, pl, mode])?;
+            Ok((kernel(Kind::Pool, vec![x], words, planes * oh * ow), vec![xs[0], xs[1], oh, ow]))
+        }
+        "Resize" => {
+            let (x, xs) = gpu_arg(0)?;
+            let scales: Option<Vec<f32>> = host(2).map(Tensor::floats).filter(|v| v.len() == 4);
+            let mode = (
+                n.string("mode", "nearest"),
+                n.string("coordinate_transformation_mode", "half_pixel"),
+                n.string("nearest_mode", ""),
+            );
+            if xs.len() != 4 || mode.0 != "nearest" || mode.1 != "asymmetric" || mode.2 != "floor" {
+                return Err(GpuError::Shape(format!("Resize {mode:?} is not on the GPU (nearest, asymmetric, floor)")));
+            }
+            let sc = scales.ok_or_else(|| GpuError::Shape("Resize needs constant scales on the GPU".into()))?;
+            if sc.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
+                return Err(GpuError::Shape(format!("Resize scales {sc:?}")));
+            }
+            let (oh, ow) = ((xs[2] as f32 * sc[2]).floor() as usize, (xs[3] as f32 * sc[3]).floor() as usize);
+            let planes = xs[0] * xs[1];
+            let mut words = u32s(&[planes, xs[2], xs[3], oh, ow])?;
+            words.extend([sc[2].to_bits(), sc[3].to_bits(), 0]);
+            Ok((kernel(Kind::Resize, vec![x], words, planes * oh * ow), vec![xs[0], xs[1], oh, ow]))
+        }
+        "Reshape" => {
+            let (x, xs) = gpu_arg(0)?;
+            let spec = ints(1).ok_or_else(|| GpuError::Shape("Reshape needs a constant shape".into()))?;
+            let shape = reshape_shape(&xs, &spec).map_err(GpuError::Shape)?;
+            Ok((Lowered::Alias { input: x }, shape))
+        }
+        "Pad" => {
+            let (x, xs) = gpu_arg(0)?;
+            let pads = n.ints("pads").map(<[i64]>::to_vec).or_else(|| ints(1)).unwrap_or_default();
+            let value = match host(2) {
+                Some(t) => t.floats().first().copied().unwrap_or(0.0),
+                None => n.float("value", 0.0),
+            };
+            let r = xs.len();
+            if r > 4 || pads.len() != 2 * r || pads.iter().any(|&p| p < 0) || n.string("mode", "constant") != "constant"
+            {
+                return Err(GpuError::Shape(format!(
+                    "Pad {pads:?} of rank {r}: constant, non-negative, rank <= 4 only"
+                )));
+            }
+            let out_shape: Vec<usize> = (0..r).map(|d| xs[d] + pads[d] as usize + pads[d + r] as usize).collect();
+            let (d, i) = (left4(&out_shape, 1), left4(&xs, 1));
+            let b = left4(&pads[..r].iter().map(|&p| p as usize).collect::<Vec<_>>(), 0);
+            let len: usize = out_shape.iter().product();
+            let mut words = u32s(&[d[0], d[1], d[2], d[3], i[0], i[1], i[2], i[3], b[0], b[1], b[2], b[3], len])?;
+            words.extend([value.to_bits(), 0, 0]);
+            Ok((kernel(Kind::Pad, vec![x], words, len), out_shape))
+        }
+        "Softmax" => {
+            let (x, xs) = gpu_arg(0)?;
+            let axis = norm_axis(n.int("axis", -1), xs.len()).map_err(GpuError::Shape)?;
+            let step: usize = xs[axis + 1..].iter().product();
+            let total: usize = xs.iter().product();
+            let rows = total / xs[axis].max(1);
+            Ok((kernel(Kind::Softmax, vec![x], u32s(&[rows, xs[axis], step, 0])?, rows), xs))
+        }
+        "Gather" => {
+            // A float tensor indexed by one constant index (ShuffleNet's channel split): a
+            // strided gather that drops the axis.
+            let (x, xs) = gpu_arg(0)?;
+            let index = host(1).filter(|t| t.shape().is_empty() || t.shape() == [1]);
+            let Some(index) = index else {
+                return Err(GpuError::Shape("Gather on the GPU takes one constant index".into()));
+            };
+            let keep_axis = index.shape() == [1];
+            let axis = norm_axis(n.int("axis", 0), xs.len()).map_err(GpuError::Shape)?;
+            let i = ints(1).and_then(|v| v.first().copied()).unwrap_or(0);
+            let i = if i < 0 { i + xs[axis] as i64 } else { i };
+            if !(0..xs[axis] as i64).contains(&i) {
+                return Err(GpuError::Shape(format!("Gather index {i} on axis {axis} of {xs:?}")));
+            }
+            let si = strides(&xs);
+            let keep: Vec<usize> = (0..xs.len()).filter(|&d| d != axis).collect();
+            let mut out_shape: Vec<usize> = keep.iter().map(|&d| xs[d]).collect();
+            let mut st: Vec<usize> = keep.iter().map(|&d| si[d]).collect();
+            if keep_axis {
+                out_shape.insert(axis, 1);
+                st.insert(axis, 0);
+            }
+            if out_shape.len() > 4 {
+                return Err(GpuError::Shape(format!(
+                    "Gather output of rank {} (4 at most on the GPU)",
+                    out_shape.len()
+                )));
+            }
+            gather(x, out_shape, &st, i as usize * si[axis])
+        }
+        other => Err(GpuError::Shape(format!("op `{other}` is not on the GPU yet"))),
     }
 }

@@ -564,11 +564,17 @@ pub fn parse(bytes: &[u8]) -> Result<Model, OnnxError> {
 
 /// Read and decode a model file.
 pub fn load(path: &Path) -> Result<Model, OnnxError> {
+    load_with_bytes(path).map(|(m, _)| m)
+}
+
+/// Read and decode a model file; the model and the file's bytes (for another runtime).
+pub fn load_with_bytes(path: &Path) -> Result<(Model, Vec<u8>), OnnxError> {
     let bytes =
         std::fs::read(path).map_err(|e| OnnxError::Io { path: path.display().to_string(), message: e.to_string() })?;
-    parse(&bytes).map_err(|e| match e {
+    let model = parse(&bytes).map_err(|e| match e {
         OnnxError::Malformed(m) => OnnxError::Malformed(format!("{}: {m}", path.display())),
         OnnxError::Unsupported(m) => OnnxError::Unsupported(format!("{}: {m}", path.display())),
         io => io,
-    })
+    })?;
+    Ok((model, bytes))
 }

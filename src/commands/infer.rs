@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use dynaflow_infer::detect::{Decoder, Detector};
 use dynaflow_infer::onnx;
-use dynaflow_operators::inference::{COCO_NAMES, YOLOX_NANO, wgpu_or_fallback};
+use dynaflow_operators::inference::{COCO_NAMES, Runner, YOLOX_NANO};
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
@@ -21,9 +21,10 @@ pub struct InferArgs {
     /// Output decoding of the model.
     #[arg(long, default_value = "yolox", value_parser = ["yolox", "fastestdet"])]
     pub decoder: String,
-    /// Where the model runs: `cpu` (the reference executor) or `wgpu` (falls back to `cpu`
-    /// with a warning without an adapter or for an op with no GPU kernel).
-    #[arg(long, default_value = "cpu", value_parser = ["cpu", "wgpu"])]
+    /// Where the model runs: `cpu` (rten), `wgpu` (our GPU executor; falls back to `cpu`
+    /// with a warning without an adapter or for a model it cannot plan) or `reference` (plain
+    /// loops; slow).
+    #[arg(long, default_value = "cpu", value_parser = ["cpu", "wgpu", "reference"])]
     pub backend: String,
     /// Score threshold.
     #[arg(long, default_value_t = 0.3)]
@@ -35,12 +36,17 @@ pub struct InferArgs {
 
 /// Exit 0 with one JSON object per image, 2 on a bad model or image.
 pub fn infer(args: &InferArgs) -> u8 {
-    let model = match &args.model {
-        Some(p) => onnx::load(p),
-        None => onnx::parse(YOLOX_NANO),
+    let loaded = match &args.model {
+        Some(p) => onnx::load_with_bytes(p),
+        None => onnx::parse(YOLOX_NANO).map(|m| (m, YOLOX_NANO.to_vec())),
     };
     let decoder = if args.decoder == "fastestdet" { Decoder::FastestDet } else { Decoder::Yolox };
-    let detector = match model.map_err(|e| e.to_string()).and_then(|m| Detector::new(m, decoder)) {
+    // Without an adapter (or for a model it cannot plan) `wgpu` warns and runs on the CPU.
+    let ready = loaded.map_err(|e| e.to_string()).and_then(|(m, bytes)| {
+        let (runner, _) = Runner::new(&bytes, &m, &args.backend)?;
+        Ok((Detector::new(m, decoder)?, runner))
+    });
+    let (detector, runner) = match ready {
         Ok(d) => d,
         Err(e) => {
             eprintln!("error: {e}");
@@ -48,12 +54,6 @@ pub fn infer(args: &InferArgs) -> u8 {
         }
     };
     let names: Vec<&str> = COCO_NAMES.lines().collect();
-    let gpu = if args.backend == "wgpu" {
-        // Without an adapter (or for an op with no GPU kernel) this warns and runs on the CPU.
-        wgpu_or_fallback(detector.model()).0
-    } else {
-        None
-    };
     let mut out = std::io::stdout().lock();
     for path in &args.images {
         let img = match image::open(path) {
@@ -64,12 +64,8 @@ pub fn infer(args: &InferArgs) -> u8 {
             }
         };
         let (w, h) = (img.width() as usize, img.height() as usize);
-        let found = match &gpu {
-            Some(g) => detector.detect_with(img.as_raw(), w, h, names.len(), args.score, args.iou, |name, input| {
-                g.run(&[(name, input)]).map_err(|e| e.to_string())
-            }),
-            None => detector.detect(img.as_raw(), w, h, names.len(), args.score, args.iou).map_err(|e| e.to_string()),
-        };
+        let found = detector
+            .detect_with(img.as_raw(), w, h, names.len(), args.score, args.iou, |name, input| runner.run(name, input));
         let dets = match found {
             Ok(d) => d,
             Err(e) => {

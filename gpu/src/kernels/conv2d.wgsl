@@ -1,11 +1,11 @@
 // Direct 2-D convolution, NCHW, one invocation per output element; groups, strides, padding,
 // dilation; bias and an activation fused into the store.
 struct Params {
-    n: u32, c: u32, h: u32, w: u32,
-    m: u32, oh: u32, ow: u32, kh: u32,
-    kw: u32, sh: u32, sw: u32, ph: u32,
-    pw: u32, dh: u32, dw: u32, group: u32,
-    act: u32, pad0: u32,
+    c: u32, h: u32, w: u32, m: u32,
+    oh: u32, ow: u32, kh: u32, kw: u32,
+    sh: u32, sw: u32, ph: u32, pw: u32,
+    dh: u32, dw: u32, act: u32, k: u32,
+    n: u32, group: u32, pad0: u32, pad1: u32,
 }
 
 @group(0) @binding(0) var<storage, read> x: array<f32>;
@@ -13,6 +13,8 @@ struct Params {
 @group(0) @binding(2) var<storage, read> bias: array<f32>;
 @group(0) @binding(3) var<storage, read_write> y: array<f32>;
 @group(0) @binding(4) var<uniform> p: Params;
+// Element offsets into the bound buffers: x = first input, y = second input, z = output.
+@group(0) @binding(5) var<uniform> off: vec4<u32>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -39,7 +41,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
                 if (ix < 0 || ix >= i32(p.w)) {
                     continue;
                 }
-                acc += wt[((oc * cg + icg) * p.kh + ky) * p.kw + kx] * x[((b * p.c + ic) * p.h + u32(iy)) * p.w + u32(ix)];
+                acc += wt[((oc * cg + icg) * p.kh + ky) * p.kw + kx] * x[off.x + ((b * p.c + ic) * p.h + u32(iy)) * p.w + u32(ix)];
             }
         }
     }
@@ -49,5 +51,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
         case 3u: { acc = max(acc, 0.0); }
         default: {}
     }
-    y[idx] = acc;
+    y[off.z + idx] = acc;
 }

@@ -4,6 +4,8 @@ struct Params { outer: u32, inner_src: u32, inner_dst: u32, offset: u32 }
 @group(0) @binding(0) var<storage, read> x: array<f32>;
 @group(0) @binding(1) var<storage, read_write> y: array<f32>;
 @group(0) @binding(2) var<uniform> p: Params;
+// Element offsets into the bound buffers: x = first input, y = second input, z = output.
+@group(0) @binding(3) var<uniform> off: vec4<u32>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -13,5 +15,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     }
     let o = idx / p.inner_src;
     let i = idx % p.inner_src;
-    y[o * p.inner_dst + p.offset + i] = x[idx];
+    y[off.z + o * p.inner_dst + p.offset + i] = x[off.x + idx];
 }

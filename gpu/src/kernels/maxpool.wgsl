@@ -9,6 +9,8 @@ struct Params {
 @group(0) @binding(0) var<storage, read> x: array<f32>;
 @group(0) @binding(1) var<storage, read_write> y: array<f32>;
 @group(0) @binding(2) var<uniform> p: Params;
+// Element offsets into the bound buffers: x = first input, y = second input, z = output.
+@group(0) @binding(3) var<uniform> off: vec4<u32>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -34,7 +36,7 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
             if (ix < 0 || ix >= i32(p.w)) {
                 continue;
             }
-            let v = x[(plane * p.h + u32(iy)) * p.w + u32(ix)];
+            let v = x[off.x + (plane * p.h + u32(iy)) * p.w + u32(ix)];
             if (p.mode == 0u) {
                 acc = max(acc, v);
             } else {
@@ -48,5 +50,5 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     } else if (p.mode == 2u) {
         acc = acc / f32(p.kh * p.kw);
     }
-    y[idx] = acc;
+    y[off.z + idx] = acc;
 }

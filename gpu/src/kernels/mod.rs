@@ -1,4 +1,7 @@
-//! WGSL kernels with their host side: pipelines built once, buffers passed per call.
+//! WGSL kernels and their pipelines, compiled once per model. Every kernel binds its buffers in
+//! the order inputs, weights, output, parameters, offsets: the last is a `vec4<u32>` of element
+//! offsets (first input, second input, output) so a value can live inside a larger buffer (a
+//! concatenation's output) and Concat costs nothing.
 
 use crate::{Gpu, GpuError};
 
@@ -13,12 +16,6 @@ pub enum Activation {
     Sigmoid = 2,
     /// `max(x, 0)` (FastestDet).
     Relu = 3,
-}
-
-/// A direct 2-D convolution, NCHW, one invocation per output element.
-#[derive(Debug)]
-pub struct Conv2d {
-    pipeline: wgpu::ComputePipeline,
 }
 
 /// Shape and attributes of one convolution.
@@ -84,88 +81,92 @@ pub(crate) fn bind(gpu: &Gpu, pipeline: &wgpu::ComputePipeline, buffers: &[&wgpu
     })
 }
 
-impl Conv2d {
-    /// Compile the kernel.
-    pub fn new(gpu: &Gpu) -> Self {
-        Self { pipeline: pipeline(gpu, include_str!("conv2d.wgsl"), "conv2d") }
+/// The kernels a plan dispatches.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub(crate) enum Kind {
+    /// Direct convolution (grouped and depthwise).
+    ConvDirect,
+    /// Implicit-GEMM convolution (one group), register-tiled, 64 channels x 64 pixels a tile.
+    ConvGemm,
+    /// The same with 32 channels x 128 pixels a tile, for layers of 17 to 32 channels.
+    ConvGemm32,
+    /// The same with 16 channels x 256 pixels a tile, for layers of at most 16 channels.
+    ConvGemm16,
+    /// Sigmoid / ReLU not fused into a convolution.
+    Unary,
+    /// Add / Mul of equal shapes.
+    Binary,
+    /// Strided gather: Slice, Transpose, Gather of one index.
+    Gather,
+    /// One part of a concatenation that could not be produced in place.
+    CopyBlock,
+    /// Max and average pooling.
+    Pool,
+    /// Nearest resize.
+    Resize,
+    /// Constant pad.
+    Pad,
+    /// Softmax along an axis.
+    Softmax,
+}
+
+impl Kind {
+    /// Name in profiles.
+    pub(crate) fn name(self) -> &'static str {
+        match self {
+            Kind::ConvDirect => "conv_direct",
+            Kind::ConvGemm => "conv_gemm",
+            Kind::ConvGemm32 => "conv_gemm_32x128",
+            Kind::ConvGemm16 => "conv_gemm_16x256",
+            Kind::Unary => "unary",
+            Kind::Binary => "binary",
+            Kind::Gather => "gather",
+            Kind::CopyBlock => "copy_block",
+            Kind::Pool => "pool",
+            Kind::Resize => "resize",
+            Kind::Pad => "pad",
+            Kind::Softmax => "softmax",
+        }
     }
 
-    /// `y = act(conv(x, w) + bias)`; `y` must hold `n * m * oh * ow` floats. Submits the work
-    /// (read `y` back with [`Gpu::download`]).
-    #[allow(clippy::too_many_arguments)]
-    pub fn run(
-        &self,
-        gpu: &Gpu,
-        shape: &ConvShape,
-        x: &wgpu::Buffer,
-        w: &wgpu::Buffer,
-        bias: &wgpu::Buffer,
-        y: &wgpu::Buffer,
-        act: Activation,
-    ) -> Result<(), GpuError> {
-        let (oh, ow) = shape.output()?;
-        let [n, c, h, wd] = shape.input;
-        let [m, kh, kw] = shape.kernel;
-        let p = [
-            n,
-            c,
-            h,
-            wd,
-            m,
-            oh,
-            ow,
-            kh,
-            kw,
-            shape.stride[0],
-            shape.stride[1],
-            shape.pads[0],
-            shape.pads[1],
-            shape.dilation[0],
-            shape.dilation[1],
-            shape.group,
-            act as usize,
-            0,
-        ];
-        let words: Vec<u32> = p
-            .iter()
-            .map(|&v| u32::try_from(v).map_err(|_| GpuError::Shape("conv dimension over u32".into())))
-            .collect::<Result<_, _>>()?;
-        let params = gpu.uniform(&words);
-        let group = bind(gpu, &self.pipeline, &[x, w, bias, y, &params]);
-        gpu.dispatch(&self.pipeline, &group, n * m * oh * ow);
-        Ok(())
+    fn source(self) -> std::borrow::Cow<'static, str> {
+        let gemm = include_str!("conv_gemm.wgsl");
+        std::borrow::Cow::Borrowed(match self {
+            Kind::ConvDirect => include_str!("conv2d.wgsl"),
+            Kind::ConvGemm => gemm,
+            Kind::ConvGemm32 | Kind::ConvGemm16 => {
+                let (tm, tn) = if self == Kind::ConvGemm32 { (32, 128) } else { (16, 256) };
+                return std::borrow::Cow::Owned(
+                    gemm.replace("const TM: u32 = 64u;", &format!("const TM: u32 = {tm}u;"))
+                        .replace("const TN: u32 = 64u;", &format!("const TN: u32 = {tn}u;")),
+                );
+            }
+            Kind::Unary => include_str!("unary.wgsl"),
+            Kind::Binary => include_str!("binary.wgsl"),
+            Kind::Gather => include_str!("gather.wgsl"),
+            Kind::CopyBlock => include_str!("copy_block.wgsl"),
+            Kind::Pool => include_str!("maxpool.wgsl"),
+            Kind::Resize => include_str!("resize.wgsl"),
+            Kind::Pad => include_str!("pad.wgsl"),
+            Kind::Softmax => include_str!("softmax.wgsl"),
+        })
     }
 }
 
-/// Element-wise binary op on two buffers of the same length.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum BinaryOp {
-    /// `a + b`.
-    Add = 0,
-    /// `a * b`.
-    Mul = 1,
+/// Pipelines compiled on first use.
+#[derive(Debug, Default)]
+pub(crate) struct Kernels {
+    compiled: std::collections::HashMap<Kind, wgpu::ComputePipeline>,
 }
 
-impl BinaryOp {
-    /// Compile the kernel.
-    pub fn pipeline(gpu: &Gpu) -> wgpu::ComputePipeline {
-        pipeline(gpu, include_str!("binary.wgsl"), "binary")
+impl Kernels {
+    /// The pipeline of `kind`, compiled if it is not yet.
+    pub(crate) fn get(&mut self, gpu: &Gpu, kind: Kind) -> &wgpu::ComputePipeline {
+        self.compiled.entry(kind).or_insert_with(|| pipeline(gpu, &kind.source(), kind.name()))
     }
 
-    /// `y = a (op) b` over `len` elements.
-    pub fn run(
-        self,
-        gpu: &Gpu,
-        pipeline: &wgpu::ComputePipeline,
-        a: &wgpu::Buffer,
-        b: &wgpu::Buffer,
-        y: &wgpu::Buffer,
-        len: usize,
-    ) -> Result<(), GpuError> {
-        let n = u32::try_from(len).map_err(|_| GpuError::Shape("length over u32".into()))?;
-        let params = gpu.uniform(&[n, self as u32, 0, 0]);
-        let group = bind(gpu, pipeline, &[a, b, y, &params]);
-        gpu.dispatch(pipeline, &group, len);
-        Ok(())
+    /// The pipeline of `kind` if compiled.
+    pub(crate) fn compiled(&self, kind: Kind) -> Option<&wgpu::ComputePipeline> {
+        self.compiled.get(&kind)
     }
 }

@@ -4,6 +4,8 @@ struct Params { len: u32, op: u32, pad0: u32, pad1: u32 }
 @group(0) @binding(0) var<storage, read> x: array<f32>;
 @group(0) @binding(1) var<storage, read_write> y: array<f32>;
 @group(0) @binding(2) var<uniform> p: Params;
+// Element offsets into the bound buffers: x = first input, y = second input, z = output.
+@group(0) @binding(3) var<uniform> off: vec4<u32>;
 
 @compute @workgroup_size(64)
 fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) nwg: vec3<u32>) {
@@ -11,11 +13,11 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (i >= p.len) {
         return;
     }
-    let v = x[i];
+    let v = x[off.x + i];
     switch p.op {
-        case 1u: { y[i] = v / (1.0 + exp(-v)); }
-        case 2u: { y[i] = 1.0 / (1.0 + exp(-v)); }
-        case 3u: { y[i] = max(v, 0.0); }
-        default: { y[i] = v; }
+        case 1u: { y[off.z + i] = v / (1.0 + exp(-v)); }
+        case 2u: { y[off.z + i] = 1.0 / (1.0 + exp(-v)); }
+        case 3u: { y[off.z + i] = max(v, 0.0); }
+        default: { y[off.z + i] = v; }
     }
 }

@@ -2,12 +2,12 @@
 
 use std::sync::Arc;
 
+use super::runner::{BACKENDS, Runner};
 use dynaflow_engine::msg::{Body, Detection, Detections, PixelFormat, PortType};
 use dynaflow_engine::op::{
     Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
     PortSpec,
 };
-use dynaflow_gpu::{Gpu, GpuModel};
 use dynaflow_infer::detect::{Decoder, Detector};
 use dynaflow_infer::onnx;
 
@@ -29,7 +29,7 @@ struct Config {
 pub const DETECT: OpSpec = OpSpec {
     name: "detect",
     family: "inference",
-    doc: "Object detection with an ONNX model: YOLOX (letterbox, BGR 0..255, grid decoding, score obj x cls) or FastestDet (resize, BGR 0..1, tanh/sigmoid box decoding, score obj^0.6 x cls^0.4), then class-wise NMS; boxes in image pixels with COCO class names. The default model is the vendored YOLOX-nano (embedded in the binary). Backend `cpu` is the reference executor (plain loops, checked against onnxruntime); the wgpu executor is being built (issue 12).",
+    doc: "Object detection with an ONNX model: YOLOX (letterbox, BGR 0..255, grid decoding, score obj x cls) or FastestDet (resize, BGR 0..1, tanh/sigmoid box decoding, score obj^0.6 x cls^0.4), then class-wise NMS; boxes in image pixels with COCO class names. The default model is the vendored YOLOX-nano (embedded in the binary). Backends: `cpu` (rten), `wgpu` (our WGSL executor), `reference` (plain loops); all checked against onnxruntime.",
     kind: OpKind::Transform,
     inputs: &[PortSpec::input("image", PortType::Image, "RGB8 image")],
     outputs: &[PortSpec::output("detections", PortType::Detections, "boxes, classes and scores, highest score first")],
@@ -48,9 +48,9 @@ pub const DETECT: OpSpec = OpSpec {
         },
         ParamSpec {
             name: "backend",
-            ty: ParamType::Enum { values: &["cpu", "wgpu"] },
+            ty: ParamType::Enum { values: BACKENDS },
             default: Default::Str("cpu"),
-            doc: "where the model runs: `cpu` (the reference executor) or `wgpu` (any Vulkan, Metal or DX12 adapter; node by node for now). Without an adapter, or with an op that has no GPU kernel, `wgpu` falls back to `cpu` with a warning (and says so in the summary)",
+            doc: "where the model runs: `cpu` (rten: SIMD, multi-threaded), `wgpu` (our planned executor on any Vulkan, Metal or DX12 adapter: one submit per frame) or `reference` (plain loops, the oracle the others are tested against; slow). Without an adapter, or for a model the GPU plan cannot take, `wgpu` falls back to `cpu` with a warning (and says so in the summary)",
         },
         ParamSpec {
             name: "score_threshold",
@@ -68,17 +68,17 @@ pub const DETECT: OpSpec = OpSpec {
     cpu_heavy: true,
     build: |p: &Params| {
         let c: Config = p.parse()?;
-        let model = if c.model.is_empty() {
-            onnx::parse(YOLOX_NANO).map_err(|e| OpError::Input(format!("embedded YOLOX-nano: {e}")))?
+        let (model, bytes) = if c.model.is_empty() {
+            let m = onnx::parse(YOLOX_NANO).map_err(|e| OpError::Input(format!("embedded YOLOX-nano: {e}")))?;
+            (m, YOLOX_NANO.to_vec())
         } else {
-            onnx::load(&p.resolve_path(&c.model)).map_err(|e| OpError::Input(e.to_string()))?
+            onnx::load_with_bytes(&p.resolve_path(&c.model)).map_err(|e| OpError::Input(e.to_string()))?
         };
         let decoder = if c.decoder == "fastestdet" { Decoder::FastestDet } else { Decoder::Yolox };
         let detector = Detector::new(model, decoder).map_err(OpError::Input)?;
         let names: Vec<Arc<str>> = COCO_NAMES.lines().map(Arc::from).collect();
-        let (gpu, backend) =
-            if c.backend == "wgpu" { wgpu_or_fallback(detector.model()) } else { (None, "cpu".into()) };
-        Ok(Instance::Transform(Box::new(Detect { config: c, detector, names, gpu, backend })))
+        let (runner, backend) = Runner::new(&bytes, detector.model(), &c.backend).map_err(OpError::Input)?;
+        Ok(Instance::Transform(Box::new(Detect { config: c, detector, names, runner, backend })))
     },
 };
 
@@ -86,25 +86,9 @@ struct Detect {
     config: Config,
     detector: Detector,
     names: Vec<Arc<str>>,
-    gpu: Option<GpuModel>,
+    runner: Runner,
     /// What runs the model, for the summary.
     backend: String,
-}
-
-/// The model on the GPU, or `None` and why not (a warning is logged: the documented fallback
-/// to the CPU).
-pub fn wgpu_or_fallback(model: &dynaflow_infer::onnx::Model) -> (Option<GpuModel>, String) {
-    let why = match (GpuModel::unsupported(model), Gpu::new()) {
-        (None, Ok(gpu)) => {
-            let m = GpuModel::new(gpu, model.clone());
-            let name = format!("wgpu: {}", m.adapter());
-            return (Some(m), name);
-        }
-        (Some(op), _) => op,
-        (None, Err(e)) => e.to_string(),
-    };
-    tracing::warn!("backend `wgpu` unavailable ({why}); running on the CPU");
-    (None, format!("cpu (wgpu fallback: {why})"))
 }
 
 impl Operator for Detect {
@@ -122,13 +106,11 @@ impl Operator for Detect {
         };
         let (score, iou) = (self.config.score_threshold as f32, self.config.nms_iou as f32);
         let classes = self.names.len();
-        let found = match &self.gpu {
-            Some(g) => self.detector.detect_with(rgb, w, h, classes, score, iou, |name, input| {
-                g.run(&[(name, input)]).map_err(|e| e.to_string())
-            }),
-            None => self.detector.detect(rgb, w, h, classes, score, iou).map_err(|e| e.to_string()),
-        }
-        .map_err(OpError::Input)?;
+        let runner = &self.runner;
+        let found = self
+            .detector
+            .detect_with(rgb, w, h, classes, score, iou, |name, input| runner.run(name, input))
+            .map_err(OpError::Input)?;
         let detections = found
             .into_iter()
             .map(|d| Detection {

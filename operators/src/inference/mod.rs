@@ -6,7 +6,9 @@
 mod box_mask;
 mod detect;
 mod gate;
+mod runner;
 
 pub use box_mask::BOX_TO_MASK;
-pub use detect::{COCO_NAMES, DETECT, YOLOX_NANO, wgpu_or_fallback};
+pub use detect::{COCO_NAMES, DETECT, YOLOX_NANO};
 pub use gate::KEYFRAME_GATE;
+pub use runner::{BACKENDS, Runner};
