@@ -1,0 +1,694 @@
+//! The occupancy octree: OctoMap 1.9's update rules on a compact arena.
+//!
+//! Every node is 16 bytes (log-odds, child block, colour, class, flags); the eight children
+//! of a node live together in one block of an arena, so a node with children costs one index,
+//! not eight pointers, and freed blocks are reused. Semantics are OctoMap's
+//! (`OccupancyOcTreeBase`): a new node starts at log-odds 0; a hit adds `logit(prob_hit)`, a
+//! miss `logit(prob_miss)`, clamped to `[logit(clamp_min), logit(clamp_max)]`; an update that
+//! reaches a pruned node expands it into eight copies; on the way back up, a node whose eight
+//! children are identical leaves is pruned into one, otherwise it takes its children's
+//! maximum. A node at or above `logit(occupancy)` is occupied.
+
+use std::collections::HashSet;
+use std::hash::{BuildHasherDefault, Hasher};
+
+use crate::key::{DEPTH, Grid, Key};
+
+/// `log(p / (1 - p))` in `f32`, as OctoMap's `logodds`.
+pub fn logodds(p: f64) -> f32 {
+    (p / (1.0 - p)).ln() as f32
+}
+
+/// Probability of a log-odds value.
+pub fn probability(l: f32) -> f64 {
+    1.0 - 1.0 / (1.0 + f64::from(l).exp())
+}
+
+/// Sensor model and tree parameters (OctoMap's defaults).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Params {
+    /// Edge of the finest voxel in metres (OctoMap's `res`; 0.05 in PSPNet-SLAM).
+    pub resolution: f64,
+    /// Probability a hit means occupied (0.7).
+    pub prob_hit: f64,
+    /// Probability a pass-through means occupied (0.4).
+    pub prob_miss: f64,
+    /// Lower clamp (0.1192).
+    pub clamp_min: f64,
+    /// Upper clamp (0.971).
+    pub clamp_max: f64,
+    /// Occupied at or above this probability (0.5).
+    pub occupancy: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self { resolution: 0.05, prob_hit: 0.7, prob_miss: 0.4, clamp_min: 0.1192, clamp_max: 0.971, occupancy: 0.5 }
+    }
+}
+
+impl Params {
+    /// Why these parameters cannot make a tree, if they cannot.
+    pub fn check(&self) -> Result<(), String> {
+        let p = |v: f64| v > 0.0 && v < 1.0;
+        if !(self.resolution.is_finite() && self.resolution > 0.0) {
+            return Err(format!("resolution {} must be a positive number of metres", self.resolution));
+        }
+        if !(p(self.prob_hit) && p(self.prob_miss) && p(self.clamp_min) && p(self.clamp_max) && p(self.occupancy)) {
+            return Err("probabilities must lie strictly between 0 and 1".into());
+        }
+        if self.prob_hit <= 0.5 || self.prob_miss >= 0.5 || self.clamp_min >= self.clamp_max {
+            return Err(format!(
+                "need prob_hit > 0.5 > prob_miss and clamp_min < clamp_max (got {}, {}, {}, {})",
+                self.prob_hit, self.prob_miss, self.clamp_min, self.clamp_max
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// No child block.
+pub(crate) const NONE: u32 = u32::MAX;
+/// The node exists (a child slot may be empty: unknown space).
+pub(crate) const EXISTS: u8 = 1;
+/// A colour was observed (OctoMap's `isColorSet`).
+pub(crate) const COLOR_SET: u8 = 2;
+
+/// One node.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Node {
+    /// Occupancy log-odds.
+    pub log_odds: f32,
+    pub(crate) children: u32,
+    /// RGB colour (white until observed, as OctoMap's ColorOcTree).
+    pub color: [u8; 3],
+    pub(crate) flags: u8,
+    /// Semantic class (0: none).
+    pub class: u16,
+}
+
+impl Node {
+    pub(crate) const ABSENT: Node = Node { log_odds: 0.0, children: NONE, color: [255; 3], flags: 0, class: 0 };
+    const NEW: Node = Node { log_odds: 0.0, children: NONE, color: [255; 3], flags: EXISTS, class: 0 };
+
+    /// Whether it has children.
+    pub fn has_children(&self) -> bool {
+        self.children != NONE
+    }
+
+    /// Whether a colour was observed.
+    pub fn color_set(&self) -> bool {
+        self.flags & COLOR_SET != 0
+    }
+
+    pub(crate) fn exists(&self) -> bool {
+        self.flags & EXISTS != 0
+    }
+}
+
+/// A hasher for packed keys (multiply-shift; keys are not adversarial).
+#[derive(Clone, Default)]
+pub(crate) struct KeyHasher(u64);
+
+impl Hasher for KeyHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(8) ^ u64::from(b)).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
+    }
+    fn write_u64(&mut self, v: u64) {
+        self.0 = (v ^ (v >> 29)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        self.0 ^= self.0 >> 32;
+    }
+}
+
+pub(crate) type KeySet = HashSet<u64, BuildHasherDefault<KeyHasher>>;
+
+/// What a scan point carries besides its position.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Label {
+    /// RGB colour of the pixel.
+    pub color: [u8; 3],
+    /// Semantic class (0: none).
+    pub class: u16,
+}
+
+/// A leaf of the tree (a voxel at some depth; pruned leaves are larger).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Leaf {
+    /// Key of its first finest voxel (lowest corner).
+    pub key: Key,
+    /// Edge in finest voxels (1 at depth 16, 2 at depth 15...).
+    pub size: u32,
+    /// The node.
+    pub node: Node,
+}
+
+/// What a ray cast found.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum RayHit {
+    /// The centre of the first occupied voxel.
+    Occupied([f64; 3]),
+    /// The centre of the first unknown voxel.
+    Unknown([f64; 3]),
+    /// Free space all the way to the range limit (or the tree's edge).
+    Free,
+}
+
+/// The labels of one voxel's points in one scan: colour sum, count, class votes (the first
+/// four classes seen; more in one voxel of one scan is noise).
+#[derive(Clone, Copy, Default)]
+struct Votes {
+    sum: [u32; 3],
+    n: u32,
+    classes: [(u16, u32); 4],
+}
+
+impl Votes {
+    fn add(&mut self, l: &Label) {
+        for c in 0..3 {
+            self.sum[c] += u32::from(l.color[c]);
+        }
+        self.n += 1;
+        if let Some(v) = self.classes.iter_mut().find(|v| v.1 > 0 && v.0 == l.class) {
+            v.1 += 1;
+        } else if let Some(v) = self.classes.iter_mut().find(|v| v.1 == 0) {
+            *v = (l.class, 1);
+        }
+    }
+
+    /// Mean colour, most voted class (ties: the smaller id).
+    fn label(&self) -> Label {
+        let n = self.n.max(1);
+        let class =
+            self.classes.iter().filter(|v| v.1 > 0).max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0))).map_or(0, |v| v.0);
+        Label { color: [(self.sum[0] / n) as u8, (self.sum[1] / n) as u8, (self.sum[2] / n) as u8], class }
+    }
+}
+
+/// Scratch buffers reused between scans.
+#[derive(Clone, Default)]
+struct Scratch {
+    free: KeySet,
+    occupied: KeySet,
+    labels: std::collections::HashMap<u64, Votes, BuildHasherDefault<KeyHasher>>,
+    ray: Vec<Key>,
+}
+
+/// A probabilistic occupancy octree with OctoMap's semantics.
+#[derive(Clone)]
+pub struct OcTree {
+    params: Params,
+    grid: Grid,
+    hit: f32,
+    miss: f32,
+    clamp_min: f32,
+    clamp_max: f32,
+    occupied_at: f32,
+    /// Keep colours and classes, and prune only voxels that agree on them (OctoMap's
+    /// ColorOcTree prunes only equal colours).
+    semantic: bool,
+    root: Node,
+    blocks: Vec<[Node; 8]>,
+    free_blocks: Vec<u32>,
+    scratch: Scratch,
+}
+
+impl std::fmt::Debug for OcTree {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("OcTree").field("params", &self.params).field("nodes", &self.size()).finish()
+    }
+}
+
+impl OcTree {
+    /// An empty tree (checked parameters). `semantic`: keep colour and class per voxel.
+    pub fn new(params: Params, semantic: bool) -> Result<Self, String> {
+        params.check()?;
+        Ok(Self {
+            grid: Grid::new(params.resolution),
+            hit: logodds(params.prob_hit),
+            miss: logodds(params.prob_miss),
+            clamp_min: logodds(params.clamp_min),
+            clamp_max: logodds(params.clamp_max),
+            occupied_at: logodds(params.occupancy),
+            params,
+            semantic,
+            root: Node::ABSENT,
+            blocks: Vec::new(),
+            free_blocks: Vec::new(),
+            scratch: Scratch::default(),
+        })
+    }
+
+    /// Parameters.
+    pub fn params(&self) -> &Params {
+        &self.params
+    }
+
+    /// Key and coordinate conversions.
+    pub fn grid(&self) -> &Grid {
+        &self.grid
+    }
+
+    /// Whether colours and classes are kept.
+    pub fn semantic(&self) -> bool {
+        self.semantic
+    }
+
+    /// Clamping bounds in log-odds.
+    pub fn clamping(&self) -> (f32, f32) {
+        (self.clamp_min, self.clamp_max)
+    }
+
+    /// Whether a node counts as occupied.
+    pub fn is_occupied(&self, n: &Node) -> bool {
+        n.log_odds >= self.occupied_at
+    }
+
+    /// The root, if the tree is not empty.
+    pub fn root(&self) -> Option<&Node> {
+        self.root.exists().then_some(&self.root)
+    }
+
+    /// Child `i` of `n`, if it exists.
+    pub fn child(&self, n: &Node, i: usize) -> Option<&Node> {
+        if n.children == NONE {
+            return None;
+        }
+        let c = &self.blocks[n.children as usize][i];
+        c.exists().then_some(c)
+    }
+
+    /// Number of nodes (OctoMap's `size()`).
+    pub fn size(&self) -> usize {
+        fn count(t: &OcTree, n: &Node) -> usize {
+            1 + (0..8).filter_map(|i| t.child(n, i)).map(|c| count(t, c)).sum::<usize>()
+        }
+        self.root().map_or(0, |r| count(self, r))
+    }
+
+    /// Bytes held by the tree's nodes (the arena, free blocks included).
+    pub fn memory_bytes(&self) -> usize {
+        std::mem::size_of::<Self>() + self.blocks.capacity() * std::mem::size_of::<[Node; 8]>()
+    }
+
+    fn alloc(&mut self) -> u32 {
+        if let Some(b) = self.free_blocks.pop() {
+            self.blocks[b as usize] = [Node::ABSENT; 8];
+            return b;
+        }
+        self.blocks.push([Node::ABSENT; 8]);
+        (self.blocks.len() - 1) as u32
+    }
+
+    /// The node at `path` (child indices from the root).
+    fn node_mut(&mut self, at: (u32, usize)) -> &mut Node {
+        if at.0 == NONE { &mut self.root } else { &mut self.blocks[at.0 as usize][at.1] }
+    }
+
+    /// The deepest node on `key`'s path: the voxel, or the pruned node holding it; `None`
+    /// for unknown space.
+    pub fn search(&self, key: Key) -> Option<&Node> {
+        let mut n = self.root()?;
+        for level in (0..DEPTH).rev() {
+            if !n.has_children() {
+                return Some(n);
+            }
+            n = self.child(n, key.child_index(level))?;
+        }
+        Some(n)
+    }
+
+    /// Occupancy probability at a point; `None` for unknown space or outside the tree.
+    pub fn occupancy_at(&self, p: [f32; 3]) -> Option<f64> {
+        let k = self.grid.key(p)?;
+        self.search(k).map(|n| probability(n.log_odds))
+    }
+
+    /// Update one voxel with a hit or a miss (and, for hits in a semantic tree, its label),
+    /// as OctoMap's `updateNode(key, occupied, lazy_eval = false)`.
+    pub fn update(&mut self, key: Key, hit: bool, label: Option<Label>) {
+        let delta = if hit { self.hit } else { self.miss };
+        if let Some(leaf) = self.search(key)
+            && ((delta >= 0.0 && leaf.log_odds >= self.clamp_max) || (delta <= 0.0 && leaf.log_odds <= self.clamp_min))
+            && (label.is_none() || !self.semantic)
+        {
+            return;
+        }
+        let mut just_created = false;
+        if !self.root.exists() {
+            self.root = Node::NEW;
+            just_created = true;
+        }
+        // Down: (block, slot) of each node on the path; the root is (NONE, 0).
+        let mut path = [(NONE, 0usize); DEPTH as usize + 1];
+        let mut at = (NONE, 0usize);
+        for (depth, level) in (0..DEPTH).rev().enumerate() {
+            path[depth] = at;
+            let pos = key.child_index(level);
+            let node = *self.node_mut(at);
+            let mut created = false;
+            let exists = node.children != NONE && self.blocks[node.children as usize][pos].exists();
+            if !exists {
+                if node.children == NONE && !just_created {
+                    // A pruned node: expand it into eight copies of itself.
+                    let b = self.alloc();
+                    let mut copy = node;
+                    copy.children = NONE;
+                    copy.flags |= EXISTS;
+                    self.blocks[b as usize] = [copy; 8];
+                    self.node_mut(at).children = b;
+                } else {
+                    let b = if node.children == NONE {
+                        let b = self.alloc();
+                        self.node_mut(at).children = b;
+                        b
+                    } else {
+                        node.children
+                    };
+                    self.blocks[b as usize][pos] = Node::NEW;
+                    created = true;
+                }
+            }
+            just_created = created;
+            at = (self.node_mut(at).children, pos);
+        }
+        path[DEPTH as usize] = at;
+        let (lo, hi) = (self.clamp_min, self.clamp_max);
+        let semantic = self.semantic;
+        let leaf = self.node_mut(at);
+        leaf.log_odds = (leaf.log_odds + delta).clamp(lo, hi);
+        if semantic && let Some(l) = label {
+            leaf.color = l.color;
+            leaf.class = l.class;
+            leaf.flags |= COLOR_SET;
+        }
+        // Up: prune, or take the children's maximum.
+        for depth in (0..DEPTH as usize).rev() {
+            let at = path[depth];
+            if !self.prune(at) {
+                let b = self.node_mut(at).children;
+                let max = self.blocks[b as usize]
+                    .iter()
+                    .filter(|c| c.exists())
+                    .map(|c| c.log_odds)
+                    .fold(f32::NEG_INFINITY, f32::max);
+                self.node_mut(at).log_odds = max;
+            }
+        }
+    }
+
+    /// Prune the node at `at` if its eight children are identical leaves; whether it did.
+    fn prune(&mut self, at: (u32, usize)) -> bool {
+        let b = self.node_mut(at).children;
+        if b == NONE {
+            return false;
+        }
+        let kids = &self.blocks[b as usize];
+        let first = kids[0];
+        let same = |c: &Node| {
+            c.exists()
+                && !c.has_children()
+                && c.log_odds == first.log_odds
+                && (!self.semantic || (c.color == first.color && c.class == first.class && c.flags == first.flags))
+        };
+        if !kids.iter().all(same) {
+            return false;
+        }
+        let n = self.node_mut(at);
+        n.log_odds = first.log_odds;
+        n.color = first.color;
+        n.class = first.class;
+        n.flags = first.flags | EXISTS;
+        n.children = NONE;
+        self.free_blocks.push(b);
+        true
+    }
+
+    /// Insert one scan as OctoMap's `insertPointCloud(cloud, origin, max_range)`: the voxels on
+    /// each ray from `origin` up to its end point are updated free once, each end point's
+    /// voxel occupied once (a voxel that is both counts as occupied); a point beyond
+    /// `max_range` (when positive) clears the ray up to `max_range` and marks nothing. With
+    /// `labels` (one per point) a semantic tree keeps, per occupied voxel, the mean colour and
+    /// the most frequent class of its points. Points are world coordinates.
+    pub fn insert_scan(&mut self, points: &[[f32; 3]], labels: Option<&[Label]>, origin: [f32; 3], max_range: f64) {
+        let mut s = std::mem::take(&mut self.scratch);
+        s.free.clear();
+        s.occupied.clear();
+        s.labels.clear();
+        for (i, p) in points.iter().enumerate() {
+            let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+            let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            if max_range < 0.0 || norm <= max_range {
+                if self.grid.ray_keys(origin, *p, &mut s.ray) {
+                    s.free.extend(s.ray.iter().map(|k| k.packed()));
+                }
+                if let Some(k) = self.grid.key(*p) {
+                    s.occupied.insert(k.packed());
+                    if let Some(l) = labels.and_then(|l| l.get(i)) {
+                        s.labels.entry(k.packed()).or_default().add(l);
+                    }
+                }
+            } else {
+                let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                let dir = [d[0] / len, d[1] / len, d[2] / len];
+                let r = max_range as f32;
+                let end = [origin[0] + dir[0] * r, origin[1] + dir[1] * r, origin[2] + dir[2] * r];
+                if self.grid.ray_keys(origin, end, &mut s.ray) {
+                    s.free.extend(s.ray.iter().map(|k| k.packed()));
+                }
+            }
+        }
+        let unpack = |v: u64| Key([(v >> 32) as u16, (v >> 16) as u16, v as u16]);
+        for &k in &s.free {
+            if !s.occupied.contains(&k) {
+                self.update(unpack(k), false, None);
+            }
+        }
+        for &k in &s.occupied {
+            self.update(unpack(k), true, s.labels.get(&k).map(Votes::label));
+        }
+        self.scratch = s;
+    }
+
+    /// Every leaf (voxels at the finest level and pruned nodes), depth first.
+    pub fn leaves(&self) -> Vec<Leaf> {
+        let mut out = Vec::new();
+        if let Some(r) = self.root() {
+            self.collect(r, Key([0; 3]), 1 << DEPTH, &mut out);
+        }
+        out
+    }
+
+    fn collect(&self, n: &Node, corner: Key, size: u32, out: &mut Vec<Leaf>) {
+        if !n.has_children() {
+            out.push(Leaf { key: corner, size, node: *n });
+            return;
+        }
+        let half = (size / 2) as u16;
+        for i in 0..8 {
+            if let Some(c) = self.child(n, i) {
+                let k = Key([
+                    corner.0[0] + if i & 1 != 0 { half } else { 0 },
+                    corner.0[1] + if i & 2 != 0 { half } else { 0 },
+                    corner.0[2] + if i & 4 != 0 { half } else { 0 },
+                ]);
+                self.collect(c, k, size / 2, out);
+            }
+        }
+    }
+
+    /// Occupied leaves.
+    pub fn occupied_leaves(&self) -> Vec<Leaf> {
+        self.leaves().into_iter().filter(|l| self.is_occupied(&l.node)).collect()
+    }
+
+    /// Walk from `origin` along `direction` (voxel by voxel) to the first occupied voxel, as
+    /// OctoMap's `castRay` with `ignoreUnknown = false`; `max_range` <= 0: to the tree's edge.
+    pub fn cast_ray(&self, origin: [f32; 3], direction: [f32; 3], max_range: f64) -> RayHit {
+        let norm = (direction.iter().map(|d| f64::from(*d).powi(2)).sum::<f64>()).sqrt();
+        let Some(start) = self.grid.key(origin) else { return RayHit::Free };
+        if norm == 0.0 {
+            return RayHit::Free;
+        }
+        let dir = [f64::from(direction[0]) / norm, f64::from(direction[1]) / norm, f64::from(direction[2]) / norm];
+        let res = self.params.resolution;
+        let mut cur = [i32::from(start.0[0]), i32::from(start.0[1]), i32::from(start.0[2])];
+        let mut step = [0i32; 3];
+        let mut t_max = [f64::MAX; 3];
+        let mut t_delta = [f64::MAX; 3];
+        for i in 0..3 {
+            if dir[i] != 0.0 {
+                step[i] = if dir[i] > 0.0 { 1 } else { -1 };
+                let border = self.grid.key_coord(start.0[i]) + f64::from(step[i]) * res * 0.5;
+                t_max[i] = (border - f64::from(origin[i])) / dir[i];
+                t_delta[i] = res / dir[i].abs();
+            }
+        }
+        loop {
+            let key = Key([cur[0] as u16, cur[1] as u16, cur[2] as u16]);
+            match self.search(key) {
+                Some(n) if self.is_occupied(n) => return RayHit::Occupied(self.grid.centre(key)),
+                Some(_) => {}
+                None => return RayHit::Unknown(self.grid.centre(key)),
+            }
+            let dim = (0..3).min_by(|&a, &b| t_max[a].total_cmp(&t_max[b])).unwrap_or(0);
+            if max_range > 0.0 && t_max[dim] > max_range {
+                return RayHit::Free;
+            }
+            cur[dim] += step[dim];
+            t_max[dim] += t_delta[dim];
+            if !(0..=65_535).contains(&cur[dim]) {
+                return RayHit::Free;
+            }
+        }
+    }
+
+    /// Every node to its maximum-likelihood value (clamp bound), then pruned again, as
+    /// OctoMap's `toMaxLikelihood` + `prune` (what `writeBinary` stores).
+    pub fn to_max_likelihood(&mut self) {
+        if !self.root.exists() {
+            return;
+        }
+        self.ml_recurs((NONE, 0));
+    }
+
+    fn ml_recurs(&mut self, at: (u32, usize)) {
+        let n = *self.node_mut(at);
+        let v = if self.is_occupied(&n) { self.clamp_max } else { self.clamp_min };
+        self.node_mut(at).log_odds = v;
+        if n.children != NONE {
+            for i in 0..8 {
+                if self.blocks[n.children as usize][i].exists() {
+                    self.ml_recurs((n.children, i));
+                }
+            }
+            self.prune(at);
+        }
+    }
+
+    /// Prune every collapsible node, bottom up (OctoMap's `prune`).
+    pub fn prune_all(&mut self) {
+        if self.root.exists() {
+            self.prune_recurs((NONE, 0));
+        }
+    }
+
+    fn prune_recurs(&mut self, at: (u32, usize)) {
+        let b = self.node_mut(at).children;
+        if b == NONE {
+            return;
+        }
+        for i in 0..8 {
+            if self.blocks[b as usize][i].exists() {
+                self.prune_recurs((b, i));
+            }
+        }
+        self.prune(at);
+    }
+
+    /// A tree from nodes read from a file (`io`).
+    pub(crate) fn from_parts(
+        params: Params,
+        semantic: bool,
+        root: Node,
+        blocks: Vec<[Node; 8]>,
+    ) -> Result<Self, String> {
+        let mut t = Self::new(params, semantic)?;
+        t.root = root;
+        t.blocks = blocks;
+        Ok(t)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tree() -> OcTree {
+        OcTree::new(Params::default(), false).unwrap()
+    }
+
+    #[test]
+    fn hits_and_misses_follow_octomaps_log_odds_and_clamp() {
+        let mut t = tree();
+        let k = t.grid().key([0.3, 0.2, 0.1]).unwrap();
+        t.update(k, true, None);
+        assert!((t.search(k).unwrap().log_odds - logodds(0.7)).abs() < 1e-7);
+        for _ in 0..20 {
+            t.update(k, true, None);
+        }
+        assert_eq!(t.search(k).unwrap().log_odds, logodds(0.971));
+        for _ in 0..40 {
+            t.update(k, false, None);
+        }
+        assert_eq!(t.search(k).unwrap().log_odds, logodds(0.1192));
+        // One voxel: 16 levels of single children plus the root.
+        assert_eq!(t.size(), 17);
+        assert!(t.search(Key([1, 2, 3])).is_none());
+    }
+
+    #[test]
+    fn eight_equal_siblings_are_pruned_and_expand_again() {
+        let mut t = tree();
+        let base = t.grid().key([0.0, 0.0, 0.0]).unwrap();
+        let sib = |i: u16| Key([base.0[0] + (i & 1), base.0[1] + ((i >> 1) & 1), base.0[2] + ((i >> 2) & 1)]);
+        for i in 0..8 {
+            t.update(sib(i), true, None);
+        }
+        assert_eq!(t.size(), 16, "the eight leaves merged into their parent");
+        assert_eq!(t.leaves().len(), 1);
+        assert_eq!(t.leaves()[0].size, 2);
+        t.update(sib(3), true, None);
+        assert_eq!(t.size(), 24, "expanded back into eight");
+        assert!(t.search(sib(3)).unwrap().log_odds > t.search(sib(2)).unwrap().log_odds);
+    }
+
+    #[test]
+    fn a_scan_clears_its_rays_and_marks_its_end_points() {
+        let mut t = tree();
+        let wall: Vec<[f32; 3]> =
+            (0..20).flat_map(|i| (0..20).map(move |j| [2.0, -0.5 + i as f32 * 0.05, -0.5 + j as f32 * 0.05])).collect();
+        t.insert_scan(&wall, None, [0.01, 0.01, 0.01], -1.0);
+        assert!(t.occupancy_at([2.0, 0.0, 0.0]).unwrap() > 0.5);
+        assert!(t.occupancy_at([1.0, 0.0, 0.0]).unwrap() < 0.5);
+        assert!(t.occupancy_at([3.0, 0.0, 0.0]).is_none(), "behind the wall is unknown");
+        match t.cast_ray([0.01, 0.01, 0.01], [1.0, 0.0, 0.0], -1.0) {
+            RayHit::Occupied(p) => assert!((p[0] - 2.025).abs() < 1e-9, "{p:?}"),
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(t.cast_ray([0.01, 0.01, 0.01], [1.0, 0.0, 0.0], 1.0), RayHit::Free);
+        assert!(matches!(t.cast_ray([0.01, 0.01, 0.01], [0.0, 0.0, -1.0], -1.0), RayHit::Unknown(_)));
+        // Beyond max range: the ray is cleared to the range, nothing is marked.
+        let mut u = tree();
+        u.insert_scan(&wall, None, [0.01, 0.01, 0.01], 1.0);
+        assert!(u.occupancy_at([2.0, 0.0, 0.0]).is_none());
+        assert!(u.occupancy_at([0.9, 0.0, 0.0]).unwrap() < 0.5);
+    }
+
+    #[test]
+    fn a_semantic_tree_keeps_colour_and_class() {
+        let mut t = OcTree::new(Params::default(), true).unwrap();
+        let pts = [[1.0f32, 0.0, 0.0], [1.01, 0.01, 0.0], [2.0, 0.0, 0.0]];
+        let labels = [
+            Label { color: [10, 20, 30], class: 5 },
+            Label { color: [30, 40, 50], class: 5 },
+            Label { color: [200, 0, 0], class: 1 },
+        ];
+        t.insert_scan(&pts, Some(&labels), [0.0, 0.0, 0.0], -1.0);
+        let k = t.grid().key([1.0, 0.0, 0.0]).unwrap();
+        let n = t.search(k).unwrap();
+        assert_eq!((n.color, n.class, n.color_set()), ([20, 30, 40], 5, true));
+        assert_eq!(t.search(t.grid().key([2.0, 0.0, 0.0]).unwrap()).unwrap().class, 1);
+    }
+
+    #[test]
+    fn bad_parameters_are_refused() {
+        assert!(OcTree::new(Params { resolution: 0.0, ..Params::default() }, false).is_err());
+        assert!(OcTree::new(Params { prob_hit: 0.4, ..Params::default() }, false).is_err());
+        assert!(OcTree::new(Params { clamp_min: 0.99, ..Params::default() }, false).is_err());
+    }
+}
