@@ -76,6 +76,8 @@ enum Command {
     Eval(commands::eval::EvalArgs),
     /// Run an ONNX detector on images: detections per image as JSON lines.
     Infer(commands::infer::InferArgs),
+    /// Summarise an OctoMap file (.ot, .bt) as JSON; `--plot` draws it from above.
+    Octree(commands::octree::OctreeArgs),
     /// Generate a semi-synthetic dynamic RGB-D sequence in the TUM layout, with ground truth.
     Synth(commands::synth::SynthArgs),
     /// Open a `.rrd` recording in the rerun viewer (if installed).
@@ -212,6 +214,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => commands::eval::eval(&args),
         Command::Synth(args) => commands::synth::synth(&args),
         Command::Infer(args) => commands::infer::infer(&args),
+        Command::Octree(args) => commands::octree::octree(&args),
         Command::View { file } => commands::view::view(&file),
         Command::Graph { graph, format, variant } => {
             commands::graph::graph(&graph, matches!(format, GraphFormat::Dot), variant)

@@ -86,15 +86,20 @@ impl Grid {
         [c(k.0[0]), c(k.0[1]), c(k.0[2])]
     }
 
-    /// The voxels a ray from `origin` to `end` crosses, the end point's excluded, appended to
-    /// `out` (cleared first); `false` when either point is outside the tree's range.
+    /// The voxels a ray from `origin` to `end` crosses, the end point's excluded, into `out`
+    /// (cleared first); `false` when either point is outside the tree's range.
     pub fn ray_keys(&self, origin: [f32; 3], end: [f32; 3], out: &mut Vec<Key>) -> bool {
         out.clear();
+        self.ray_walk(origin, end, |k| out.push(k))
+    }
+
+    /// [`Grid::ray_keys`] without a buffer: `visit` sees each voxel in order.
+    pub fn ray_walk(&self, origin: [f32; 3], end: [f32; 3], mut visit: impl FnMut(Key)) -> bool {
         let (Some(start), Some(stop)) = (self.key(origin), self.key(end)) else { return false };
         if start == stop {
             return true;
         }
-        out.push(start);
+        visit(start);
         let mut dir = [end[0] - origin[0], end[1] - origin[1], end[2] - origin[2]];
         let length = (dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]).sqrt();
         for d in &mut dir {
@@ -118,30 +123,40 @@ impl Grid {
                 t_delta[i] = self.resolution / f64::from(dir[i]).abs();
             }
         }
-        let mut cur = [i32::from(start.0[0]), i32::from(start.0[1]), i32::from(start.0[2])];
+        let [mut tx, mut ty, mut tz] = t_max;
+        let [dx, dy, dz] = t_delta;
+        let [sx, sy, sz] = step;
+        let [mut x, mut y, mut z] = [i32::from(start.0[0]), i32::from(start.0[1]), i32::from(start.0[2])];
+        let stop = [i32::from(stop.0[0]), i32::from(stop.0[1]), i32::from(stop.0[2])];
         let length = f64::from(length);
         loop {
-            let dim = if t_max[0] < t_max[1] {
-                if t_max[0] < t_max[2] { 0 } else { 2 }
-            } else if t_max[1] < t_max[2] {
-                1
+            // The smallest crossing distance; ties go to the later axis, as OctoMap's.
+            if tx < ty {
+                if tx < tz {
+                    x += sx;
+                    tx += dx;
+                } else {
+                    z += sz;
+                    tz += dz;
+                }
+            } else if ty < tz {
+                y += sy;
+                ty += dy;
             } else {
-                2
-            };
-            cur[dim] += step[dim];
-            t_max[dim] += t_delta[dim];
-            if !(0..=65_535).contains(&cur[dim]) {
-                return true;
+                z += sz;
+                tz += dz;
             }
-            let key = Key([cur[0] as u16, cur[1] as u16, cur[2] as u16]);
-            if key == stop {
+            if [x, y, z] == stop {
                 return true;
             }
             // Past the end point's distance without meeting its voxel (rounding): stop.
-            if t_max[0].min(t_max[1]).min(t_max[2]) > length {
+            if tx.min(ty).min(tz) > length {
                 return true;
             }
-            out.push(key);
+            if !((0..=65_535).contains(&x) && (0..=65_535).contains(&y) && (0..=65_535).contains(&z)) {
+                return true;
+            }
+            visit(Key([x as u16, y as u16, z as u16]));
         }
     }
 }

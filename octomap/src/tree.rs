@@ -189,13 +189,107 @@ impl Votes {
     }
 }
 
+/// Morton code of a key (x, y, z bits interleaved, z highest): sorting keys by it walks the
+/// tree depth first, so consecutive updates share most of their path.
+fn morton(k: Key) -> u64 {
+    fn spread(v: u16) -> u64 {
+        let mut x = u64::from(v);
+        x = (x | (x << 16)) & 0x0000_FF00_00FF;
+        x = (x | (x << 8)) & 0x00F0_0F00_F00F;
+        x = (x | (x << 4)) & 0x0003_0C30_C30C_30C3;
+        (x | (x << 2)) & 0x0009_2492_4924_9249
+    }
+    spread(k.0[0]) | (spread(k.0[1]) << 1) | (spread(k.0[2]) << 2)
+}
+
+fn unmorton(m: u64) -> Key {
+    fn squeeze(mut x: u64) -> u16 {
+        x &= 0x0009_2492_4924_9249;
+        x = (x | (x >> 2)) & 0x0003_0C30_C30C_30C3;
+        x = (x | (x >> 4)) & 0x00F0_0F00_F00F;
+        x = (x | (x >> 8)) & 0x0000_FF00_00FF;
+        x = (x | (x >> 16)) & 0xFFFF;
+        x as u16
+    }
+    Key([squeeze(m), squeeze(m >> 1), squeeze(m >> 2)])
+}
+
+/// A set of keys for one scan: a bitmap over the scan's bounding box (set and cleared in
+/// O(1) per key), with a hash set for keys outside it; the distinct keys in `list`.
+#[derive(Clone, Default)]
+struct KeyDedup {
+    lo: [i32; 3],
+    dims: [usize; 3],
+    bits: Vec<u64>,
+    outside: KeySet,
+    list: Vec<u64>,
+}
+
+impl KeyDedup {
+    /// Empty, covering keys `lo..lo + dims` densely (when that fits in 16 MB of bits).
+    fn reset(&mut self, lo: [i32; 3], dims: [usize; 3]) {
+        for &m in &self.list {
+            if let Some(i) = self.index(unmorton(m)) {
+                self.bits[i / 64] &= !(1 << (i % 64));
+            }
+        }
+        self.list.clear();
+        self.outside.clear();
+        let cells = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).filter(|&c| c <= 1 << 27);
+        match cells {
+            Some(c) => {
+                if self.bits.len() < c.div_ceil(64) {
+                    self.bits.resize(c.div_ceil(64), 0);
+                }
+                self.lo = lo;
+                self.dims = dims;
+            }
+            None => self.dims = [0; 3],
+        }
+    }
+
+    #[inline]
+    fn index(&self, k: Key) -> Option<usize> {
+        // Wrapping subtraction: below `lo` becomes huge and fails the bound.
+        let x = (i32::from(k.0[0]) - self.lo[0]) as u32 as usize;
+        let y = (i32::from(k.0[1]) - self.lo[1]) as u32 as usize;
+        let z = (i32::from(k.0[2]) - self.lo[2]) as u32 as usize;
+        (x < self.dims[0] && y < self.dims[1] && z < self.dims[2]).then(|| (z * self.dims[1] + y) * self.dims[0] + x)
+    }
+
+    /// Add `k`; whether it was new.
+    #[inline]
+    fn insert(&mut self, k: Key) -> bool {
+        let new = match self.index(k) {
+            Some(i) => {
+                let (w, b) = (i / 64, 1u64 << (i % 64));
+                let new = self.bits[w] & b == 0;
+                self.bits[w] |= b;
+                new
+            }
+            None => self.outside.insert(k.packed()),
+        };
+        if new {
+            self.list.push(morton(k));
+        }
+        new
+    }
+
+    fn contains(&self, k: Key) -> bool {
+        match self.index(k) {
+            Some(i) => self.bits[i / 64] & (1 << (i % 64)) != 0,
+            None => self.outside.contains(&k.packed()),
+        }
+    }
+}
+
 /// Scratch buffers reused between scans.
 #[derive(Clone, Default)]
 struct Scratch {
-    free: KeySet,
-    occupied: KeySet,
+    free: KeyDedup,
+    occupied: KeyDedup,
     labels: std::collections::HashMap<u64, Votes, BuildHasherDefault<KeyHasher>>,
-    ray: Vec<Key>,
+    changes: Vec<(Key, bool)>,
 }
 
 /// A probabilistic occupancy octree with OctoMap's semantics.
@@ -208,8 +302,7 @@ pub struct OcTree {
     clamp_min: f32,
     clamp_max: f32,
     occupied_at: f32,
-    /// Keep colours and classes, and prune only voxels that agree on them (OctoMap's
-    /// ColorOcTree prunes only equal colours).
+    /// Keep colours and classes (OctoMap's ColorOcTree, plus a class).
     semantic: bool,
     root: Node,
     blocks: Vec<[Node; 8]>,
@@ -329,15 +422,19 @@ impl OcTree {
     }
 
     /// Update one voxel with a hit or a miss (and, for hits in a semantic tree, its label),
-    /// as OctoMap's `updateNode(key, occupied, lazy_eval = false)`.
-    pub fn update(&mut self, key: Key, hit: bool, label: Option<Label>) {
+    /// as OctoMap's `updateNode(key, occupied, lazy_eval = false)`. Returns the voxel's new
+    /// state (occupied or not) when its occupancy decision changed (unknown counts as a
+    /// state), as OctoMap's change detection.
+    pub fn update(&mut self, key: Key, hit: bool, label: Option<Label>) -> Option<bool> {
         let delta = if hit { self.hit } else { self.miss };
-        if let Some(leaf) = self.search(key)
-            && ((delta >= 0.0 && leaf.log_odds >= self.clamp_max) || (delta <= 0.0 && leaf.log_odds <= self.clamp_min))
-            && (label.is_none() || !self.semantic)
-        {
-            return;
-        }
+        // OctoMap's early abort: the voxel (or the pruned node holding it) is already clamped
+        // in this direction. Checked on the way down, where that node is met, before anything
+        // is modified.
+        let keep_label = label.is_some() && self.semantic;
+        let (lo_clamp, hi_clamp) = (self.clamp_min, self.clamp_max);
+        let clamped = |l: f32| !keep_label && ((delta >= 0.0 && l >= hi_clamp) || (delta <= 0.0 && l <= lo_clamp));
+        // The state before: the node met (`None`: unknown space).
+        let mut before: Option<bool> = None;
         let mut just_created = false;
         if !self.root.exists() {
             self.root = Node::NEW;
@@ -345,16 +442,24 @@ impl OcTree {
         }
         // Down: (block, slot) of each node on the path; the root is (NONE, 0).
         let mut path = [(NONE, 0usize); DEPTH as usize + 1];
+        // Each node's state before this update (existed, log-odds, had children): once a node
+        // comes out unchanged, nothing above it can change and the walk up stops.
+        let mut was = [(false, 0.0f32, false); DEPTH as usize + 1];
         let mut at = (NONE, 0usize);
         for (depth, level) in (0..DEPTH).rev().enumerate() {
             path[depth] = at;
             let pos = key.child_index(level);
             let node = *self.node_mut(at);
+            was[depth] = (!just_created, node.log_odds, node.has_children());
             let mut created = false;
             let exists = node.children != NONE && self.blocks[node.children as usize][pos].exists();
             if !exists {
                 if node.children == NONE && !just_created {
                     // A pruned node: expand it into eight copies of itself.
+                    if clamped(node.log_odds) {
+                        return None;
+                    }
+                    before = Some(self.is_occupied(&node));
                     let b = self.alloc();
                     let mut copy = node;
                     copy.children = NONE;
@@ -377,16 +482,25 @@ impl OcTree {
             at = (self.node_mut(at).children, pos);
         }
         path[DEPTH as usize] = at;
-        let (lo, hi) = (self.clamp_min, self.clamp_max);
+        if !just_created && before.is_none() {
+            // An existing voxel at the finest level.
+            let l = self.node_mut(at).log_odds;
+            if clamped(l) {
+                return None;
+            }
+            before = Some(l >= self.occupied_at);
+        }
+        let (lo, hi, at_least) = (self.clamp_min, self.clamp_max, self.occupied_at);
         let semantic = self.semantic;
         let leaf = self.node_mut(at);
         leaf.log_odds = (leaf.log_odds + delta).clamp(lo, hi);
+        let now = leaf.log_odds >= at_least;
         if semantic && let Some(l) = label {
             leaf.color = l.color;
             leaf.class = l.class;
             leaf.flags |= COLOR_SET;
         }
-        // Up: prune, or take the children's maximum.
+        // Up: prune, or take the children's maximum, until a node comes out as it was.
         for depth in (0..DEPTH as usize).rev() {
             let at = path[depth];
             if !self.prune(at) {
@@ -398,32 +512,49 @@ impl OcTree {
                     .fold(f32::NEG_INFINITY, f32::max);
                 self.node_mut(at).log_odds = max;
             }
+            let n = self.node_mut(at);
+            if was[depth] == (true, n.log_odds, n.has_children()) {
+                break;
+            }
         }
+        (before != Some(now)).then_some(now)
     }
 
-    /// Prune the node at `at` if its eight children are identical leaves; whether it did.
+    /// Prune the node at `at` if its eight children are leaves of equal occupancy; whether
+    /// it did. As OctoMap's ColorOcTree, colours do not prevent pruning: the merged node takes
+    /// the average colour of its children (and here the most frequent class).
     fn prune(&mut self, at: (u32, usize)) -> bool {
         let b = self.node_mut(at).children;
         if b == NONE {
             return false;
         }
-        let kids = &self.blocks[b as usize];
+        let kids = self.blocks[b as usize];
         let first = kids[0];
-        let same = |c: &Node| {
-            c.exists()
-                && !c.has_children()
-                && c.log_odds == first.log_odds
-                && (!self.semantic || (c.color == first.color && c.class == first.class && c.flags == first.flags))
-        };
-        if !kids.iter().all(same) {
+        if !kids.iter().all(|c| c.exists() && !c.has_children() && c.log_odds == first.log_odds) {
             return false;
         }
-        let n = self.node_mut(at);
-        n.log_odds = first.log_odds;
-        n.color = first.color;
-        n.class = first.class;
-        n.flags = first.flags | EXISTS;
-        n.children = NONE;
+        let mut merged = first;
+        merged.children = NONE;
+        merged.flags |= EXISTS;
+        if self.semantic && first.color_set() {
+            let (mut sum, mut k) = ([0u32; 3], 0u32);
+            let mut votes: [(u16, u32); 8] = [(0, 0); 8];
+            for c in kids.iter().filter(|c| c.color_set()) {
+                for (s, v) in sum.iter_mut().zip(c.color) {
+                    *s += u32::from(v);
+                }
+                k += 1;
+                if let Some(v) = votes.iter_mut().find(|v| v.1 > 0 && v.0 == c.class) {
+                    v.1 += 1;
+                } else if let Some(v) = votes.iter_mut().find(|v| v.1 == 0) {
+                    *v = (c.class, 1);
+                }
+            }
+            merged.color = [(sum[0] / k) as u8, (sum[1] / k) as u8, (sum[2] / k) as u8];
+            merged.class =
+                votes.iter().filter(|v| v.1 > 0).max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0))).map_or(0, |v| v.0);
+        }
+        *self.node_mut(at) = merged;
         self.free_blocks.push(b);
         true
     }
@@ -436,18 +567,21 @@ impl OcTree {
     /// the most frequent class of its points. Points are world coordinates.
     pub fn insert_scan(&mut self, points: &[[f32; 3]], labels: Option<&[Label]>, origin: [f32; 3], max_range: f64) {
         let mut s = std::mem::take(&mut self.scratch);
-        s.free.clear();
-        s.occupied.clear();
+        // The scan's bounding box in keys: the sensor's range around it, or the points'.
+        let (lo, dims) = self.scan_box(points, origin, max_range);
+        s.free.reset(lo, dims);
+        s.occupied.reset(lo, dims);
         s.labels.clear();
         for (i, p) in points.iter().enumerate() {
             let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
             let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
             if max_range < 0.0 || norm <= max_range {
-                if self.grid.ray_keys(origin, *p, &mut s.ray) {
-                    s.free.extend(s.ray.iter().map(|k| k.packed()));
-                }
+                let free = &mut s.free;
+                self.grid.ray_walk(origin, *p, |k| {
+                    free.insert(k);
+                });
                 if let Some(k) = self.grid.key(*p) {
-                    s.occupied.insert(k.packed());
+                    s.occupied.insert(k);
                     if let Some(l) = labels.and_then(|l| l.get(i)) {
                         s.labels.entry(k.packed()).or_default().add(l);
                     }
@@ -457,21 +591,60 @@ impl OcTree {
                 let dir = [d[0] / len, d[1] / len, d[2] / len];
                 let r = max_range as f32;
                 let end = [origin[0] + dir[0] * r, origin[1] + dir[1] * r, origin[2] + dir[2] * r];
-                if self.grid.ray_keys(origin, end, &mut s.ray) {
-                    s.free.extend(s.ray.iter().map(|k| k.packed()));
-                }
+                let free = &mut s.free;
+                self.grid.ray_walk(origin, end, |k| {
+                    free.insert(k);
+                });
             }
         }
-        let unpack = |v: u64| Key([(v >> 32) as u16, (v >> 16) as u16, v as u16]);
-        for &k in &s.free {
-            if !s.occupied.contains(&k) {
-                self.update(unpack(k), false, None);
+        // Depth-first order: consecutive updates share their path down the tree.
+        s.free.list.sort_unstable();
+        s.occupied.list.sort_unstable();
+        s.changes.clear();
+        for &m in &s.free.list {
+            let k = unmorton(m);
+            if !s.occupied.contains(k)
+                && let Some(now) = self.update(k, false, None)
+            {
+                s.changes.push((k, now));
             }
         }
-        for &k in &s.occupied {
-            self.update(unpack(k), true, s.labels.get(&k).map(Votes::label));
+        for &m in &s.occupied.list {
+            let k = unmorton(m);
+            if let Some(now) = self.update(k, true, s.labels.get(&k.packed()).map(Votes::label)) {
+                s.changes.push((k, now));
+            }
         }
         self.scratch = s;
+    }
+
+    /// Keys `lo .. lo + dims` covering a scan: its range around the origin, or its points.
+    fn scan_box(&self, points: &[[f32; 3]], origin: [f32; 3], max_range: f64) -> ([i32; 3], [usize; 3]) {
+        let key = |v: f64| (v / self.params.resolution).floor() as i64 + i64::from(crate::key::MAX_VAL);
+        let (mut lo, mut hi) = ([0i64; 3], [0i64; 3]);
+        if max_range > 0.0 {
+            for a in 0..3 {
+                lo[a] = key(f64::from(origin[a]) - max_range) - 1;
+                hi[a] = key(f64::from(origin[a]) + max_range) + 1;
+            }
+        } else {
+            for a in 0..3 {
+                let o = f64::from(origin[a]);
+                let (mn, mx) =
+                    points.iter().fold((o, o), |(a0, b0), p| (a0.min(f64::from(p[a])), b0.max(f64::from(p[a]))));
+                lo[a] = key(mn) - 1;
+                hi[a] = key(mx) + 1;
+            }
+        }
+        let lo = lo.map(|v| v.clamp(0, 65_535) as i32);
+        let hi = hi.map(|v| v.clamp(0, 65_535) as i32);
+        (lo, [0, 1, 2].map(|a| (hi[a] - lo[a] + 1).max(0) as usize))
+    }
+
+    /// The voxels whose occupancy decision the last [`OcTree::insert_scan`] changed, with
+    /// their new state (`true`: occupied).
+    pub fn last_changes(&self) -> &[(Key, bool)] {
+        &self.scratch.changes
     }
 
     /// Every leaf (voxels at the finest level and pruned nodes), depth first.
@@ -543,6 +716,15 @@ impl OcTree {
             t_max[dim] += t_delta[dim];
             if !(0..=65_535).contains(&cur[dim]) {
                 return RayHit::Free;
+            }
+        }
+    }
+
+    /// Colour every observed voxel by its class (a semantic map's colours).
+    pub fn recolor(&mut self, color: impl Fn(u16) -> [u8; 3]) {
+        for n in self.blocks.iter_mut().flatten().chain(std::iter::once(&mut self.root)) {
+            if n.exists() && n.color_set() {
+                n.color = color(n.class);
             }
         }
     }
@@ -661,6 +843,11 @@ mod tests {
             other => panic!("{other:?}"),
         }
         assert_eq!(t.cast_ray([0.01, 0.01, 0.01], [1.0, 0.0, 0.0], 1.0), RayHit::Free);
+        let occupied_now = t.last_changes().iter().filter(|c| c.1).count();
+        assert_eq!(occupied_now, t.occupied_leaves().iter().map(|l| (l.size as usize).pow(3)).sum::<usize>());
+        // The same scan again changes nothing.
+        t.insert_scan(&wall, None, [0.01, 0.01, 0.01], -1.0);
+        assert!(t.last_changes().is_empty());
         assert!(matches!(t.cast_ray([0.01, 0.01, 0.01], [0.0, 0.0, -1.0], -1.0), RayHit::Unknown(_)));
         // Beyond max range: the ray is cleared to the range, nothing is marked.
         let mut u = tree();
@@ -683,6 +870,16 @@ mod tests {
         let n = t.search(k).unwrap();
         assert_eq!((n.color, n.class, n.color_set()), ([20, 30, 40], 5, true));
         assert_eq!(t.search(t.grid().key([2.0, 0.0, 0.0]).unwrap()).unwrap().class, 1);
+    }
+
+    #[test]
+    fn morton_codes_round_trip_and_order_depth_first() {
+        for k in [Key([0, 0, 0]), Key([65_535, 1, 32_768]), Key([12_345, 54_321, 777])] {
+            assert_eq!(unmorton(morton(k)), k);
+        }
+        // The eight children of one node are consecutive.
+        assert_eq!(morton(Key([1, 1, 1])), 7);
+        assert!(morton(Key([1, 1, 1])) < morton(Key([2, 0, 0])));
     }
 
     #[test]

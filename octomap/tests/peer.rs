@@ -3,55 +3,11 @@
 //! Skips when no compiler or library is there, unless `DYNAFLOW_REQUIRE_PEERS` is set (CI).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+mod common;
 
+use common::{Scan, octomap_peer, run_peer};
 use dynaflow_octomap::io::{bt_bytes, ot_bytes};
 use dynaflow_octomap::{OcTree, Params};
-
-/// Build the peer once per test binary; `None` (or a panic under `DYNAFLOW_REQUIRE_PEERS`)
-/// when g++ or liboctomap is missing.
-pub fn octomap_peer(dir: &Path) -> Option<PathBuf> {
-    let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../tests/peers/octomap_peer.cpp");
-    let exe = dir.join("octomap_peer");
-    let ok = Command::new("g++")
-        .args(["-O2", "-std=c++17"])
-        .arg(&src)
-        .args(["-loctomap", "-loctomath", "-o"])
-        .arg(&exe)
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(),
-            "OctoMap peer required: g++ and liboctomap-dev (Debian) must be installed"
-        );
-        eprintln!("note: no g++ with liboctomap-dev; skipping the OctoMap comparison (CI runs it)");
-        return None;
-    }
-    Some(exe)
-}
-
-/// One scan: world points, sensor origin, max range (negative: none).
-type Scan = (Vec<[f32; 3]>, [f32; 3], f64);
-
-/// Scans as the peer reads them.
-fn scans_file(scans: &[Scan], path: &Path) {
-    let mut b = Vec::new();
-    for (pts, origin, range) in scans {
-        b.extend((pts.len() as u32).to_le_bytes());
-        for v in origin {
-            b.extend(v.to_le_bytes());
-        }
-        b.extend(range.to_le_bytes());
-        for p in pts {
-            for v in p {
-                b.extend(v.to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(path, b).unwrap();
-}
 
 /// A box room seen from a few places, with a pillar and some far points beyond the range.
 fn room_scans() -> Vec<Scan> {
@@ -100,10 +56,7 @@ fn our_files_equal_octomaps_for_the_same_scans() {
     std::fs::create_dir_all(&dir).unwrap();
     let Some(peer) = octomap_peer(&dir) else { return };
     let scans = room_scans();
-    scans_file(&scans, &dir.join("scans.bin"));
-    let out = Command::new(&peer).arg(dir.join("scans.bin")).arg("0.05").arg(dir.join("peer")).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    let report: String = String::from_utf8_lossy(&out.stdout).into_owned();
+    let report = run_peer(&peer, &scans, 0.05, &dir, "peer");
     let mut tree = OcTree::new(Params::default(), false).unwrap();
     for (pts, origin, range) in &scans {
         tree.insert_scan(pts, None, *origin, *range);
@@ -112,7 +65,7 @@ fn our_files_equal_octomaps_for_the_same_scans() {
     let theirs_bt = std::fs::read(dir.join("peer.bt")).unwrap();
     let (ours_ot, ours_bt) = (ot_bytes(&tree), bt_bytes(&tree));
     eprintln!(
-        "OctoMap: {report}ours: {} nodes, {} leaves, {} occupied; .ot {} / {} bytes, .bt {} / {} bytes",
+        "OctoMap: {report}\nours: {} nodes, {} leaves, {} occupied; .ot {} / {} bytes, .bt {} / {} bytes",
         tree.size(),
         tree.leaves().len(),
         tree.occupied_leaves().len(),

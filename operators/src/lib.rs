@@ -3,13 +3,15 @@
 //! Families: `synth` (the semi-synthetic dynamic RGB-D generator), `util` (test sources,
 //! pass-through, gating, fault injection: the pieces used to exercise the engine), `decode`
 //! (dataset readers), `frontend` (ORB, descriptor matching, LK flow over `dynaflow-vision`),
-//! `culling` (fundamental-matrix RANSAC, the seed papers' culling rules, an oracle for boxes).
-//! Inference, PnP/BA and OctoMap families land in their own modules.
+//! `culling` (fundamental-matrix RANSAC, the seed papers' culling rules, an oracle for boxes),
+//! `tracking` (PnP + BA over `dynaflow-slam`), `inference` (detectors over `dynaflow-infer` and
+//! `dynaflow-gpu`), `mapping` (OctoMap over `dynaflow-octomap`).
 
 pub mod culling;
 pub mod decode;
 mod frontend;
 pub mod inference;
+pub mod mapping;
 pub mod synth;
 pub mod tracking;
 mod util;
@@ -37,5 +39,6 @@ pub fn registry() -> Registry {
     r.register(inference::DETECT);
     r.register(inference::BOX_TO_MASK);
     r.register(inference::KEYFRAME_GATE);
+    r.register(mapping::OCTOMAP);
     r
 }

@@ -4,6 +4,7 @@ pub mod diff;
 pub mod eval;
 pub mod graph;
 pub mod infer;
+pub mod octree;
 pub mod ops;
 pub mod run;
 pub mod synth;

@@ -136,6 +136,17 @@ impl Generator {
         self.config.motion.pose(self.time(k))
     }
 
+    /// The people's body parts at frame `k` as oriented boxes (world from box centre, half
+    /// extents): the ground truth of where the moving things are.
+    pub fn people_boxes(&self, k: u64) -> Vec<(Isometry3<f64>, nalgebra::Vector3<f64>)> {
+        self.scene.people_parts(self.time(k)).into_iter().map(|p| (p.world_from_part, p.half)).collect()
+    }
+
+    /// The static room's parts (walls, floor, furniture) as oriented boxes.
+    pub fn static_boxes(&self) -> Vec<(Isometry3<f64>, nalgebra::Vector3<f64>)> {
+        self.scene.statics().iter().map(|p| (p.world_from_part, p.half)).collect()
+    }
+
     /// Render frame `k` (and its flow to frame `k + 1` if `flow`).
     pub fn frame(&self, k: u64, flow: bool) -> Frame {
         let c = &self.config;

@@ -1,0 +1,5 @@
+//! Mapping: `octomap` (a semantic OctoMap over `dynaflow-octomap`).
+
+mod octomap;
+
+pub use octomap::OCTOMAP;

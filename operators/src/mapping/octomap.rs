@@ -1,0 +1,286 @@
+//! `octomap`: depth frames into a semantic OctoMap, a thin wrapper over `dynaflow-octomap`.
+
+use std::time::Instant;
+
+use dynaflow_engine::msg::{Body, OctreeUpdate, PixelFormat, PortType};
+use dynaflow_engine::op::{
+    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
+    PortSpec,
+};
+use dynaflow_octomap::{Key, Label, OcTree, Params as TreeParams, io};
+
+#[derive(Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct Config {
+    resolution: f64,
+    max_range: f64,
+    subsample: u64,
+    prob_hit: f64,
+    prob_miss: f64,
+    clamp_min: f64,
+    clamp_max: f64,
+    dynamic_classes: String,
+    color: String,
+    snapshot_every: u64,
+}
+
+pub const OCTOMAP: OpSpec = OpSpec {
+    name: "octomap",
+    family: "mapping",
+    doc: "A semantic OctoMap (OctoMap 1.9's semantics: log-odds hit/miss updates with clamping, free space ray-cast from the camera to every depth pixel, each voxel updated once per frame with end points winning, pruning). Depth pixels (every `subsample`-th in x and y) are back-projected with the intrinsics and placed with `pose`; pixels whose `mask` class is dynamic are not inserted at all, neither as end points nor as rays, so moving people leave no trace. Each voxel keeps a colour (from `image`, or its class's) and a class (from `mask`). At the end of the run writes `<out>/<graph>[-<variant>].<node>.ot` (ColorOcTree) and `.bt` (binary), which OctoMap's tools and octovis open.",
+    kind: OpKind::Transform,
+    inputs: &[
+        PortSpec::input("depth", PortType::Depth, "depth in metres"),
+        PortSpec::input("camera_info", PortType::CameraInfo, "intrinsics"),
+        PortSpec::input("pose", PortType::Pose, "world_from_cam: the tracker's estimate or the ground truth"),
+        PortSpec::optional("image", PortType::Image, "RGB8 colours for the voxels"),
+        PortSpec::optional(
+            "mask",
+            PortType::Mask,
+            "per-pixel classes: dynamic ones are skipped, the rest kept per voxel",
+        ),
+    ],
+    outputs: &[
+        PortSpec::output(
+            "updates",
+            PortType::OctreeUpdate,
+            "voxels whose occupancy changed this frame (newly occupied with their class, newly freed)",
+        ),
+        PortSpec::output(
+            "map",
+            PortType::OctreeUpdate,
+            "every occupied voxel with its class, every `snapshot_every` frames (what the viewer shows as the map)",
+        ),
+    ],
+    params: &[
+        ParamSpec {
+            name: "resolution",
+            ty: ParamType::Float { min: 0.001, max: 10.0 },
+            default: Default::Float(0.05),
+            doc: "voxel edge in metres (PSPNet-SLAM and DS-SLAM: 0.05)",
+        },
+        ParamSpec {
+            name: "max_range",
+            ty: ParamType::Float { min: -1.0, max: 1000.0 },
+            default: Default::Float(4.0),
+            doc: "depths beyond this clear their ray up to it and mark nothing (Kinect v1 depth noise grows with the square of range; 4 m keeps it under ~4 cm); -1: no limit",
+        },
+        ParamSpec {
+            name: "subsample",
+            ty: ParamType::Int { min: 1, max: 64 },
+            default: Default::Int(4),
+            doc: "use every n-th pixel in x and y (4: 160x120 rays of a 640x480 frame; a 5 cm voxel at 2 m spans ~13 pixels)",
+        },
+        ParamSpec {
+            name: "prob_hit",
+            ty: ParamType::Float { min: 0.5, max: 1.0 },
+            default: Default::Float(0.7),
+            doc: "OctoMap's hit probability",
+        },
+        ParamSpec {
+            name: "prob_miss",
+            ty: ParamType::Float { min: 0.0, max: 0.5 },
+            default: Default::Float(0.4),
+            doc: "OctoMap's miss probability",
+        },
+        ParamSpec {
+            name: "clamp_min",
+            ty: ParamType::Float { min: 0.0, max: 1.0 },
+            default: Default::Float(0.1192),
+            doc: "lower clamping probability (OctoMap: 0.1192)",
+        },
+        ParamSpec {
+            name: "clamp_max",
+            ty: ParamType::Float { min: 0.0, max: 1.0 },
+            default: Default::Float(0.971),
+            doc: "upper clamping probability (OctoMap: 0.971)",
+        },
+        ParamSpec {
+            name: "dynamic_classes",
+            ty: ParamType::Str,
+            default: Default::Str("person"),
+            doc: "comma-separated mask classes never inserted",
+        },
+        ParamSpec {
+            name: "color",
+            ty: ParamType::Enum { values: &["image", "class"] },
+            default: Default::Str("image"),
+            doc: "voxel colour in the .ot file: the image's, or a colour per class (a semantic map)",
+        },
+        ParamSpec {
+            name: "snapshot_every",
+            ty: ParamType::Int { min: 0, max: 1_000_000 },
+            default: Default::Int(30),
+            doc: "frames between full-map outputs on `map` (0: only the last frame's)",
+        },
+    ],
+    cpu_heavy: true,
+    build: |p: &Params| {
+        let c: Config = p.parse()?;
+        let params = TreeParams {
+            resolution: c.resolution,
+            prob_hit: c.prob_hit,
+            prob_miss: c.prob_miss,
+            clamp_min: c.clamp_min,
+            clamp_max: c.clamp_max,
+            ..TreeParams::default()
+        };
+        let tree = OcTree::new(params, true).map_err(OpError::Input)?;
+        Ok(Instance::Transform(Box::new(Octomap { config: c, tree, insert_ms: Vec::new(), frames: 0, skipped: 0 })))
+    },
+};
+
+struct Octomap {
+    config: Config,
+    tree: OcTree,
+    insert_ms: Vec<f64>,
+    frames: u64,
+    /// Pixels left out as dynamic.
+    skipped: u64,
+}
+
+/// A colour per class id (class 0, background, grey).
+fn class_color(c: u16) -> [u8; 3] {
+    if c == 0 {
+        return [160, 160, 160];
+    }
+    let h = u32::from(c).wrapping_mul(0x9E37_79B9);
+    [(h >> 24) as u8 | 0x40, (h >> 16) as u8 | 0x40, (h >> 8) as u8 | 0x40]
+}
+
+impl Octomap {
+    fn centre(&self, k: Key) -> [f32; 3] {
+        let c = self.tree.grid().centre(k);
+        [c[0] as f32, c[1] as f32, c[2] as f32]
+    }
+
+    /// Every occupied voxel at the finest level (pruned leaves expanded), with its class.
+    fn snapshot(&self) -> OctreeUpdate {
+        let mut occupied = Vec::new();
+        for l in self.tree.occupied_leaves() {
+            let s = l.size.min(64) as u16;
+            for dz in 0..s {
+                for dy in 0..s {
+                    for dx in 0..s {
+                        let k = Key([l.key.0[0] + dx, l.key.0[1] + dy, l.key.0[2] + dz]);
+                        occupied.push((self.centre(k), l.node.class));
+                    }
+                }
+            }
+        }
+        OctreeUpdate { resolution: self.config.resolution as f32, occupied, freed: Vec::new() }
+    }
+}
+
+impl Operator for Octomap {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let msg = inputs.require("depth")?;
+        let Body::Depth(depth) = &msg.body else { return Err(OpError::Input("`depth` is not a depth image".into())) };
+        let Body::CameraInfo(k) = &inputs.require("camera_info")?.body else {
+            return Err(OpError::Input("`camera_info` is not camera info".into()));
+        };
+        let Body::Pose(pose) = &inputs.require("pose")?.body else {
+            return Err(OpError::Input("`pose` is not a pose".into()));
+        };
+        let image = match inputs.get("image").map(|m| &m.body) {
+            Some(Body::Image(i)) if i.width == depth.width && i.height == depth.height => Some(i),
+            _ => None,
+        };
+        let mask = match inputs.get("mask").map(|m| &m.body) {
+            Some(Body::Mask(m)) if m.width == depth.width && m.height == depth.height => Some(m),
+            _ => None,
+        };
+        let dynamic: Vec<u16> = mask.map_or_else(Vec::new, |m| {
+            m.class_names
+                .iter()
+                .enumerate()
+                .filter(|(_, n)| self.config.dynamic_classes.split(',').any(|c| c.trim() == &***n))
+                .map(|(i, _)| i as u16)
+                .collect()
+        });
+        let (w, h) = (depth.width as usize, depth.height as usize);
+        let step = self.config.subsample.max(1) as usize;
+        let iso = pose.world_from_cam;
+        let mut points = Vec::with_capacity((w / step + 1) * (h / step + 1));
+        let mut labels = Vec::with_capacity(points.capacity());
+        for v in (0..h).step_by(step) {
+            for u in (0..w).step_by(step) {
+                let i = v * w + u;
+                let z = f64::from(depth.data[i]);
+                if !(z.is_finite() && z > 0.0) {
+                    continue;
+                }
+                let class = mask.and_then(|m| m.classes.get(i).copied()).unwrap_or(0);
+                if dynamic.contains(&class) {
+                    self.skipped += 1;
+                    continue;
+                }
+                let p = nalgebra::Point3::new((u as f64 - k.cx) * z / k.fx, (v as f64 - k.cy) * z / k.fy, z);
+                let q = iso * p;
+                points.push([q.x as f32, q.y as f32, q.z as f32]);
+                let color = match (self.config.color.as_str(), image) {
+                    ("class", _) => class_color(class),
+                    (_, Some(img)) => match img.format {
+                        PixelFormat::Rgb8 => [img.data[3 * i], img.data[3 * i + 1], img.data[3 * i + 2]],
+                        PixelFormat::Gray8 => [img.data[i]; 3],
+                    },
+                    _ => [255, 255, 255],
+                };
+                labels.push(Label { color, class });
+            }
+        }
+        let t = iso.translation.vector;
+        let origin = [t.x as f32, t.y as f32, t.z as f32];
+        let started = Instant::now();
+        self.tree.insert_scan(&points, Some(&labels), origin, self.config.max_range);
+        self.insert_ms.push(started.elapsed().as_secs_f64() * 1e3);
+        self.frames += 1;
+        let (mut occupied, mut freed) = (Vec::new(), Vec::new());
+        for &(key, now) in self.tree.last_changes() {
+            if now {
+                let class = self.tree.search(key).map_or(0, |n| n.class);
+                occupied.push((self.centre(key), class));
+            } else {
+                freed.push(self.centre(key));
+            }
+        }
+        let update = OctreeUpdate { resolution: self.config.resolution as f32, occupied, freed };
+        let mut out = Outputs::new().with("updates", msg.header.clone(), Body::OctreeUpdate(update));
+        let every = self.config.snapshot_every;
+        if every > 0 && self.frames.is_multiple_of(every) {
+            out = out.with("map", msg.header.clone(), Body::OctreeUpdate(self.snapshot()));
+        }
+        Ok(out)
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
+        let mut ms = self.insert_ms.clone();
+        ms.sort_by(f64::total_cmp);
+        let pct = |q: f64| ms.get(((ms.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(0.0);
+        let leaves = self.tree.leaves();
+        let occupied = leaves.iter().filter(|l| self.tree.is_occupied(&l.node)).count();
+        let mut report = serde_json::json!({
+            "frames": self.frames,
+            "insert_ms": { "mean": ms.iter().sum::<f64>() / ms.len().max(1) as f64, "median": pct(0.5), "p95": pct(0.95) },
+            "nodes": self.tree.size(),
+            "leaves": leaves.len(),
+            "occupied_leaves": occupied,
+            "memory_bytes": self.tree.memory_bytes(),
+            "dynamic_pixels_skipped": self.skipped,
+        });
+        if let Some(dir) = &ctx.out_dir {
+            let mut tree = self.tree.clone();
+            if self.config.color == "class" {
+                tree.recolor(class_color);
+            }
+            let ot = dir.join(format!("{}.{}.ot", ctx.stem, ctx.node));
+            let bt = dir.join(format!("{}.{}.bt", ctx.stem, ctx.node));
+            let io_err = |e: io::OctoError| OpError::Input(e.to_string());
+            io::write_ot(&tree, &ot).map_err(io_err)?;
+            io::write_bt(&tree, &bt).map_err(io_err)?;
+            report["files"] = serde_json::json!([ot.display().to_string(), bt.display().to_string()]);
+        }
+        ctx.report = Some(report);
+        Ok(())
+    }
+}

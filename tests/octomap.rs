@@ -1,0 +1,241 @@
+//! The OctoMap operator and library (issue 13) against OctoMap itself: the same depth frames
+//! and poses (real ICL-NUIM frames, synthetic walking frames) give the same tree as
+//! liboctomap's `insertPointCloud`; OctoMap's tools read our files; people excluded by their
+//! masks leave no ghost voxels in their swept volume.
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+mod common;
+#[path = "../octomap/tests/common/mod.rs"]
+mod peer;
+
+use std::collections::HashSet;
+use std::path::Path;
+use std::process::Command;
+
+use dynaflow_octomap::io::{bt_bytes, ot_bytes};
+use dynaflow_octomap::{Key, OcTree, Params, read};
+use dynaflow_operators::synth::{Generator, SynthConfig};
+use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
+
+/// Every `step`-th pixel of a depth image back-projected and placed in the world (pixels
+/// where `keep` says no are left out); the sensor origin.
+#[allow(clippy::too_many_arguments)]
+fn scan(
+    depth: &[f32],
+    w: usize,
+    k: [f64; 4],
+    pose: &Isometry3<f64>,
+    step: usize,
+    max_range: f64,
+    keep: impl Fn(usize) -> bool,
+) -> peer::Scan {
+    let [fx, fy, cx, cy] = k;
+    let h = depth.len() / w;
+    let mut pts = Vec::new();
+    for v in (0..h).step_by(step) {
+        for u in (0..w).step_by(step) {
+            let i = v * w + u;
+            let z = f64::from(depth[i]);
+            if z > 0.0 && z.is_finite() && keep(i) {
+                let q = pose * Point3::new((u as f64 - cx) * z / fx, (v as f64 - cy) * z / fy, z);
+                pts.push([q.x as f32, q.y as f32, q.z as f32]);
+            }
+        }
+    }
+    let t = pose.translation.vector;
+    (pts, [t.x as f32, t.y as f32, t.z as f32], max_range)
+}
+
+/// The five ICL-NUIM frames of slambook2's ch12 with their poses.
+fn icl_scans() -> Vec<peer::Scan> {
+    let dir = common::repo().join("tests/fixtures/slambook2_dense_rgbd");
+    let poses = std::fs::read_to_string(dir.join("pose.txt")).unwrap();
+    poses
+        .lines()
+        .enumerate()
+        .map(|(i, line)| {
+            let v: Vec<f64> = line.split_whitespace().map(|s| s.parse().unwrap()).collect();
+            let pose = Isometry3::from_parts(
+                Translation3::new(v[0], v[1], v[2]),
+                UnitQuaternion::from_quaternion(Quaternion::new(v[6], v[3], v[4], v[5])),
+            );
+            let img = image::open(dir.join(format!("depth/{}.png", i + 1))).unwrap().into_luma16();
+            let w = img.width() as usize;
+            let depth: Vec<f32> = img.as_raw().iter().map(|&d| f32::from(d) / 5000.0).collect();
+            scan(&depth, w, [481.2, -480.0, 319.5, 239.5], &pose, 4, -1.0, |_| true)
+        })
+        .collect()
+}
+
+/// `n` frames of the synthetic walking scene, people included.
+fn synthetic_scans(n: u64) -> Vec<peer::Scan> {
+    let g = Generator::new(SynthConfig::default());
+    let c = g.config().intrinsics.clone();
+    (0..n)
+        .map(|k| {
+            let f = g.frame(k * 5, false);
+            scan(&f.depth, c.width as usize, [c.fx, c.fy, c.cx, c.cy], &f.world_from_cam, 4, 4.0, |_| true)
+        })
+        .collect()
+}
+
+fn ours(scans: &[peer::Scan]) -> OcTree {
+    let mut t = OcTree::new(Params::default(), false).unwrap();
+    for (pts, origin, range) in scans {
+        t.insert_scan(pts, None, *origin, *range);
+    }
+    t
+}
+
+/// Occupancy decision (occupied, free, unknown) of both trees at every voxel centre that is
+/// a leaf of either, plus a grid over their joint bounding box: the share that agrees.
+fn agreement(a: &OcTree, b: &OcTree) -> (f64, usize) {
+    let g = a.grid();
+    let mut keys: HashSet<Key> = HashSet::new();
+    let (mut lo, mut hi) = ([u16::MAX; 3], [0u16; 3]);
+    for l in a.leaves().iter().chain(b.leaves().iter()) {
+        keys.insert(l.key);
+        for i in 0..3 {
+            lo[i] = lo[i].min(l.key.0[i]);
+            hi[i] = hi[i].max(l.key.0[i]);
+        }
+    }
+    for x in (lo[0]..=hi[0]).step_by(3) {
+        for y in (lo[1]..=hi[1]).step_by(3) {
+            for z in (lo[2]..=hi[2]).step_by(3) {
+                keys.insert(Key([x, y, z]));
+            }
+        }
+    }
+    let state = |t: &OcTree, k: Key| t.search(k).map(|n| t.is_occupied(n));
+    let same = keys.iter().filter(|&&k| state(a, k) == state(b, k)).count();
+    let _ = g;
+    (same as f64 / keys.len() as f64, keys.len())
+}
+
+fn compare_octrees(a: &Path, b: &Path) -> String {
+    let out = Command::new("compare_octrees").arg(a).arg(b).output().unwrap();
+    assert!(out.status.success(), "compare_octrees: {}", String::from_utf8_lossy(&out.stderr));
+    format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr))
+}
+
+#[test]
+fn our_tree_equals_octomaps_on_real_and_synthetic_depth() {
+    let dir = common::TempDir::new("octomap-peer");
+    let Some(exe) = peer::octomap_peer(dir.path()) else { return };
+    for (name, scans) in [("icl_nuim", icl_scans()), ("synthetic_walking", synthetic_scans(12))] {
+        let report = peer::run_peer(&exe, &scans, 0.05, dir.path(), name);
+        let t = ours(&scans);
+        let theirs = read(&dir.path().join(format!("{name}.ot"))).unwrap();
+        let (occ_ours, occ_theirs) = (t.occupied_leaves().len(), report["occupied_leafs"].as_u64().unwrap() as usize);
+        let (share, sampled) = agreement(&t, &theirs);
+        let same_bytes = ot_bytes(&t) == std::fs::read(dir.path().join(format!("{name}.ot"))).unwrap()
+            && bt_bytes(&t) == std::fs::read(dir.path().join(format!("{name}.bt"))).unwrap();
+        eprintln!(
+            "{name}: {} rays; occupied leaves ours {occ_ours} / OctoMap {occ_theirs}; same decision at {:.4} % of {sampled} sampled voxels; files byte-identical: {same_bytes}",
+            scans.iter().map(|s| s.0.len()).sum::<usize>(),
+            100.0 * share
+        );
+        assert!((occ_ours as f64 - occ_theirs as f64).abs() <= 0.01 * occ_theirs as f64);
+        assert_eq!(t.leaves().len(), report["leafs"].as_u64().unwrap() as usize);
+        assert!(share >= 0.99, "{share}");
+        // OctoMap's own comparison of our .ot against its tree.
+        let path = dir.path().join(format!("{name}.ours.ot"));
+        dynaflow_octomap::write_ot(&t, &path).unwrap();
+        let said = compare_octrees(&path, &dir.path().join(format!("{name}.ot")));
+        eprintln!("compare_octrees: {}", said.lines().filter(|l| !l.trim().is_empty()).collect::<Vec<_>>().join(" | "));
+        assert!(!said.to_lowercase().contains("error"), "{said}");
+    }
+}
+
+#[test]
+fn octomap_tools_read_the_files_a_run_writes() {
+    let dir = common::TempDir::new("octomap-run");
+    let graph = common::repo().join("graphs/octomap.yaml");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--frames", "8", "--out"])
+        .arg(dir.path())
+        .arg(&graph)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let (ot, bt) = (dir.path().join("octomap.map.ot"), dir.path().join("octomap.map.bt"));
+    let tree = read(&ot).unwrap();
+    assert!(tree.semantic() && !tree.occupied_leaves().is_empty());
+    if Command::new("convert_octree").arg("--help").output().is_err() {
+        assert!(std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(), "octomap-tools required");
+        eprintln!("note: no octomap-tools; skipping convert_octree");
+        return;
+    }
+    for (input, output) in [(&bt, dir.path().join("from_bt.ot")), (&ot, dir.path().join("from_ot.bt"))] {
+        let r = Command::new("convert_octree").arg(input).arg(&output).output().unwrap();
+        let said = format!("{}{}", String::from_utf8_lossy(&r.stdout), String::from_utf8_lossy(&r.stderr));
+        assert!(r.status.success() && output.exists(), "convert_octree {}: {said}", input.display());
+    }
+    // What OctoMap wrote back reads here too, with the same occupied voxels.
+    let back = read(&dir.path().join("from_ot.bt")).unwrap();
+    let ml = read(&bt).unwrap();
+    assert_eq!(back.occupied_leaves().len(), ml.occupied_leaves().len());
+}
+
+/// Voxels whose centre lies inside a person's body part at some frame and more than one
+/// voxel from any static surface: the people's swept volume.
+fn swept_volume(g: &Generator, frames: u64, res: f64) -> HashSet<Key> {
+    let grid = dynaflow_octomap::Grid::new(res);
+    let inside = |(pose, half): &(Isometry3<f64>, Vector3<f64>), p: &Point3<f64>, margin: f64| {
+        let q = pose.inverse_transform_point(p);
+        (0..3).all(|i| q[i].abs() <= half[i] + margin)
+    };
+    let statics = g.static_boxes();
+    let mut out = HashSet::new();
+    for k in 0..frames {
+        for b in g.people_boxes(k) {
+            let r = b.1.norm();
+            let c = b.0.translation.vector;
+            let lo = grid.key([(c.x - r) as f32, (c.y - r) as f32, (c.z - r) as f32]).unwrap();
+            let hi = grid.key([(c.x + r) as f32, (c.y + r) as f32, (c.z + r) as f32]).unwrap();
+            for x in lo.0[0]..=hi.0[0] {
+                for y in lo.0[1]..=hi.0[1] {
+                    for z in lo.0[2]..=hi.0[2] {
+                        let key = Key([x, y, z]);
+                        let p = grid.centre(key);
+                        let p = Point3::new(p[0], p[1], p[2]);
+                        if inside(&b, &p, 0.0) && !statics.iter().any(|s| inside(s, &p, res)) {
+                            out.insert(key);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn masked_people_leave_no_trace_and_unmasked_ones_leave_ghosts() {
+    let g = Generator::new(SynthConfig::default());
+    let c = g.config().intrinsics.clone();
+    let frames = 90;
+    let (mut masked, mut all) = (ours(&[]), ours(&[]));
+    for k in 0..frames {
+        let f = g.frame(k, false);
+        let kk = [c.fx, c.fy, c.cx, c.cy];
+        let (p, o, r) = scan(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |i| f.class[i] == 0);
+        masked.insert_scan(&p, None, o, r);
+        let (p, o, r) = scan(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |_| true);
+        all.insert_scan(&p, None, o, r);
+    }
+    let swept = swept_volume(&g, frames, 0.05);
+    let ghosts = |t: &OcTree| swept.iter().filter(|&&k| t.search(k).is_some_and(|n| t.is_occupied(n))).count();
+    let (gm, ga) = (ghosts(&masked), ghosts(&all));
+    let share = |n: usize| 100.0 * n as f64 / swept.len() as f64;
+    eprintln!(
+        "swept volume {} voxels; occupied at the end: masked {gm} ({:.2} %), unmasked {ga} ({:.2} %)",
+        swept.len(),
+        share(gm),
+        share(ga)
+    );
+    assert!(swept.len() > 1000);
+    assert!(share(gm) < 5.0, "masked: {:.2} %", share(gm));
+    assert!(ga > gm, "without masks the people leave voxels behind");
+}
