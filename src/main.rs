@@ -70,6 +70,8 @@ enum Command {
         #[arg(long, conflicts_with_all = ["format", "json"])]
         markdown: bool,
     },
+    /// Run graphs x variants x sequences and tabulate ATE, RPE and time per frame, as papers do.
+    Bench(commands::bench::BenchArgs),
     /// Compare two recorded runs (MCAP): per topic, counts, first differing frame, deltas, ATE.
     Diff(commands::diff::DiffArgs),
     /// Evaluate a trajectory against ground truth (TUM files): ATE and RPE, as evo computes them.
@@ -214,6 +216,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => commands::eval::eval(&args),
         Command::Synth(args) => commands::synth::synth(&args),
         Command::Infer(args) => commands::infer::infer(&args),
+        Command::Bench(args) => commands::bench::bench(&args),
         Command::Octree(args) => commands::octree::octree(&args),
         Command::View { file } => commands::view::view(&file),
         Command::Graph { graph, format, variant } => {

@@ -100,3 +100,155 @@ pub fn evaluation(e: &Evaluation, title: &str, path: &Path) -> Result<(), String
     let img = image::RgbImage::from_raw(w, h, buf).ok_or("plot buffer has the wrong size")?;
     img.save(path).map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
+
+/// Render with `draw` into a `w x h` PNG at `path`.
+fn png(
+    w: u32,
+    h: u32,
+    path: &Path,
+    draw: impl FnOnce(&mut [u8]) -> Result<(), Box<dyn std::error::Error>>,
+) -> Result<(), String> {
+    fonts()?;
+    let mut buf = vec![0u8; (w * h * 3) as usize];
+    draw(&mut buf).map_err(|e| format!("cannot draw the plot: {e}"))?;
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or("plot buffer has the wrong size")?;
+    img.save(path).map_err(|e| format!("cannot write {}: {e}", path.display()))
+}
+
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    let p = q * (sorted.len() - 1) as f64;
+    let (lo, hi) = (p.floor() as usize, p.ceil() as usize);
+    sorted[lo] + (sorted[hi] - sorted[lo]) * (p - lo as f64)
+}
+
+/// A box plot per label (median, quartiles, whiskers to min and max, every value as a dot).
+pub fn boxes(values: &std::collections::BTreeMap<String, Vec<f64>>, title: &str, path: &Path) -> Result<(), String> {
+    let groups: Vec<(&String, Vec<f64>)> = values
+        .iter()
+        .filter(|(_, v)| !v.is_empty())
+        .map(|(k, v)| {
+            let mut v = v.clone();
+            v.sort_by(f64::total_cmp);
+            (k, v)
+        })
+        .collect();
+    if groups.is_empty() {
+        return Ok(());
+    }
+    let (w, h) = ((200 + 110 * groups.len() as u32).max(600), 600u32);
+    let ymax = groups.iter().flat_map(|g| g.1.iter().copied()).fold(0.0, f64::max).max(1e-6) * 1.1;
+    png(w, h, path, |buf| {
+        let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let n = groups.len();
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (FAMILY, 20))
+            .margin(20)
+            .x_label_area_size(130)
+            .y_label_area_size(60)
+            .build_cartesian_2d(-0.5..n as f64 - 0.5, 0.0..ymax)?;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(n)
+            .x_label_formatter(&|x| {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 {
+                    groups.get(i as usize).map_or(String::new(), |g| g.0.clone())
+                } else {
+                    String::new()
+                }
+            })
+            .x_label_style((FAMILY, 13).into_font().transform(FontTransform::Rotate90))
+            .label_style((FAMILY, 13))
+            .draw()?;
+        for (i, (_, v)) in groups.iter().enumerate() {
+            let x = i as f64;
+            let (q1, med, q3) = (quantile(v, 0.25), quantile(v, 0.5), quantile(v, 0.75));
+            let (lo, hi) = (v[0], v[v.len() - 1]);
+            chart
+                .draw_series(std::iter::once(Rectangle::new([(x - 0.3, q1), (x + 0.3, q3)], BLUE.mix(0.3).filled())))?;
+            chart.draw_series(std::iter::once(Rectangle::new([(x - 0.3, q1), (x + 0.3, q3)], BLUE.stroke_width(1))))?;
+            chart.draw_series(std::iter::once(PathElement::new(
+                vec![(x - 0.3, med), (x + 0.3, med)],
+                RED.stroke_width(2),
+            )))?;
+            chart.draw_series(std::iter::once(PathElement::new(vec![(x, lo), (x, q1)], BLACK)))?;
+            chart.draw_series(std::iter::once(PathElement::new(vec![(x, q3), (x, hi)], BLACK)))?;
+            chart.draw_series(v.iter().map(|&y| Circle::new((x, y), 3, BLACK.filled())))?;
+        }
+        root.present()?;
+        Ok(())
+    })
+}
+
+/// One stacked bar per run: each node's share of the time per frame.
+pub fn stacked(runs: &[(String, Vec<(String, f64)>)], title: &str, path: &Path) -> Result<(), String> {
+    if runs.is_empty() {
+        return Ok(());
+    }
+    let mut names: Vec<&String> = runs.iter().flat_map(|r| r.1.iter().map(|n| &n.0)).collect();
+    names.sort();
+    names.dedup();
+    let color = |name: &String| {
+        let i = names.iter().position(|n| *n == name).unwrap_or(0) as u16;
+        let [r, g, b] = dynaflow_engine::msg::class_rgb(i + 1);
+        RGBColor(r, g, b)
+    };
+    let (w, h) = ((300 + 90 * runs.len() as u32).max(700), 650u32);
+    let ymax = runs.iter().map(|r| r.1.iter().map(|n| n.1).sum::<f64>()).fold(0.0, f64::max).max(1e-6) * 1.1;
+    png(w, h, path, |buf| {
+        let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let n = runs.len();
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, (FAMILY, 20))
+            .margin(20)
+            .x_label_area_size(150)
+            .y_label_area_size(60)
+            .build_cartesian_2d(-0.5..n as f64 - 0.5, 0.0..ymax)?;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(n)
+            .x_label_formatter(&|x| {
+                let i = x.round();
+                if (x - i).abs() < 1e-6 && i >= 0.0 {
+                    runs.get(i as usize).map_or(String::new(), |r| r.0.clone())
+                } else {
+                    String::new()
+                }
+            })
+            .x_label_style((FAMILY, 13).into_font().transform(FontTransform::Rotate90))
+            .y_desc("ms")
+            .label_style((FAMILY, 13))
+            .draw()?;
+        for name in &names {
+            let mut first = true;
+            for (i, (_, nodes)) in runs.iter().enumerate() {
+                let below: f64 = nodes.iter().take_while(|n| &&n.0 != name).map(|n| n.1).sum();
+                let Some(v) = nodes.iter().find(|n| &&n.0 == name).map(|n| n.1) else { continue };
+                let x = i as f64;
+                let s = chart.draw_series(std::iter::once(Rectangle::new(
+                    [(x - 0.35, below), (x + 0.35, below + v)],
+                    color(name).filled(),
+                )))?;
+                if first {
+                    let c = color(name);
+                    s.label(name.as_str())
+                        .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], c.filled()));
+                    first = false;
+                }
+            }
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font((FAMILY, 13))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()?;
+        root.present()?;
+        Ok(())
+    })
+}

@@ -239,3 +239,34 @@ fn masked_people_leave_no_trace_and_unmasked_ones_leave_ghosts() {
     assert!(share(gm) < 5.0, "masked: {:.2} %", share(gm));
     assert!(ga > gm, "without masks the people leave voxels behind");
 }
+
+#[test]
+fn octree_command_summarises_plots_and_refuses_corrupt_files() {
+    let dir = common::TempDir::new("octree-cli");
+    let mut t = OcTree::new(Params::default(), false).unwrap();
+    for (p, o, r) in icl_scans().iter().take(2) {
+        t.insert_scan(p, None, *o, *r);
+    }
+    let (ot, bt) = (dir.path().join("t.ot"), dir.path().join("t.bt"));
+    dynaflow_octomap::write_ot(&t, &ot).unwrap();
+    dynaflow_octomap::write_bt(&t, &bt).unwrap();
+    let png = dir.path().join("top.png");
+    let out = common::bin().arg("octree").arg(&ot).arg("--plot").arg(&png).output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(v["occupied_leaves"].as_u64().unwrap() as usize, t.occupied_leaves().len());
+    assert_eq!(v["type"], "OcTree");
+    let img = image::open(&png).unwrap().into_rgb8();
+    assert!(img.pixels().any(|p| p.0 != [255, 255, 255]), "the plot draws something");
+    // Truncated, flipped and foreign files: exit 2 with the file named, never a panic.
+    let bytes = std::fs::read(&bt).unwrap();
+    let cut = dir.path().join("cut.bt");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let text = common::repo().join("README.md");
+    for bad in [cut.as_path(), text.as_path(), Path::new("/nonexistent.ot")] {
+        let out = common::bin().arg("octree").arg(bad).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{}: {err}", bad.display());
+        assert!(err.contains(&bad.display().to_string()) && !err.contains("panicked"), "{err}");
+    }
+}

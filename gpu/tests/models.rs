@@ -46,7 +46,7 @@ fn yolox_nano_on_the_gpu_equals_the_reference_on_real_images() {
 }
 
 #[test]
-fn fastestdet_on_the_gpu_equals_the_reference_on_a_real_image() {
+fn fastestdet_on_the_gpu_equals_the_reference_on_real_images() {
     let gpu = match Gpu::new() {
         Ok(g) => g,
         Err(e) => {
@@ -59,13 +59,16 @@ fn fastestdet_on_the_gpu_equals_the_reference_on_a_real_image() {
     let name = model.inputs[0].name.clone();
     let on_gpu = GpuModel::new(gpu, &model).unwrap();
     eprintln!("FastestDet plan: {:?}", on_gpu.stats());
-    let rgb = image::open(repo().join("tests/fixtures/slambook2_rgbd_pair/rgb/2.png")).unwrap().into_rgb8();
-    let x = dynaflow_infer::detect::resize_bgr_unit(rgb.as_raw(), rgb.width() as usize, rgb.height() as usize, 352);
-    let input = Tensor::F32 { shape: vec![1, 3, 352, 352], data: x };
-    let want = run(&model, &[(name.as_str(), input.clone())]).unwrap();
-    let got = on_gpu.run(&[(name.as_str(), input)]).unwrap();
-    assert_eq!(got[0].shape(), want[0].shape());
-    let d = got[0].floats().iter().zip(want[0].floats()).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
-    eprintln!("FastestDet: max |gpu - cpu| = {d:e}");
-    assert!(d <= 1e-3, "{d}");
+    for img in ["tests/fixtures/slambook2_rgbd_pair/rgb/2.png", "tests/fixtures/slambook2_dense_rgbd/color/3.png"] {
+        let rgb = image::open(repo().join(img)).unwrap().into_rgb8();
+        let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+        let x = dynaflow_infer::detect::resize_bgr_unit(rgb.as_raw(), w, h, 352);
+        let input = Tensor::F32 { shape: vec![1, 3, 352, 352], data: x };
+        let want = run(&model, &[(name.as_str(), input.clone())]).unwrap();
+        let got = on_gpu.run(&[(name.as_str(), input)]).unwrap();
+        assert_eq!(got[0].shape(), want[0].shape());
+        let d = got[0].floats().iter().zip(want[0].floats()).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+        eprintln!("FastestDet {img}: max |gpu - cpu| = {d:e}");
+        assert!(d <= 1e-3, "{img}: {d}");
+    }
 }

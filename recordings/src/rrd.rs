@@ -132,18 +132,8 @@ fn octave_color(octave: u8) -> rerun::Color {
 }
 
 fn class_color(id: u16) -> rerun::Color {
-    // Golden-ratio hue steps give distinct, stable colours per class id.
-    let h = (f32::from(id) * 0.618_034).fract() * 6.0;
-    let x = 1.0 - (h % 2.0 - 1.0).abs();
-    let (r, g, b) = match h as u32 {
-        0 => (1.0, x, 0.0),
-        1 => (x, 1.0, 0.0),
-        2 => (0.0, 1.0, x),
-        3 => (0.0, x, 1.0),
-        4 => (x, 0.0, 1.0),
-        _ => (1.0, 0.0, x),
-    };
-    rerun::Color::from_rgb((r * 220.0) as u8 + 35, (g * 220.0) as u8 + 35, (b * 220.0) as u8 + 35)
+    let [r, g, b] = dynaflow_engine::msg::class_rgb(id);
+    rerun::Color::from_rgb(r, g, b)
 }
 
 impl Sink for RrdSink {

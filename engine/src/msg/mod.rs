@@ -27,7 +27,7 @@ pub use geometry::{
 };
 pub use image::{CameraInfo, DepthImage, Image, PixelFormat};
 pub use scalar::Scalars;
-pub use semantic::{Detection, Detections, SegmentationMask};
+pub use semantic::{Detection, Detections, SegmentationMask, class_rgb};
 
 /// Where and when a message's data was observed.
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]

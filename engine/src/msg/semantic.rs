@@ -70,3 +70,19 @@ impl SegmentationMask {
         }
     }
 }
+
+/// A distinct, stable colour per class id (golden-ratio hue steps): what every recorder and
+/// the octree files use, so a class looks the same everywhere.
+pub fn class_rgb(id: u16) -> [u8; 3] {
+    let h = (f32::from(id) * 0.618_034).fract() * 6.0;
+    let x = 1.0 - (h % 2.0 - 1.0).abs();
+    let (r, g, b) = match h as u32 {
+        0 => (1.0, x, 0.0),
+        1 => (x, 1.0, 0.0),
+        2 => (0.0, 1.0, x),
+        3 => (0.0, x, 1.0),
+        4 => (x, 0.0, 1.0),
+        _ => (1.0, 0.0, x),
+    };
+    [(r * 220.0) as u8 + 35, (g * 220.0) as u8 + 35, (b * 220.0) as u8 + 35]
+}

@@ -37,6 +37,15 @@ pub fn valid_id(id: &str) -> bool {
         && chars.all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-')
 }
 
+/// Whether `id` is a valid variant name: an id, or an ablation row such as `S+G` (`+` allowed
+/// after the first character; variant names end up in file names, where `+` is safe).
+pub fn valid_variant_id(id: &str) -> bool {
+    let mut chars = id.chars();
+    id.len() <= MAX_NAME_LEN
+        && matches!(chars.next(), Some(c) if c.is_ascii_alphabetic() || c == '_')
+        && chars.all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '+'))
+}
+
 fn check_id(what: &str, id: &str, span: Span, diags: &mut Vec<Diagnostic>) {
     if !valid_id(id) {
         diags.push(
@@ -191,7 +200,12 @@ pub fn parse_graph(doc: &Yaml) -> (GraphSpec, Vec<Diagnostic>) {
             }
             "variants" => {
                 for (name, body) in entries(value, "`variants`", None, &mut diags) {
-                    check_id("variant", &name.text, name.span, &mut diags);
+                    if !valid_variant_id(&name.text) {
+                        diags.push(
+                            Diagnostic::error("bad-id", name.span, format!("invalid variant id `{}`", name.text))
+                                .with_hint("variant ids start with a letter or `_` and contain only letters, digits, `_`, `-` and `+`"),
+                        );
+                    }
                     let patches = entries(body, &format!("variant `{}`", name.text), None, &mut diags)
                         .into_iter()
                         .map(|(node, patch)| parse_patch(&name.text, node, patch, &mut diags))

@@ -139,13 +139,9 @@ struct Octomap {
     skipped: u64,
 }
 
-/// A colour per class id (class 0, background, grey).
+/// A colour per class id: the recorders' palette, class 0 (background) grey.
 fn class_color(c: u16) -> [u8; 3] {
-    if c == 0 {
-        return [160, 160, 160];
-    }
-    let h = u32::from(c).wrapping_mul(0x9E37_79B9);
-    [(h >> 24) as u8 | 0x40, (h >> 16) as u8 | 0x40, (h >> 8) as u8 | 0x40]
+    if c == 0 { [160, 160, 160] } else { dynaflow_engine::msg::class_rgb(c) }
 }
 
 impl Octomap {

@@ -274,20 +274,25 @@ impl Operator for PnpTrack {
 }
 
 impl PnpTrack {
+    /// `<out>/<stem>.<node>.trajectory.txt`, and with `gt_pose` the ground truth of the same
+    /// frames beside it (`.groundtruth.txt`), both TUM format (`dynaflow eval`, `dynaflow bench`).
     fn write_trajectory(&self, ctx: &Context) -> Result<(), OpError> {
         let Some(dir) = &ctx.out_dir else { return Ok(()) };
-        if self.trajectory.is_empty() {
-            return Ok(());
+        for (what, poses) in [("trajectory", &self.trajectory), ("groundtruth", &self.ground_truth)] {
+            if poses.is_empty() {
+                continue;
+            }
+            let path = dir.join(format!("{}.{}.{what}.txt", ctx.stem, ctx.node));
+            let io = |source| OpError::Io { path: path.clone(), source };
+            let mut f = std::io::BufWriter::new(std::fs::File::create(&path).map_err(io)?);
+            writeln!(f, "# timestamp tx ty tz qx qy qz qw (world_from_cam, dynaflow pnp_track {what})").map_err(io)?;
+            for (t, p) in poses.iter() {
+                let (v, q) = (p.translation.vector, p.rotation.coords);
+                writeln!(f, "{t:.6} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}", v.x, v.y, v.z, q.x, q.y, q.z, q.w)
+                    .map_err(io)?;
+            }
+            f.flush().map_err(io)?;
         }
-        let path = dir.join(format!("{}.{}.trajectory.txt", ctx.stem, ctx.node));
-        let io = |source| OpError::Io { path: path.clone(), source };
-        let mut f = std::io::BufWriter::new(std::fs::File::create(&path).map_err(io)?);
-        writeln!(f, "# timestamp tx ty tz qx qy qz qw (world_from_cam, dynaflow pnp_track)").map_err(io)?;
-        for (t, p) in &self.trajectory {
-            let (v, q) = (p.translation.vector, p.rotation.coords);
-            writeln!(f, "{t:.6} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}", v.x, v.y, v.z, q.x, q.y, q.z, q.w)
-                .map_err(io)?;
-        }
-        f.flush().map_err(io)
+        Ok(())
     }
 }

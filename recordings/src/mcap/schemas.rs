@@ -156,9 +156,10 @@ pub fn to_json(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Result<
             let cubes: Vec<Value> = o
                 .occupied
                 .iter()
-                .map(|(p, _)| {
+                .map(|(p, class)| {
+                    let [r, g, b] = dynaflow_engine::msg::class_rgb(*class).map(|v| f32::from(v) / 255.0);
                     json!({"pose": {"position": {"x": p[0], "y": p[1], "z": p[2]}, "orientation": {"x": 0, "y": 0, "z": 0, "w": 1}},
-                           "size": size, "color": color(0.3, 0.6, 1.0, 0.8)})
+                           "size": size, "color": color(r, g, b, 0.8)})
                 })
                 .collect();
             json!({"deletions": [], "entities": [{"timestamp": ts, "frame_id": "world", "id": format!("octree-{}", msg.header.seq),

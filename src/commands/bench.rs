@@ -1,0 +1,387 @@
+//! `dynaflow bench GRAPH... [--inputs DIR...] [--variants all|a,b] [--jobs N] [--out DIR]`:
+//! every graph x variant x sequence as its own `dynaflow run` process (spread over `--jobs`),
+//! then the papers' tables (markdown and CSV: ATE, RPE, time per frame, improvement over
+//! `orb_baseline`) and plots (trajectories against ground truth, ATE per variant, time per
+//! node). A failed run is a row marked failed with its error.
+
+use std::collections::BTreeMap;
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::{Arc, Mutex};
+
+use dynaflow_engine::LoadRequest;
+use dynaflow_slam::eval::{Align, evaluate};
+
+use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+
+/// `dynaflow bench` arguments.
+#[derive(Debug, clap::Args)]
+pub struct BenchArgs {
+    /// Graph files.
+    #[arg(required = true)]
+    pub graphs: Vec<PathBuf>,
+    /// Sequences to run each graph on (TUM RGB-D, KITTI or image folders, as `run --input`);
+    /// none: each graph's own source (the embedded synthetic scene).
+    #[arg(long, num_args = 1..)]
+    pub inputs: Vec<PathBuf>,
+    /// Intrinsics for `--inputs` (as `run --intrinsics`).
+    #[arg(long)]
+    pub intrinsics: Option<String>,
+    /// Variants: `all` (the graph as written, then each variant), or a comma-separated list
+    /// where `base` names the graph as written.
+    #[arg(long, default_value = "all")]
+    pub variants: String,
+    /// Runs at a time (each its own process).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=64))]
+    pub jobs: u64,
+    /// Output folder: `bench.md`, `bench.csv`, plots, and one folder per run.
+    #[arg(long, default_value = "bench")]
+    pub out: PathBuf,
+    /// Frames per run (default: each graph's own).
+    #[arg(long)]
+    pub frames: Option<u64>,
+    /// Override a parameter in every run: `node.param=value` (repeatable).
+    #[arg(long = "set")]
+    pub set: Vec<String>,
+    /// No progress bar.
+    #[arg(long)]
+    pub no_progress: bool,
+}
+
+/// One run to do.
+#[derive(Clone, Debug)]
+struct Job {
+    graph: PathBuf,
+    name: String,
+    variant: Option<String>,
+    input: Option<PathBuf>,
+    dir: PathBuf,
+}
+
+impl Job {
+    fn variant_name(&self) -> &str {
+        self.variant.as_deref().unwrap_or("base")
+    }
+    fn sequence(&self) -> String {
+        self.input.as_ref().map_or_else(
+            || "synthetic".to_string(),
+            |p| p.file_name().map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into_owned()),
+        )
+    }
+}
+
+/// What a run gave.
+#[derive(Clone, Debug, Default)]
+struct Row {
+    ok: bool,
+    error: String,
+    frames: u64,
+    wall_s: f64,
+    ate: Option<[f64; 4]>,
+    rpe: Option<[f64; 2]>,
+    /// Whole-run wall time per frame, milliseconds.
+    ms_per_frame: f64,
+    /// Busy milliseconds per frame of each node.
+    nodes: Vec<(String, f64)>,
+    trajectory: Option<(PathBuf, PathBuf)>,
+}
+
+fn jobs(args: &BenchArgs) -> Result<Vec<Job>, String> {
+    let registry = dynaflow::registry();
+    let mut out = Vec::new();
+    let inputs: Vec<Option<PathBuf>> =
+        if args.inputs.is_empty() { vec![None] } else { args.inputs.iter().cloned().map(Some).collect() };
+    for g in &args.graphs {
+        let loaded = dynaflow_engine::load(g, &registry, &LoadRequest::default())
+            .map_err(|e| format!("cannot read graph file {}: {e}", g.display()))?;
+        if loaded.has_errors() {
+            super::print_diagnostics(&loaded);
+            return Err(format!("{} does not validate", g.display()));
+        }
+        let spec = loaded.spec.ok_or_else(|| format!("{}: no graph", g.display()))?;
+        let all: Vec<Option<String>> =
+            std::iter::once(None).chain(spec.variants.iter().map(|v| Some(v.name.clone()))).collect();
+        let wanted: Vec<Option<String>> = if args.variants == "all" {
+            all
+        } else {
+            let mut w = Vec::new();
+            for v in args.variants.split(',').map(str::trim).filter(|v| !v.is_empty()) {
+                if v == "base" {
+                    w.push(None);
+                } else if spec.variants.iter().any(|s| s.name == v) {
+                    w.push(Some(v.to_string()));
+                } else if args.graphs.len() == 1 {
+                    return Err(format!("{} has no variant `{v}`", g.display()));
+                }
+            }
+            w
+        };
+        for input in &inputs {
+            for v in &wanted {
+                let job = Job {
+                    graph: g.clone(),
+                    name: spec.name.clone(),
+                    variant: v.clone(),
+                    input: input.clone(),
+                    dir: PathBuf::new(),
+                };
+                let dir = args.out.join("runs").join(format!("{}-{}-{}", job.name, job.variant_name(), job.sequence()));
+                out.push(Job { dir, ..job });
+            }
+        }
+    }
+    Ok(out)
+}
+
+fn run_one(exe: &Path, job: &Job, args: &BenchArgs) -> Row {
+    let _ = std::fs::remove_dir_all(&job.dir);
+    let mut cmd = Command::new(exe);
+    cmd.arg("run").arg(&job.graph).args(["--no-progress", "--record", "none", "--out"]).arg(&job.dir);
+    if let Some(v) = &job.variant {
+        cmd.args(["--variant", v]);
+    }
+    if let Some(i) = &job.input {
+        cmd.arg("--input").arg(i);
+        if let Some(k) = &args.intrinsics {
+            cmd.args(["--intrinsics", k]);
+        }
+    }
+    if let Some(f) = args.frames {
+        cmd.args(["--frames", &f.to_string()]);
+    }
+    for s in &args.set {
+        cmd.args(["--set", s]);
+    }
+    let out = match cmd.output() {
+        Ok(o) => o,
+        Err(e) => return Row { error: format!("cannot start {}: {e}", exe.display()), ..Row::default() },
+    };
+    let _ = std::fs::write(job.dir.join("stderr.txt"), &out.stderr);
+    let stem = match &job.variant {
+        Some(v) => format!("{}-{v}", job.name),
+        None => job.name.clone(),
+    };
+    let summary: Option<serde_json::Value> =
+        std::fs::read(job.dir.join(format!("{stem}.summary.json"))).ok().and_then(|b| serde_json::from_slice(&b).ok());
+    let mut row = Row { ok: out.status.success(), ..Row::default() };
+    if !row.ok {
+        let err = String::from_utf8_lossy(&out.stderr);
+        row.error = err.lines().rev().find(|l| l.contains("error")).unwrap_or("run failed").trim().to_string();
+    }
+    let Some(s) = summary else {
+        if row.ok {
+            row.ok = false;
+            row.error = "no summary written".into();
+        }
+        return row;
+    };
+    row.frames = s["frames"].as_u64().unwrap_or(0);
+    row.wall_s = s["wall_s"].as_f64().unwrap_or(f64::NAN);
+    row.ms_per_frame = 1e3 * row.wall_s / row.frames.max(1) as f64;
+    let a = &s["ate"];
+    if let (Some(r), Some(m), Some(md), Some(sd)) =
+        (a["rmse"].as_f64(), a["mean"].as_f64(), a["median"].as_f64(), a["std"].as_f64())
+    {
+        row.ate = Some([r, m, md, sd]);
+    }
+    let node = a["node"].as_str().unwrap_or("track").to_string();
+    if let Some(nodes) = s["nodes"].as_array() {
+        for n in nodes {
+            let name = n["node"].as_str().unwrap_or("?").to_string();
+            if name == node
+                && let (Some(t), Some(r)) =
+                    (n["report"]["rpe"]["translation_rmse"].as_f64(), n["report"]["rpe"]["rotation_rmse_deg"].as_f64())
+            {
+                row.rpe = Some([t, r]);
+            }
+            let busy = n["busy_s"].as_f64().unwrap_or(0.0);
+            row.nodes.push((name, 1e3 * busy / row.frames.max(1) as f64));
+        }
+    }
+    let est = job.dir.join(format!("{stem}.{node}.trajectory.txt"));
+    let gt = job.dir.join(format!("{stem}.{node}.groundtruth.txt"));
+    if est.exists() && gt.exists() {
+        row.trajectory = Some((gt, est));
+    }
+    row
+}
+
+fn fmt_cm(v: Option<f64>) -> String {
+    v.map_or_else(|| "-".into(), |v| format!("{:.2}", 100.0 * v))
+}
+
+/// Exit 0 when every run completed, 1 when some failed (the table says which), 2 on bad input.
+pub fn bench(args: &BenchArgs) -> u8 {
+    let jobs = match jobs(args) {
+        Ok(j) => j,
+        Err(e) => {
+            eprintln!("error: {e}");
+            return EXIT_BAD_INPUT;
+        }
+    };
+    if jobs.is_empty() {
+        eprintln!("error: nothing to run (no matching variant)");
+        return EXIT_BAD_INPUT;
+    }
+    if let Err(e) = std::fs::create_dir_all(args.out.join("runs")) {
+        eprintln!("error: cannot create {}: {e}", args.out.display());
+        return EXIT_BAD_INPUT;
+    }
+    let exe = match std::env::current_exe() {
+        Ok(e) => e,
+        Err(e) => {
+            eprintln!("error: cannot find this program: {e}");
+            return EXIT_FAILED;
+        }
+    };
+    let bar = if args.no_progress || !std::io::stderr().is_terminal() {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(jobs.len() as u64)
+    };
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{bar:30} {pos}/{len} runs [{elapsed_precise}] {msg}") {
+        bar.set_style(style);
+    }
+    let next = Arc::new(Mutex::new(0usize));
+    let rows: Arc<Mutex<Vec<Option<Row>>>> = Arc::new(Mutex::new(vec![None; jobs.len()]));
+    std::thread::scope(|s| {
+        for _ in 0..args.jobs.min(jobs.len() as u64) {
+            s.spawn(|| {
+                loop {
+                    let i = {
+                        let mut n = next.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+                        let i = *n;
+                        *n += 1;
+                        i
+                    };
+                    let Some(job) = jobs.get(i) else { break };
+                    bar.set_message(format!("{} {} {}", job.name, job.variant_name(), job.sequence()));
+                    let row = run_one(&exe, job, args);
+                    if !row.ok && bar.is_hidden() {
+                        eprintln!("failed: {} {} {}: {}", job.name, job.variant_name(), job.sequence(), row.error);
+                    }
+                    rows.lock().unwrap_or_else(std::sync::PoisonError::into_inner)[i] = Some(row);
+                    bar.inc(1);
+                }
+            });
+        }
+    });
+    bar.finish_and_clear();
+    let rows: Vec<Row> = rows
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .iter()
+        .map(|r| r.clone().unwrap_or_default())
+        .collect();
+    let (md, csv) = tables(&jobs, &rows);
+    print!("{md}");
+    let write = |name: &str, text: &str| {
+        let p = args.out.join(name);
+        std::fs::write(&p, text).map_err(|e| eprintln!("error: {}: {e}", p.display())).is_ok()
+    };
+    if !(write("bench.md", &md) && write("bench.csv", &csv)) {
+        return EXIT_FAILED;
+    }
+    if let Err(e) = plots(&jobs, &rows, &args.out) {
+        eprintln!("warning: plots: {e}");
+    }
+    if rows.iter().all(|r| r.ok) { EXIT_OK } else { EXIT_FAILED }
+}
+
+/// The markdown and CSV tables.
+fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
+    // Improvement over orb_baseline's plain graph on the same sequence.
+    let baseline: BTreeMap<String, f64> = jobs
+        .iter()
+        .zip(rows)
+        .filter(|(j, _)| j.name == "orb_baseline" && j.variant.is_none())
+        .filter_map(|(j, r)| r.ate.map(|a| (j.sequence(), a[0])))
+        .collect();
+    let mut md = String::from(
+        "| graph | variant | sequence | ATE rmse (cm) | mean | median | std | RPE t (cm) | RPE r (deg) | ms/frame | vs orb_baseline |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+    );
+    let mut csv = String::from(
+        "graph,variant,sequence,status,frames,ate_rmse_m,ate_mean_m,ate_median_m,ate_std_m,rpe_t_m,rpe_r_deg,ms_per_frame,improvement_pct,error\n",
+    );
+    for (j, r) in jobs.iter().zip(rows) {
+        let improvement = match (r.ate, baseline.get(&j.sequence())) {
+            (Some(a), Some(b)) if *b > 0.0 && !(j.name == "orb_baseline" && j.variant.is_none()) => {
+                Some(100.0 * (b - a[0]) / b)
+            }
+            _ => None,
+        };
+        let ate = r.ate.map(|a| a.map(Some)).unwrap_or([None; 4]);
+        let rpe = r.rpe.map(|a| a.map(Some)).unwrap_or([None; 2]);
+        if r.ok {
+            md.push_str(&format!(
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} |\n",
+                j.name,
+                j.variant_name(),
+                j.sequence(),
+                fmt_cm(ate[0]),
+                fmt_cm(ate[1]),
+                fmt_cm(ate[2]),
+                fmt_cm(ate[3]),
+                fmt_cm(rpe[0]),
+                rpe[1].map_or_else(|| "-".into(), |v| format!("{v:.3}")),
+                r.ms_per_frame,
+                improvement.map_or_else(|| "-".into(), |v| format!("{v:+.0} %")),
+            ));
+        } else {
+            md.push_str(&format!(
+                "| {} | {} | {} | **failed**: {} | | | | | | | |\n",
+                j.name,
+                j.variant_name(),
+                j.sequence(),
+                r.error.replace('|', "/")
+            ));
+        }
+        let f = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v:.6}"));
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{:.3},{},\"{}\"\n",
+            j.name,
+            j.variant_name(),
+            j.sequence(),
+            if r.ok { "ok" } else { "failed" },
+            r.frames,
+            f(ate[0]),
+            f(ate[1]),
+            f(ate[2]),
+            f(ate[3]),
+            f(rpe[0]),
+            f(rpe[1]),
+            r.ms_per_frame,
+            improvement.map_or_else(String::new, |v| format!("{v:.1}")),
+            r.error.replace('"', "'"),
+        ));
+    }
+    (md, csv)
+}
+
+/// Trajectory plots per run, ATE per variant, time per node.
+fn plots(jobs: &[Job], rows: &[Row], out: &Path) -> Result<(), String> {
+    for (j, r) in jobs.iter().zip(rows) {
+        let Some((gt, est)) = &r.trajectory else { continue };
+        let read = |p: &Path| dynaflow_operators::decode::read_trajectory(p).map_err(|e| e.to_string());
+        let e = evaluate(&read(gt)?, &read(est)?, 0.01, Align::Se3, 1).map_err(|e| e.to_string())?;
+        let title = format!("{} {} {}: ATE {:.2} cm", j.name, j.variant_name(), j.sequence(), 100.0 * e.ate.rmse);
+        crate::plot::evaluation(&e, &title, &j.dir.join("trajectory.png"))?;
+    }
+    let runs: Vec<(String, &Row)> = jobs
+        .iter()
+        .zip(rows)
+        .filter(|(_, r)| r.ok)
+        .map(|(j, r)| (format!("{} {}", j.name, j.variant_name()), r))
+        .collect();
+    let mut ate: BTreeMap<String, Vec<f64>> = BTreeMap::new();
+    for (label, r) in &runs {
+        if let Some(a) = r.ate {
+            ate.entry(label.clone()).or_default().push(100.0 * a[0]);
+        }
+    }
+    crate::plot::boxes(&ate, "ATE rmse per variant (cm), over sequences", &out.join("ate.png"))?;
+    let stacks: Vec<(String, Vec<(String, f64)>)> =
+        runs.iter().filter(|(_, r)| !r.nodes.is_empty()).map(|(label, r)| (label.clone(), r.nodes.clone())).collect();
+    crate::plot::stacked(&stacks, "busy ms per frame, per node", &out.join("time.png"))
+}

@@ -1,0 +1,66 @@
+//! `dynaflow bench` (issue 14): every variant of the seed graphs runs end to end on a short
+//! synthetic sequence, the tables and plots are written, and a failed run is a row, not the
+//! end of the bench.
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+mod common;
+
+fn csv_rows(path: &std::path::Path) -> Vec<Vec<String>> {
+    std::fs::read_to_string(path).unwrap().lines().skip(1).map(|l| l.split(',').map(str::to_string).collect()).collect()
+}
+
+#[test]
+fn every_seed_graph_variant_runs_and_the_tables_compare_them_with_the_baseline() {
+    let dir = common::TempDir::new("bench-all");
+    let out = common::bin()
+        .arg("bench")
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .arg(common::repo().join("graphs/mg_slam.yaml"))
+        .args(["--variants", "all", "--frames", "6", "--jobs", "2", "--no-progress", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(out.status.code(), Some(0), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
+    let rows = csv_rows(&dir.path().join("bench.csv"));
+    // orb_baseline: base + 4 variants; mg_slam: base + 6.
+    assert_eq!(rows.len(), 12, "{rows:?}");
+    for r in &rows {
+        assert_eq!(r[3], "ok", "{r:?}");
+        assert_eq!(r[4], "6", "{r:?}");
+        assert!(r[5].parse::<f64>().is_ok(), "ATE of {r:?}");
+    }
+    // The improvement over orb_baseline is computed for every other row on the same sequence.
+    let mg: Vec<&Vec<String>> = rows.iter().filter(|r| r[0] == "mg_slam").collect();
+    assert!(mg.iter().all(|r| r[12].parse::<f64>().is_ok()), "{mg:?}");
+    assert!(stdout.contains("| mg_slam | S+G | synthetic |"), "{stdout}");
+    for f in ["bench.md", "ate.png", "time.png", "runs/mg_slam-G-synthetic/trajectory.png"] {
+        assert!(dir.path().join(f).exists(), "{f}");
+    }
+}
+
+#[test]
+fn a_failed_run_is_a_row_and_the_rest_still_run() {
+    let dir = common::TempDir::new("bench-fail");
+    let empty = dir.path().join("empty-sequence");
+    std::fs::create_dir_all(&empty).unwrap();
+    let out = common::bin()
+        .arg("bench")
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .args(["--variants", "base", "--no-progress", "--intrinsics", "fr2", "--inputs"])
+        .arg(common::repo().join("tests/fixtures/slambook2_rgbd_pair"))
+        .arg(&empty)
+        .arg("--out")
+        .arg(dir.path().join("out"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", String::from_utf8_lossy(&out.stderr));
+    let rows = csv_rows(&dir.path().join("out/bench.csv"));
+    assert_eq!(rows.len(), 2);
+    assert_eq!((rows[0][2].as_str(), rows[0][3].as_str()), ("slambook2_rgbd_pair", "ok"));
+    assert_eq!((rows[1][2].as_str(), rows[1][3].as_str()), ("empty-sequence", "failed"));
+    assert!(rows[1][13].contains("empty-sequence"), "the error names the folder: {:?}", rows[1]);
+    // Bad input to the bench itself: exit 2.
+    let out = common::bin().args(["bench", "/nonexistent.yaml"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+}
