@@ -12,10 +12,10 @@ fn csv_rows(path: &std::path::Path) -> Vec<Vec<String>> {
 #[test]
 fn every_seed_graph_variant_runs_and_the_tables_compare_them_with_the_baseline() {
     let dir = common::TempDir::new("bench-all");
+    let graphs = ["orb_baseline", "mg_slam", "yg_slam", "pspnet_slam", "ysag", "yoec_dslam"];
     let out = common::bin()
         .arg("bench")
-        .arg(common::repo().join("graphs/orb_baseline.yaml"))
-        .arg(common::repo().join("graphs/mg_slam.yaml"))
+        .args(graphs.iter().map(|g| common::repo().join(format!("graphs/{g}.yaml"))))
         .args(["--variants", "all", "--frames", "6", "--jobs", "2", "--no-progress", "--out"])
         .arg(dir.path())
         .output()
@@ -23,18 +23,25 @@ fn every_seed_graph_variant_runs_and_the_tables_compare_them_with_the_baseline()
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert_eq!(out.status.code(), Some(0), "{stdout}\n{}", String::from_utf8_lossy(&out.stderr));
     let rows = csv_rows(&dir.path().join("bench.csv"));
-    // orb_baseline: base + 4 variants; mg_slam: base + 6.
-    assert_eq!(rows.len(), 12, "{rows:?}");
+    // Each graph as written plus every variant: orb_baseline 1 + 4, mg_slam 1 + 6, yg_slam
+    // 1 + 6, pspnet_slam 1 + 3, ysag 1 + 2, yoec_dslam 1 + 4.
+    assert_eq!(rows.len(), 31, "{rows:?}");
     for r in &rows {
         assert_eq!(r[3], "ok", "{r:?}");
         assert_eq!(r[4], "6", "{r:?}");
         assert!(r[5].parse::<f64>().is_ok(), "ATE of {r:?}");
     }
     // The improvement over orb_baseline is computed for every other row on the same sequence.
-    let mg: Vec<&Vec<String>> = rows.iter().filter(|r| r[0] == "mg_slam").collect();
-    assert!(mg.iter().all(|r| r[12].parse::<f64>().is_ok()), "{mg:?}");
+    let seed: Vec<&Vec<String>> = rows.iter().filter(|r| r[0] != "orb_baseline").collect();
+    assert!(seed.iter().all(|r| r[12].parse::<f64>().is_ok()), "{seed:?}");
     assert!(stdout.contains("| mg_slam | S+G | synthetic |"), "{stdout}");
-    for f in ["bench.md", "ate.png", "time.png", "runs/mg_slam-G-synthetic/trajectory.png"] {
+    for f in [
+        "bench.md",
+        "ate.png",
+        "time.png",
+        "runs/mg_slam-G-synthetic/trajectory.png",
+        "runs/pspnet_slam-base-synthetic/pspnet_slam.octomap.ot",
+    ] {
         assert!(dir.path().join(f).exists(), "{f}");
     }
 }
