@@ -345,9 +345,14 @@ fn fundamental_ransac_agrees_with_opencv() {
             count(&magsac)
         );
         assert!(fit.inlier_count() as f64 >= 0.95 * count(&ransac) as f64, "{name}: too few inliers");
-        if *name == "synth_lk" {
+        if *name == "synth_lk" && a_cv >= 0.95 {
             // A well-conditioned pair: one answer, found by all three.
             assert!(a_r >= 0.95 && a_m >= 0.95, "{name}: {a_r} {a_m}");
+        } else if *name == "synth_lk" {
+            // OpenCV's plain RANSAC stops early on this pair (the photo-textured people add
+            // outlier tracks) and disagrees with its own MAGSAC: ours must match MAGSAC, the
+            // better of the two, and agree with RANSAC as well as MAGSAC does.
+            assert!(a_m >= 0.95 && a_r >= a_cv - 0.02, "{name}: {a_r} {a_m} vs {a_cv}");
         } else {
             // The real pair is ill-conditioned at 1 px: OpenCV's two estimators agree on only
             // about three quarters of the decisions. Ours must agree with each at least as

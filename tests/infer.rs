@@ -393,3 +393,42 @@ fn an_unsupported_op_is_named_on_every_backend() {
         assert!(err.contains(says) && !err.contains("panicked"), "{backend}: {err}");
     }
 }
+
+#[test]
+fn yolox_finds_the_photo_textured_synthetic_people() {
+    use dynaflow_infer::detect::{Decoder, Detector};
+    use dynaflow_operators::synth::{Generator, SynthConfig};
+    let detector = Detector::new(load(&yolox()).unwrap(), Decoder::Yolox).unwrap();
+    let rten = RtenModel::load(std::fs::read(yolox()).unwrap()).unwrap();
+    let g = Generator::new(SynthConfig::default());
+    let (w, h) = (g.config().intrinsics.width as usize, g.config().intrinsics.height as usize);
+    let iou = |a: [f32; 4], b: [f32; 4]| {
+        let iw = (a[2].min(b[2]) - a[0].max(b[0])).max(0.0);
+        let ih = (a[3].min(b[3]) - a[1].max(b[1])).max(0.0);
+        let area = |r: [f32; 4]| (r[2] - r[0]) * (r[3] - r[1]);
+        iw * ih / (area(a) + area(b) - iw * ih)
+    };
+    let (mut visible, mut found) = (0, 0);
+    for k in (0..300).step_by(10) {
+        let f = g.frame(k, false);
+        let dets = detector.detect_with(&f.rgb, w, h, 80, 0.3, 0.45, |n, t| rten.run(&[(n, t)])).unwrap();
+        let people: Vec<[f32; 4]> = dets.iter().filter(|d| d.class == 0).map(|d| d.bbox).collect();
+        // Ground-truth boxes of the people with at least 3000 visible pixels.
+        for id in 1..=g.config().people as u16 {
+            let (mut b, mut n) = ([f32::MAX, f32::MAX, 0.0f32, 0.0f32], 0);
+            for (i, _) in f.instance.iter().enumerate().filter(|(_, v)| **v == id) {
+                let (x, y) = ((i % w) as f32, (i / w) as f32);
+                b = [b[0].min(x), b[1].min(y), b[2].max(x + 1.0), b[3].max(y + 1.0)];
+                n += 1;
+            }
+            if n >= 3000 {
+                visible += 1;
+                found += usize::from(people.iter().any(|&p| iou(p, b) >= 0.5));
+            }
+        }
+    }
+    let recall = found as f64 / visible.max(1) as f64;
+    eprintln!("YOLOX-nano finds {found} of {visible} visible synthetic people (IoU >= 0.5): {:.0} %", 100.0 * recall);
+    assert!(visible >= 20, "{visible}");
+    assert!(recall >= 0.5, "{recall}");
+}

@@ -243,7 +243,13 @@ impl Rays<'_> {
                 } else {
                     Hit { part: o.dynamic_index, point: [local.x as f32, local.y as f32, local.z as f32] }
                 };
-                (t, o.part.texture.sample(a as f32, b as f32), nw, o.part.kind, hit)
+                let (sa, sb) = match axis {
+                    0 => (2.0 * o.part.half.y, 2.0 * o.part.half.z),
+                    1 => (2.0 * o.part.half.x, 2.0 * o.part.half.z),
+                    _ => (2.0 * o.part.half.x, 2.0 * o.part.half.y),
+                };
+                let colour = o.part.texture.sample_face(axis, a as f32, b as f32, sa as f32, sb as f32);
+                (t, colour, nw, o.part.kind, hit)
             }
             _ => {
                 let pw = origin + dw * t_room;

@@ -3,7 +3,7 @@
 
 use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
-use super::texture::{Texture, hash};
+use super::texture::{PhotoCrop, Texture, hash};
 
 /// Room extent: `x ∈ [-W, W]`, `y ∈ [-D, D]`, `z ∈ [0, H]` (z up), metres.
 pub const ROOM_HALF_WIDTH: f64 = 3.0;
@@ -71,8 +71,13 @@ impl Scene {
     /// A room with `people` people, deterministic by `seed`.
     pub fn new(seed: u64, people: usize, mode: PeopleMode) -> Self {
         let s = hash((seed ^ (seed >> 32)) as u32 ^ 0x5eed);
-        let tex =
-            |i: u32, base: [f32; 3], tile: f32, contrast: f32| Texture { base, tile, seed: hash(s ^ i), contrast };
+        let tex = |i: u32, base: [f32; 3], tile: f32, contrast: f32| Texture {
+            base,
+            tile,
+            seed: hash(s ^ i),
+            contrast,
+            photo: None,
+        };
         let walls = [
             tex(1, [0.75, 0.72, 0.65], 0.45, 0.9), // x-
             tex(2, [0.65, 0.72, 0.78], 0.45, 0.9), // x+
@@ -123,8 +128,14 @@ impl Scene {
                     heading,
                     speed,
                     phase: unit(h >> 11) * std::f64::consts::TAU,
-                    clothes: Texture { base: colour, tile: 0.09, seed: hash(h), contrast: 1.0 },
-                    skin: Texture { base: [0.85, 0.68, 0.55], tile: 0.05, seed: hash(h ^ 7), contrast: 0.5 },
+                    clothes: Texture { base: colour, tile: 0.09, seed: hash(h), contrast: 1.0, photo: None },
+                    skin: Texture {
+                        base: [0.85, 0.68, 0.55],
+                        tile: 0.05,
+                        seed: hash(h ^ 7),
+                        contrast: 0.5,
+                        photo: None,
+                    },
                     height: 1.65 + 0.2 * unit(h >> 19),
                 }
             })
@@ -204,14 +215,14 @@ impl Scene {
                 Vector3::new(0.0, 0.0, hip_z),
                 0.0,
                 Vector3::new(0.12, 0.2, torso_h),
-                p.clothes,
+                Texture { photo: Some(PhotoCrop::TORSO), ..p.clothes },
             );
             push(
                 Vector3::new(0.0, 0.0, 0.12 * s),
                 Vector3::new(0.0, 0.0, hip_z + 2.0 * torso_h + 0.02),
                 0.0,
                 Vector3::new(0.1, 0.09, 0.12 * s),
-                p.skin,
+                Texture { photo: Some(PhotoCrop::HEAD), ..p.skin },
             );
             // Legs swing opposite each other; arms opposite the legs.
             let leg = Vector3::new(0.07, 0.07, 0.45 * s);
