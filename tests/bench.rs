@@ -71,3 +71,22 @@ fn a_failed_run_is_a_row_and_the_rest_still_run() {
     let out = common::bin().args(["bench", "/nonexistent.yaml"]).output().unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn the_seed_graphs_run_unchanged_on_a_tum_folder() {
+    let dir = common::TempDir::new("bench-tum");
+    let graphs = ["mg_slam", "yg_slam", "pspnet_slam", "ysag", "yoec_dslam"];
+    let out = common::bin()
+        .arg("bench")
+        .args(graphs.iter().map(|g| common::repo().join(format!("graphs/{g}.yaml"))))
+        .args(["--variants", "base", "--no-progress", "--jobs", "2", "--intrinsics", "fr2", "--inputs"])
+        .arg(common::repo().join("tests/fixtures/slambook2_rgbd_pair"))
+        .arg("--out")
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stdout));
+    let rows = csv_rows(&dir.path().join("bench.csv"));
+    assert_eq!(rows.len(), graphs.len());
+    assert!(rows.iter().all(|r| r[3] == "ok" && r[4] == "2"), "{rows:?}");
+}
