@@ -121,6 +121,51 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
     sorted[lo] + (sorted[hi] - sorted[lo]) * (p - lo as f64)
 }
 
+/// The chart both bar-like plots draw on: one column per label (names rotated under the
+/// axis, in an area `label_area` pixels high), values from 0 to `ymax` upwards.
+fn columns<'a, 'b>(
+    root: &'a DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    title: &str,
+    labels: &[&str],
+    label_area: u32,
+    y_desc: Option<&str>,
+    ymax: f64,
+) -> Result<
+    ChartContext<
+        'a,
+        BitMapBackend<'b>,
+        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
+    >,
+    Box<dyn std::error::Error>,
+> {
+    let n = labels.len();
+    let mut chart = ChartBuilder::on(root)
+        .caption(title, (FAMILY, 20))
+        .margin(20)
+        .x_label_area_size(label_area)
+        .y_label_area_size(60)
+        .build_cartesian_2d(-0.5..n as f64 - 0.5, 0.0..ymax)?;
+    let name = |x: &f64| {
+        let i = x.round();
+        if (x - i).abs() < 1e-6 && i >= 0.0 {
+            labels.get(i as usize).map_or(String::new(), |l| (*l).to_string())
+        } else {
+            String::new()
+        }
+    };
+    let mut mesh = chart.configure_mesh();
+    mesh.disable_x_mesh()
+        .x_labels(n)
+        .x_label_formatter(&name)
+        .x_label_style((FAMILY, 13).into_font().transform(FontTransform::Rotate90))
+        .label_style((FAMILY, 13));
+    if let Some(d) = y_desc {
+        mesh.y_desc(d);
+    }
+    mesh.draw()?;
+    Ok(chart)
+}
+
 /// A box plot per label (median, quartiles, whiskers to min and max, every value as a dot).
 pub fn boxes(values: &std::collections::BTreeMap<String, Vec<f64>>, title: &str, path: &Path) -> Result<(), String> {
     let groups: Vec<(&String, Vec<f64>)> = values
@@ -140,28 +185,8 @@ pub fn boxes(values: &std::collections::BTreeMap<String, Vec<f64>>, title: &str,
     png(w, h, path, |buf| {
         let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
         root.fill(&WHITE)?;
-        let n = groups.len();
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, (FAMILY, 20))
-            .margin(20)
-            .x_label_area_size(130)
-            .y_label_area_size(60)
-            .build_cartesian_2d(-0.5..n as f64 - 0.5, 0.0..ymax)?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_labels(n)
-            .x_label_formatter(&|x| {
-                let i = x.round();
-                if (x - i).abs() < 1e-6 && i >= 0.0 {
-                    groups.get(i as usize).map_or(String::new(), |g| g.0.clone())
-                } else {
-                    String::new()
-                }
-            })
-            .x_label_style((FAMILY, 13).into_font().transform(FontTransform::Rotate90))
-            .label_style((FAMILY, 13))
-            .draw()?;
+        let labels: Vec<&str> = groups.iter().map(|g| g.0.as_str()).collect();
+        let mut chart = columns(&root, title, &labels, 130, None, ymax)?;
         for (i, (_, v)) in groups.iter().enumerate() {
             let x = i as f64;
             let (q1, med, q3) = (quantile(v, 0.25), quantile(v, 0.5), quantile(v, 0.75));
@@ -200,29 +225,8 @@ pub fn stacked(runs: &[(String, Vec<(String, f64)>)], title: &str, path: &Path) 
     png(w, h, path, |buf| {
         let root = BitMapBackend::with_buffer(buf, (w, h)).into_drawing_area();
         root.fill(&WHITE)?;
-        let n = runs.len();
-        let mut chart = ChartBuilder::on(&root)
-            .caption(title, (FAMILY, 20))
-            .margin(20)
-            .x_label_area_size(150)
-            .y_label_area_size(60)
-            .build_cartesian_2d(-0.5..n as f64 - 0.5, 0.0..ymax)?;
-        chart
-            .configure_mesh()
-            .disable_x_mesh()
-            .x_labels(n)
-            .x_label_formatter(&|x| {
-                let i = x.round();
-                if (x - i).abs() < 1e-6 && i >= 0.0 {
-                    runs.get(i as usize).map_or(String::new(), |r| r.0.clone())
-                } else {
-                    String::new()
-                }
-            })
-            .x_label_style((FAMILY, 13).into_font().transform(FontTransform::Rotate90))
-            .y_desc("ms")
-            .label_style((FAMILY, 13))
-            .draw()?;
+        let labels: Vec<&str> = runs.iter().map(|r| r.0.as_str()).collect();
+        let mut chart = columns(&root, title, &labels, 150, Some("ms"), ymax)?;
         for name in &names {
             let mut first = true;
             for (i, (_, nodes)) in runs.iter().enumerate() {

@@ -90,7 +90,6 @@ fn ours(scans: &[peer::Scan]) -> OcTree {
 /// Occupancy decision (occupied, free, unknown) of both trees at every voxel centre that is
 /// a leaf of either, plus a grid over their joint bounding box: the share that agrees.
 fn agreement(a: &OcTree, b: &OcTree) -> (f64, usize) {
-    let g = a.grid();
     let mut keys: HashSet<Key> = HashSet::new();
     let (mut lo, mut hi) = ([u16::MAX; 3], [0u16; 3]);
     for l in a.leaves().iter().chain(b.leaves().iter()) {
@@ -109,7 +108,6 @@ fn agreement(a: &OcTree, b: &OcTree) -> (f64, usize) {
     }
     let state = |t: &OcTree, k: Key| t.search(k).map(|n| t.is_occupied(n));
     let same = keys.iter().filter(|&&k| state(a, k) == state(b, k)).count();
-    let _ = g;
     (same as f64 / keys.len() as f64, keys.len())
 }
 

@@ -108,21 +108,6 @@ impl Gpu {
         })
     }
 
-    /// Copy `len` floats of `buffer` back to the host (waits for the GPU).
-    pub fn download(&self, buffer: &wgpu::Buffer, len: usize) -> Result<Vec<f32>, GpuError> {
-        let size = (4 * len.max(1)) as u64;
-        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let mut enc = self.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
-        enc.copy_buffer_to_buffer(buffer, 0, &staging, 0, size);
-        self.queue.submit([enc.finish()]);
-        self.read_mapped(&staging, len)
-    }
-
     /// Map `staging` (a `MAP_READ` buffer the submitted work fills), wait, and read `len`
     /// little-endian words of `N` bytes.
     fn read_words<const N: usize>(&self, staging: &wgpu::Buffer, len: usize) -> Result<Vec<[u8; N]>, GpuError> {

@@ -22,7 +22,7 @@
 use std::collections::{HashMap, HashSet};
 use std::sync::{Arc, Mutex};
 
-use dynaflow_infer::cpu::{Tensor, eval_node, norm_axis, reshape_shape, slice_plan, strides};
+use dynaflow_infer::cpu::{Tensor, eval_node, norm_axis, pool_plan, reshape_shape, slice_plan, strides};
 use dynaflow_infer::onnx::{Model, Node};
 
 use crate::kernels::{Kernels, Kind, bind};
@@ -331,6 +331,26 @@ struct Dispatch {
     owner: String,
 }
 
+/// A `copy_block` dispatch for node `p`: `outer` blocks of `inner_src` values from `src` into
+/// `write`, blocks `inner_dst` apart, at `offset` within each.
+fn copy(
+    p: &Planned,
+    src: Region,
+    write: Region,
+    [outer, inner_src, inner_dst, offset]: [usize; 4],
+) -> Result<Dispatch, GpuError> {
+    Ok(Dispatch {
+        label: p.label.clone(),
+        kind: Kind::CopyBlock,
+        reads: vec![src],
+        weights: Vec::new(),
+        write,
+        words: u32s(&[outer, inner_src, inner_dst, offset])?,
+        grid: Grid::Flat(outer * inner_src),
+        owner: p.out.clone(),
+    })
+}
+
 /// The dispatches of a placed plan, and the concat statistics (in place, copied).
 fn dispatches(plan: &[Planned], at: &HashMap<String, Region>) -> Result<(Vec<Dispatch>, usize, usize), GpuError> {
     let get = |v: &str| at.get(v).copied().ok_or_else(|| GpuError::Shape(format!("value `{v}` has no region")));
@@ -353,16 +373,7 @@ fn dispatches(plan: &[Planned], at: &HashMap<String, Region>) -> Result<(Vec<Dis
                 let src = get(input)?;
                 if src != write {
                     let len = p.shape.iter().product();
-                    out.push(Dispatch {
-                        label: p.label.clone(),
-                        kind: Kind::CopyBlock,
-                        reads: vec![src],
-                        weights: Vec::new(),
-                        write,
-                        words: u32s(&[1, len, len, 0])?,
-                        grid: Grid::Flat(len),
-                        owner: p.out.clone(),
-                    });
+                    out.push(copy(p, src, write, [1, len, len, 0])?);
                 }
             }
             Lowered::Concat { parts, axis } => {
@@ -376,16 +387,7 @@ fn dispatches(plan: &[Planned], at: &HashMap<String, Region>) -> Result<(Vec<Dis
                         in_place += 1;
                     } else {
                         copied += 1;
-                        out.push(Dispatch {
-                            label: p.label.clone(),
-                            kind: Kind::CopyBlock,
-                            reads: vec![src],
-                            weights: Vec::new(),
-                            write,
-                            words: u32s(&[outer, inner_src, inner_dst, offset])?,
-                            grid: Grid::Flat(outer * inner_src),
-                            owner: p.out.clone(),
-                        });
+                        out.push(copy(p, src, write, [outer, inner_src, inner_dst, offset])?);
                     }
                     offset += inner_src;
                 }
@@ -883,21 +885,12 @@ fn lower(
         }
         "MaxPool" | "AveragePool" => {
             let (x, xs) = gpu_arg(0)?;
-            let k = attr("kernel_shape", vec![1, 1]);
-            let st = attr("strides", vec![1, 1]);
-            let p = attr("pads", vec![0; 4]);
-            if xs.len() != 4 || n.int("ceil_mode", 0) != 0 || k.len() != 2 || st.len() != 2 || p.len() != 4 {
-                return Err(GpuError::Shape("pooling on 4-D input without ceil_mode only".into()));
-            }
-            if k.iter().chain(&st).chain(&p).any(|&v| v < 0) {
+            if attr("pads", vec![]).iter().any(|&v| v < 0) {
                 return Err(GpuError::Shape("negative pooling attribute".into()));
             }
+            let plan = pool_plan(n, &xs).map_err(GpuError::Shape)?;
+            let ([kh, kw], [sh, sw], [pt, pl, _, _], [oh, ow]) = (plan.kernel, plan.strides, plan.pads, plan.out);
             let (h, w) = (xs[2], xs[3]);
-            let (kh, kw, sh, sw) = (k[0] as usize, k[1] as usize, st[0].max(1) as usize, st[1].max(1) as usize);
-            let (pt, pl, pb, pr) = (p[0] as usize, p[1] as usize, p[2] as usize, p[3] as usize);
-            let too_big = || GpuError::Shape("pool kernel too large".into());
-            let oh = (h + pt + pb).checked_sub(kh).ok_or_else(too_big)? / sh + 1;
-            let ow = (w + pl + pr).checked_sub(kw).ok_or_else(too_big)? / sw + 1;
             let planes = xs[0] * xs[1];
             let mode = match n.op_type.as_str() {
                 "MaxPool" => 0,

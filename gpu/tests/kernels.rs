@@ -3,22 +3,14 @@
 //! lavapipe in CI, which sets `DYNAFLOW_REQUIRE_GPU`).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
+mod common;
+
 use std::collections::BTreeMap;
 
+use common::gpu;
 use dynaflow_gpu::{ConvShape, Gpu, GpuModel, PlanStats};
 use dynaflow_infer::cpu::{Tensor, run};
 use dynaflow_infer::onnx::{Attribute, DataType, Model, Node, TensorData, ValueInfo};
-
-fn gpu() -> Option<Gpu> {
-    match Gpu::new() {
-        Ok(g) => Some(g),
-        Err(e) => {
-            assert!(std::env::var_os("DYNAFLOW_REQUIRE_GPU").is_none(), "GPU required: {e}");
-            eprintln!("note: {e}; skipping (CI runs it on lavapipe)");
-            None
-        }
-    }
-}
 
 /// Deterministic values in -1..1.
 fn values(n: usize, seed: u64) -> Vec<f32> {

@@ -1,9 +1,12 @@
 //! Whole models on the GPU against the reference executor, on real images.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
+mod common;
+
 use std::path::PathBuf;
 
-use dynaflow_gpu::{Gpu, GpuModel};
+use common::gpu;
+use dynaflow_gpu::GpuModel;
 use dynaflow_infer::cpu::{Tensor, run};
 use dynaflow_infer::detect::letterbox_bgr;
 use dynaflow_infer::onnx::load;
@@ -14,14 +17,7 @@ fn repo() -> PathBuf {
 
 #[test]
 fn yolox_nano_on_the_gpu_equals_the_reference_on_real_images() {
-    let gpu = match Gpu::new() {
-        Ok(g) => g,
-        Err(e) => {
-            assert!(std::env::var_os("DYNAFLOW_REQUIRE_GPU").is_none(), "GPU required: {e}");
-            eprintln!("note: {e}; skipping");
-            return;
-        }
-    };
+    let Some(gpu) = gpu() else { return };
     let model = load(&repo().join("models/yolox_nano/yolox_nano.onnx")).unwrap();
     let on_gpu = GpuModel::new(gpu, &model).unwrap();
     eprintln!("adapter: {}, plan: {:?}", on_gpu.adapter(), on_gpu.stats());
@@ -47,13 +43,7 @@ fn yolox_nano_on_the_gpu_equals_the_reference_on_real_images() {
 
 #[test]
 fn fastestdet_on_the_gpu_equals_the_reference_on_real_images() {
-    let gpu = match Gpu::new() {
-        Ok(g) => g,
-        Err(e) => {
-            assert!(std::env::var_os("DYNAFLOW_REQUIRE_GPU").is_none(), "GPU required: {e}");
-            return;
-        }
-    };
+    let Some(gpu) = gpu() else { return };
     let model = load(&repo().join("models/fastestdet/FastestDet.onnx")).unwrap();
     assert_eq!(GpuModel::unsupported(&model), None);
     let name = model.inputs[0].name.clone();

@@ -390,23 +390,46 @@ fn conv(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
     Ok(Tensor::F32 { shape: vec![nb, m, oh, ow], data: out })
 }
 
-fn pool(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
-    let (xs, x) = f32_arg(args, 0)?;
-    if xs.len() != 4 {
-        return Err(format!("pooling wants 4-D input, got {xs:?}"));
+/// Geometry of a 2-D pooling node (MaxPool, AveragePool) on an NCHW input: what the reference
+/// and the GPU executor both compute from the node's attributes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PoolPlan {
+    /// Kernel height and width.
+    pub kernel: [usize; 2],
+    /// Strides (y, x).
+    pub strides: [usize; 2],
+    /// Pads top, left, bottom, right (negative ones count as 0).
+    pub pads: [usize; 4],
+    /// Output height and width.
+    pub out: [usize; 2],
+}
+
+/// The [`PoolPlan`] of node `n` on an input of `shape`.
+pub fn pool_plan(n: &Node, shape: &[usize]) -> Result<PoolPlan, String> {
+    if shape.len() != 4 {
+        return Err(format!("pooling wants 4-D input, got {shape:?}"));
+    }
+    if n.int("ceil_mode", 0) != 0 {
+        return Err("ceil_mode pooling is not supported".into());
     }
     let k = n.ints("kernel_shape").ok_or("no kernel_shape")?.to_vec();
     let st = n.ints("strides").map_or(vec![1, 1], <[i64]>::to_vec);
     let p = pads_of(n, 2);
+    if k.len() != 2 || st.len() != 2 || p.len() != 4 || k.iter().chain(&st).any(|&v| v < 0) {
+        return Err(format!("pooling attributes kernel {k:?}, strides {st:?}, pads {p:?}"));
+    }
+    let (kh, kw, sh, sw) = (k[0] as usize, k[1] as usize, st[0].max(1) as usize, st[1].max(1) as usize);
+    let oh = (shape[2] + p[0] + p[2]).checked_sub(kh).ok_or("pool kernel larger than input")? / sh + 1;
+    let ow = (shape[3] + p[1] + p[3]).checked_sub(kw).ok_or("pool kernel larger than input")? / sw + 1;
+    Ok(PoolPlan { kernel: [kh, kw], strides: [sh, sw], pads: [p[0], p[1], p[2], p[3]], out: [oh, ow] })
+}
+
+fn pool(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
+    let (xs, x) = f32_arg(args, 0)?;
+    let PoolPlan { kernel: [kh, kw], strides: [sh, sw], pads: p, out: [oh, ow] } = pool_plan(n, xs)?;
     let max = n.op_type == "MaxPool";
     let count_pad = n.int("count_include_pad", 0) != 0;
     let (nb, c, h, w) = (xs[0], xs[1], xs[2], xs[3]);
-    let (kh, kw, sh, sw) = (k[0] as usize, k[1] as usize, st[0].max(1) as usize, st[1].max(1) as usize);
-    if n.int("ceil_mode", 0) != 0 {
-        return Err("ceil_mode pooling is not supported".into());
-    }
-    let oh = (h + p[0] + p[2]).checked_sub(kh).ok_or("pool kernel larger than input")? / sh + 1;
-    let ow = (w + p[1] + p[3]).checked_sub(kw).ok_or("pool kernel larger than input")? / sw + 1;
     let mut out = vec![0.0f32; nb * c * oh * ow];
     for bc in 0..nb * c {
         let xin = &x[bc * h * w..(bc + 1) * h * w];

@@ -190,30 +190,14 @@ impl Detector {
         Ok(Self { input_name: input.name.clone(), model, side, decoder })
     }
 
-    /// Detections in an RGB8 image (`width x height`), above `score`, after class-wise NMS at
-    /// `iou`, clipped to the image; the model run by the reference executor.
-    pub fn detect(
-        &self,
-        rgb: &[u8],
-        width: usize,
-        height: usize,
-        classes: usize,
-        score: f32,
-        iou: f32,
-    ) -> Result<Vec<Detection>, crate::cpu::RunError> {
-        let model = &self.model;
-        self.detect_with(rgb, width, height, classes, score, iou, |name, input| {
-            crate::cpu::run(model, &[(name, input)])
-        })
-    }
-
     /// The model.
     pub fn model(&self) -> &crate::onnx::Model {
         &self.model
     }
 
-    /// [`Detector::detect`] with the model run by `run` (input name, input tensor -> outputs),
-    /// e.g. on a GPU.
+    /// Detections in an RGB8 image (`width x height`), above `score`, after class-wise NMS at
+    /// `iou`, clipped to the image; the model run by `run` (input name, input tensor ->
+    /// outputs): rten, the reference executor or a GPU.
     #[allow(clippy::too_many_arguments)]
     pub fn detect_with<E>(
         &self,

@@ -158,16 +158,22 @@ pub enum RayHit {
     Free,
 }
 
-/// The labels of one voxel's points in one scan: colour sum, count, class votes (the first
-/// four classes seen; more in one voxel of one scan is noise).
-#[derive(Clone, Copy, Default)]
-struct Votes {
+/// Labels pooled into one: colour sum, count, votes for the first `N` distinct classes seen
+/// (a voxel's points in one scan: 4, more is noise; a pruned node's children: 8).
+#[derive(Clone, Copy)]
+struct Votes<const N: usize> {
     sum: [u32; 3],
     n: u32,
-    classes: [(u16, u32); 4],
+    classes: [(u16, u32); N],
 }
 
-impl Votes {
+impl<const N: usize> Default for Votes<N> {
+    fn default() -> Self {
+        Self { sum: [0; 3], n: 0, classes: [(0, 0); N] }
+    }
+}
+
+impl<const N: usize> Votes<N> {
     fn add(&mut self, l: &Label) {
         for c in 0..3 {
             self.sum[c] += u32::from(l.color[c]);
@@ -288,7 +294,7 @@ impl KeyDedup {
 struct Scratch {
     free: KeyDedup,
     occupied: KeyDedup,
-    labels: std::collections::HashMap<u64, Votes, BuildHasherDefault<KeyHasher>>,
+    labels: std::collections::HashMap<u64, Votes<4>, BuildHasherDefault<KeyHasher>>,
     changes: Vec<(Key, bool)>,
 }
 
@@ -537,22 +543,12 @@ impl OcTree {
         merged.children = NONE;
         merged.flags |= EXISTS;
         if self.semantic && first.color_set() {
-            let (mut sum, mut k) = ([0u32; 3], 0u32);
-            let mut votes: [(u16, u32); 8] = [(0, 0); 8];
+            let mut votes = Votes::<8>::default();
             for c in kids.iter().filter(|c| c.color_set()) {
-                for (s, v) in sum.iter_mut().zip(c.color) {
-                    *s += u32::from(v);
-                }
-                k += 1;
-                if let Some(v) = votes.iter_mut().find(|v| v.1 > 0 && v.0 == c.class) {
-                    v.1 += 1;
-                } else if let Some(v) = votes.iter_mut().find(|v| v.1 == 0) {
-                    *v = (c.class, 1);
-                }
+                votes.add(&Label { color: c.color, class: c.class });
             }
-            merged.color = [(sum[0] / k) as u8, (sum[1] / k) as u8, (sum[2] / k) as u8];
-            merged.class =
-                votes.iter().filter(|v| v.1 > 0).max_by(|a, b| a.1.cmp(&b.1).then(b.0.cmp(&a.0))).map_or(0, |v| v.0);
+            let Label { color, class } = votes.label();
+            (merged.color, merged.class) = (color, class);
         }
         *self.node_mut(at) = merged;
         self.free_blocks.push(b);
@@ -611,7 +607,7 @@ impl OcTree {
         }
         for &m in &s.occupied.list {
             let k = unmorton(m);
-            if let Some(now) = self.update(k, true, s.labels.get(&k.packed()).map(Votes::label)) {
+            if let Some(now) = self.update(k, true, s.labels.get(&k.packed()).map(Votes::<4>::label)) {
                 s.changes.push((k, now));
             }
         }

@@ -40,16 +40,14 @@ impl Runner {
                 Ok((Runner::Reference(model.clone()), "reference".into()))
             }
             "wgpu" => {
-                let why = match (GpuModel::unsupported(model), Gpu::new()) {
-                    (None, Ok(gpu)) => match GpuModel::new(gpu, model) {
-                        Ok(m) => {
-                            let name = format!("wgpu: {}", m.adapter());
-                            return Ok((Runner::Gpu(Box::new(m)), name));
-                        }
-                        Err(e) => e.to_string(),
-                    },
-                    (Some(op), _) => op,
-                    (None, Err(e)) => e.to_string(),
+                // Planning names an op without a kernel (with its node) and any shape it
+                // cannot take; without an adapter there is nothing to plan on.
+                let why = match Gpu::new().and_then(|gpu| GpuModel::new(gpu, model)) {
+                    Ok(m) => {
+                        let name = format!("wgpu: {}", m.adapter());
+                        return Ok((Runner::Gpu(Box::new(m)), name));
+                    }
+                    Err(e) => e.to_string(),
                 };
                 tracing::warn!("backend `wgpu` unavailable ({why}); running on the CPU");
                 let m = RtenModel::load(bytes.to_vec())?;
