@@ -195,6 +195,7 @@ fn lk_recovers_ground_truth_flow_on_the_synthetic_scene() {
         assert!(err.len() * 10 >= pts.len() * 9, "frame {frame}: {} of {} tracked", err.len(), pts.len());
         err.sort_by(f32::total_cmp);
         let median = err[err.len() / 2];
+        eprintln!("frame {frame}: {} of {} points tracked, median endpoint error {median:.3} px", err.len(), pts.len());
         assert!(median <= 0.1, "frame {frame}: median endpoint error {median} px");
     }
 }

@@ -134,32 +134,44 @@ pub fn run(args: &RunArgs) -> u8 {
     };
     say!("{}", report.table());
     let mut summary = serde_json::to_value(&report).unwrap_or_default();
-    // Trackers with ground truth report their ATE: print it, and lift the first to the top.
-    let mut first_ate = None;
+    // Trackers with ground truth report their ATE: print each (the first in graph order is
+    // the reference the others are compared with, as a baseline is), lift the first to the
+    // top of the summary and keep all under `trackers`.
+    let mut trackers = serde_json::Map::new();
+    let mut reference: Option<(String, f64)> = None;
     for n in &report.nodes {
-        if let Some(ate) = n.report.as_ref().and_then(|r| r.get("ate")) {
-            let f = |k: &str| ate.get(k).and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
-            say!(
-                "ATE of `{}` ({} poses, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m",
-                n.node,
-                ate.get("pairs").and_then(serde_json::Value::as_u64).unwrap_or(0),
-                ate.get("align").and_then(serde_json::Value::as_str).unwrap_or("se3"),
-                f("rmse"),
-                f("mean"),
-                f("median"),
-                f("std")
-            );
-            if first_ate.is_none() {
-                let mut a = ate.clone();
-                if let Some(o) = a.as_object_mut() {
-                    o.insert("node".into(), serde_json::Value::from(n.node.clone()));
-                }
-                first_ate = Some(a);
+        let Some(ate) = n.report.as_ref().and_then(|r| r.get("ate")) else { continue };
+        let f = |k: &str| ate.get(k).and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
+        let versus = match &reference {
+            Some((name, r)) if *r > 0.0 => format!(" ({:+.1} % vs `{name}`)", 100.0 * (f("rmse") / r - 1.0)),
+            _ => String::new(),
+        };
+        say!(
+            "ATE of `{}` ({} poses, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m{versus}",
+            n.node,
+            ate.get("pairs").and_then(serde_json::Value::as_u64).unwrap_or(0),
+            ate.get("align").and_then(serde_json::Value::as_str).unwrap_or("se3"),
+            f("rmse"),
+            f("mean"),
+            f("median"),
+            f("std")
+        );
+        if reference.is_none() {
+            reference = Some((n.node.clone(), f("rmse")));
+            let mut a = ate.clone();
+            if let Some(o) = a.as_object_mut() {
+                o.insert("node".into(), serde_json::Value::from(n.node.clone()));
+            }
+            if let Some(obj) = summary.as_object_mut() {
+                obj.insert("ate".into(), a);
             }
         }
+        trackers.insert(n.node.clone(), ate.clone());
     }
-    if let (Some(a), Some(obj)) = (first_ate, summary.as_object_mut()) {
-        obj.insert("ate".into(), a);
+    if !trackers.is_empty()
+        && let Some(obj) = summary.as_object_mut()
+    {
+        obj.insert("trackers".into(), serde_json::Value::Object(trackers));
     }
     if args.digest
         && let Some(obj) = summary.as_object_mut()

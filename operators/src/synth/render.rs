@@ -173,8 +173,9 @@ pub fn render(
     out
 }
 
-/// What one ray sees: distance, surface colour, normal, what it hit.
-type Seen = (f64, [f32; 3], Vector3<f64>, Kind, Hit);
+/// What one ray sees: distance, surface colour, normal, what it hit, and whether the texture
+/// there has hard colour edges (procedural tiles; photos are bilinear, so smooth).
+type Seen = (f64, [f32; 3], Vector3<f64>, Kind, Hit, bool);
 
 /// The fixed parts of a frame's rays.
 struct Rays<'a> {
@@ -248,8 +249,10 @@ impl Rays<'_> {
                     1 => (2.0 * o.part.half.x, 2.0 * o.part.half.z),
                     _ => (2.0 * o.part.half.x, 2.0 * o.part.half.y),
                 };
-                let colour = o.part.texture.sample_face(axis, a as f32, b as f32, sa as f32, sb as f32);
-                (t, colour, nw, o.part.kind, hit)
+                let tex = &o.part.texture;
+                let cos = (o.cam_from_part_rot * n).dot(&d).abs() / d.norm();
+                let colour = tex.sample_face(axis, a as f32, b as f32, sa as f32, sb as f32, footprint(t, &d, cos, k));
+                (t, colour, nw, o.part.kind, hit, tex.hard_edges(axis))
             }
             _ => {
                 let pw = origin + dw * t_room;
@@ -264,14 +267,21 @@ impl Rays<'_> {
                 n[axis] = if face % 2 == 0 { 1.0 } else { -1.0 };
                 (
                     t_room,
-                    tex.sample(a as f32, b as f32),
+                    tex.sample(a as f32, b as f32, footprint(t_room, &d, n.dot(&dw).abs() / dw.norm(), k)),
                     n,
                     Kind::Static,
                     Hit { part: u32::MAX, point: [pw.x as f32, pw.y as f32, pw.z as f32] },
+                    tex.hard_edges(axis),
                 )
             }
         }
     }
+}
+
+/// Metres of a surface one pixel covers: the ray's length over the focal length, stretched by
+/// the incidence (capped at 4x, where a grazing surface is blurred anyway).
+fn footprint(t: f64, d: &Vector3<f64>, cos: f64, k: &Intrinsics) -> f32 {
+    (t * d.norm() / (k.fx.min(k.fy) * cos.max(0.25))) as f32
 }
 
 /// Lit colour of what a ray saw.
@@ -280,10 +290,19 @@ fn lit(seen: &Seen) -> [f32; 3] {
     shade_linear(seen.1, 0.7 + 0.3 * seen.2.dot(&light).abs() as f32)
 }
 
-/// A pixel needs sub-samples when its centre colour differs from a neighbour's by more than
-/// this (four grey levels, twice the sensor noise): it straddles an edge. Flat areas keep
-/// their one ray.
+/// On a texture with hard edges, a pixel needs sub-samples when its centre colour differs
+/// from a neighbour's by more than this (four grey levels, twice the sensor noise).
 const EDGE_CONTRAST: f32 = 4.0 / 255.0;
+
+/// Whether a pixel and its neighbour straddle an edge its sub-samples must integrate: a
+/// geometric one (another object or face, a depth step of more than 2 %), or a colour step on
+/// a texture with hard edges. Photo textures are sampled bilinearly, so their colour moves
+/// smoothly under sub-pixel motion without sub-samples (and would otherwise mark nearly every
+/// pixel an edge).
+fn straddles(a: &Seen, a_lit: &[f32; 3], b: &Seen, b_lit: &[f32; 3]) -> bool {
+    let geometric = a.3 != b.3 || a.2.dot(&b.2) < 0.999 || (a.0 - b.0).abs() > 0.02 * a.0.min(b.0);
+    geometric || ((a.5 || b.5) && (0..3).any(|i| (a_lit[i] - b_lit[i]).abs() > EDGE_CONTRAST))
+}
 
 #[allow(clippy::too_many_arguments)]
 fn render_rows(
@@ -309,24 +328,31 @@ fn render_rows(
         (0..w).map(|u| rays.trace(&c, u as f64, v as f64)).collect()
     };
     let rows = depth.len() / w.max(1);
-    let mut above: Option<Vec<[f32; 3]>> = (v0 > 0).then(|| centre_row(v0 - 1).iter().map(lit).collect());
+    let lit_row = |r: &[Seen]| -> Vec<[f32; 3]> { r.iter().map(lit).collect() };
+    let mut above: Option<(Vec<Seen>, Vec<[f32; 3]>)> = (v0 > 0).then(|| {
+        let r = centre_row(v0 - 1);
+        let l = lit_row(&r);
+        (r, l)
+    });
     let mut current = centre_row(v0);
     for (row, depth_row) in depth.chunks_mut(w).enumerate() {
         let v = v0 + row;
         let below: Option<Vec<Seen>> = (v + 1 < h).then(|| centre_row(v + 1));
-        let cur_lit: Vec<[f32; 3]> = current.iter().map(lit).collect();
-        let below_lit: Option<Vec<[f32; 3]>> = below.as_ref().map(|b| b.iter().map(lit).collect());
+        let cur_lit = lit_row(&current);
+        let below_lit: Option<Vec<[f32; 3]>> = below.as_deref().map(lit_row);
         let candidates = rays.candidates(v);
         for (u, depth_px) in depth_row.iter_mut().enumerate() {
             let idx = row * w + u;
             let Some(seen) = current.get(u) else { continue };
             let centre = cur_lit[u];
-            let differs =
-                |c: Option<&[f32; 3]>| c.is_some_and(|c| (0..3).any(|i| (c[i] - centre[i]).abs() > EDGE_CONTRAST));
-            let edge = differs(u.checked_sub(1).and_then(|l| cur_lit.get(l)))
-                || differs(cur_lit.get(u + 1))
-                || differs(above.as_ref().and_then(|a| a.get(u)))
-                || differs(below_lit.as_ref().and_then(|b| b.get(u)));
+            let differs = |r: &[Seen], l: &[[f32; 3]], i: usize| match (r.get(i), l.get(i)) {
+                (Some(n), Some(nl)) => straddles(seen, &centre, n, nl),
+                _ => false,
+            };
+            let edge = u.checked_sub(1).is_some_and(|l| differs(&current, &cur_lit, l))
+                || differs(&current, &cur_lit, u + 1)
+                || above.as_ref().is_some_and(|(r, l)| differs(r, l, u))
+                || below.as_deref().zip(below_lit.as_deref()).is_some_and(|(r, l)| differs(r, l, u));
             // On an edge the colour integrates over the pixel like a real sensor:
             // SUPERSAMPLE^2 rays on a stratified grid (the centre one reused). Point sampling
             // would snap edges to whole pixels and hide sub-pixel motion from optical flow.
@@ -345,7 +371,7 @@ fn render_rows(
             if let Some(dst) = rgb.get_mut(idx * 3..idx * 3 + 3) {
                 dst.copy_from_slice(&px);
             }
-            let (t, _, _, kind, hit) = *seen;
+            let (t, _, _, kind, hit, _) = *seen;
             *depth_px = t as f32;
             if let Kind::Person(i) = kind {
                 if let Some(c) = class.get_mut(idx) {
@@ -359,9 +385,11 @@ fn render_rows(
                 *hh = hit;
             }
         }
-        above = Some(cur_lit);
         match below {
-            Some(b) if row + 1 < rows => current = b,
+            Some(b) if row + 1 < rows => {
+                let prev = std::mem::replace(&mut current, b);
+                above = Some((prev, cur_lit));
+            }
             _ => break,
         }
     }

@@ -3,7 +3,7 @@
 
 use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
-use super::texture::{PhotoCrop, Texture, hash};
+use super::texture::{PhotoCrop, Surface, Texture, hash};
 
 /// Room extent: `x ∈ [-W, W]`, `y ∈ [-D, D]`, `z ∈ [0, H]` (z up), metres.
 pub const ROOM_HALF_WIDTH: f64 = 3.0;
@@ -71,20 +71,23 @@ impl Scene {
     /// A room with `people` people, deterministic by `seed`.
     pub fn new(seed: u64, people: usize, mode: PeopleMode) -> Self {
         let s = hash((seed ^ (seed >> 32)) as u32 ^ 0x5eed);
-        let tex = |i: u32, base: [f32; 3], tile: f32, contrast: f32| Texture {
+        // Photographed surfaces, tinted: `tile` is the metres one photo edge covers (the brick
+        // photo shows 13 courses of bricks, 1.6 m with 12 cm courses; gravel stones of 1-3 cm).
+        let tex = |i: u32, base: [f32; 3], surface: Surface, tile: f32, contrast: f32| Texture {
             base,
             tile,
             seed: hash(s ^ i),
             contrast,
             photo: None,
+            surface: Some(surface),
         };
         let walls = [
-            tex(1, [0.75, 0.72, 0.65], 0.45, 0.9), // x-
-            tex(2, [0.65, 0.72, 0.78], 0.45, 0.9), // x+
-            tex(3, [0.78, 0.70, 0.60], 0.40, 0.9), // y-
-            tex(4, [0.70, 0.75, 0.68], 0.40, 0.9), // y+ (facing the camera)
-            tex(5, [0.55, 0.45, 0.35], 0.50, 0.7), // floor
-            tex(6, [0.90, 0.90, 0.88], 0.60, 0.4), // ceiling
+            tex(1, [0.75, 0.72, 0.65], Surface::Brick, 1.6, 1.0),  // x-
+            tex(2, [0.65, 0.72, 0.78], Surface::Brick, 1.6, 1.0),  // x+
+            tex(3, [0.78, 0.70, 0.60], Surface::Brick, 1.6, 1.0),  // y-
+            tex(4, [0.70, 0.75, 0.68], Surface::Brick, 1.6, 1.0),  // y+ (facing the camera)
+            tex(5, [0.55, 0.45, 0.35], Surface::Gravel, 1.0, 0.9), // floor
+            tex(6, [0.90, 0.90, 0.88], Surface::Gravel, 2.0, 0.3), // ceiling
         ];
         let mut statics = Vec::new();
         // Furniture along the walls: cabinets, shelves, a table.
@@ -104,7 +107,13 @@ impl Scene {
             statics.push(Part {
                 world_from_part: Isometry3::translation(x, y, z),
                 half: Vector3::new(sx, sy, sz),
-                texture: tex(200 + i, colour, 0.12 + 0.1 * unit(h >> 17) as f32, 1.0),
+                texture: tex(
+                    200 + i,
+                    colour,
+                    [Surface::Grass, Surface::Gravel, Surface::Brick][(h >> 23) as usize % 3],
+                    0.5 + 0.4 * unit(h >> 17) as f32,
+                    1.0,
+                ),
                 kind: Kind::Static,
             });
         }
@@ -128,13 +137,21 @@ impl Scene {
                     heading,
                     speed,
                     phase: unit(h >> 11) * std::f64::consts::TAU,
-                    clothes: Texture { base: colour, tile: 0.09, seed: hash(h), contrast: 1.0, photo: None },
+                    clothes: Texture {
+                        base: colour,
+                        tile: 0.09,
+                        seed: hash(h),
+                        contrast: 1.0,
+                        photo: None,
+                        surface: None,
+                    },
                     skin: Texture {
                         base: [0.85, 0.68, 0.55],
                         tile: 0.05,
                         seed: hash(h ^ 7),
                         contrast: 0.5,
                         photo: None,
+                        surface: None,
                     },
                     height: 1.65 + 0.2 * unit(h >> 19),
                 }

@@ -26,6 +26,7 @@ struct Config {
     max_depth: f64,
     ransac_threshold: f64,
     reset_after: u64,
+    label_radius: f64,
 }
 
 const fn float(name: &'static str, min: f64, max: f64, default: f64, doc: &'static str) -> ParamSpec {
@@ -35,7 +36,7 @@ const fn float(name: &'static str, min: f64, max: f64, default: f64, doc: &'stat
 pub const PNP_TRACK: OpSpec = OpSpec {
     name: "pnp_track",
     family: "pnp_ba",
-    doc: "ORB-SLAM-style RGB-D tracking against the local map: map points projected with a constant-velocity prediction are matched to the keypoints in a search radius (Hamming distance, ratio test), refined by motion-only BA (LM on SE(3), pixels plus depth as ORB-SLAM2's virtual right coordinate, Huber, four re-classification rounds); when too few survive, descriptor matching against the local map and P3P RANSAC relocalise. Dynamic keypoints (on `mask` pixels, or near a track `labels` marks dynamic) never reach the solver. Lost frames follow the motion model; after `reset_after` of them a new map starts at the dead-reckoned pose. Key frames (ORB-SLAM2's rules) go to `local_map`, whose refined map comes back on `map`. Writes `<out>/<graph>[-<variant>].<node>.trajectory.txt` (TUM format) and, with `gt_pose`, puts the ATE (SE(3)-aligned) in the summary.",
+    doc: "ORB-SLAM-style RGB-D tracking against the local map: map points projected with a constant-velocity prediction are matched to the keypoints in a search radius (Hamming distance, ratio test), refined by motion-only BA (LM on SE(3), pixels plus depth as ORB-SLAM2's virtual right coordinate, Huber, four re-classification rounds); when too few survive, descriptor matching against the local map and P3P RANSAC relocalise. Dynamic keypoints (on `mask` pixels, or whose nearest labelled track within `label_radius` is marked dynamic) never reach the solver. Lost frames follow the motion model; after `reset_after` of them a new map starts at the dead-reckoned pose. Key frames (ORB-SLAM2's rules) go to `local_map`, whose refined map comes back on `map`. Writes `<out>/<graph>[-<variant>].<node>.trajectory.txt` (TUM format) and, with `gt_pose`, puts the ATE (SE(3)-aligned) in the summary.",
     kind: OpKind::Transform,
     inputs: &[
         PortSpec::input("keypoints", PortType::Keypoints, "this frame's ORB keypoints with descriptors"),
@@ -47,7 +48,7 @@ pub const PNP_TRACK: OpSpec = OpSpec {
         PortSpec::optional(
             "tracks",
             PortType::Tracks,
-            "the tracks `labels` index (keypoints within 2 px of a dynamic one are left out)",
+            "the tracks `labels` index (a keypoint whose nearest labelled track within `label_radius` is dynamic is left out)",
         ),
         PortSpec::optional("gt_pose", PortType::Pose, "ground truth, for the ATE in the summary"),
     ],
@@ -106,6 +107,13 @@ pub const PNP_TRACK: OpSpec = OpSpec {
             default: Default::Int(5),
             doc: "lost frames in a row before a new map starts",
         },
+        float(
+            "label_radius",
+            0.0,
+            100.0,
+            10.0,
+            "a keypoint takes the culling label of the nearest labelled track within this many pixels (dynamic: left out); 10 = `lk_flow`'s `min_distance`, the spacing of the tracked corners, so a label speaks for its neighbourhood as a segment would; 0: only keypoints on a track",
+        ),
     ],
     cpu_heavy: true,
     build: |p: &Params| {
@@ -131,8 +139,45 @@ struct PnpTrack {
     last_map: Option<Arc<Message>>,
 }
 
+/// Nearest-neighbour label transfer: each point whose nearest labelled track lies within
+/// `radius` px (or exactly on it, for radius 0) is marked dynamic when that track is. Tracks
+/// are bucketed in a grid of `radius`-sized cells, so only nine cells are searched.
+fn transfer_labels(labelled: &[([f32; 2], bool)], points: &[[f32; 2]], radius: f32, dynamic: &mut [bool]) {
+    if labelled.is_empty() || !labelled.iter().any(|l| l.1) {
+        return;
+    }
+    let cell = radius.max(1.0);
+    let key = |p: [f32; 2]| ((p[0] / cell).floor() as i64, (p[1] / cell).floor() as i64);
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = std::collections::HashMap::new();
+    for (i, (p, _)) in labelled.iter().enumerate() {
+        if p[0].is_finite() && p[1].is_finite() {
+            grid.entry(key(*p)).or_default().push(i);
+        }
+    }
+    let r2 = radius * radius;
+    for (d, p) in dynamic.iter_mut().zip(points) {
+        let (cx, cy) = key(*p);
+        let mut best: Option<(f32, usize)> = None;
+        for gy in cy - 1..=cy + 1 {
+            for gx in cx - 1..=cx + 1 {
+                for &i in grid.get(&(gx, gy)).map_or(&[][..], Vec::as_slice) {
+                    let q = labelled[i].0;
+                    let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+                    // Ties keep the first found (a fixed cell order): deterministic.
+                    if d2 <= r2 && best.is_none_or(|(b, _)| d2 < b) {
+                        best = Some((d2, i));
+                    }
+                }
+            }
+        }
+        if let Some((_, i)) = best {
+            *d |= labelled[i].1;
+        }
+    }
+}
+
 /// Per keypoint: left out as dynamic?
-fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]]) -> Vec<bool> {
+fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]], label_radius: f32) -> Vec<bool> {
     let mut dynamic = vec![false; points.len()];
     if let Some(Body::Mask(m)) = inputs.get("mask").map(|m| &m.body) {
         for (d, p) in dynamic.iter_mut().zip(points) {
@@ -145,14 +190,12 @@ fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]]) -> Vec<bool> {
     if let (Some(Body::PointLabels(l)), Some(Body::Tracks(t))) =
         (inputs.get("labels").map(|m| &m.body), inputs.get("tracks").map(|m| &m.body))
     {
-        for lab in l.labels.iter().filter(|l| l.dynamic) {
-            let Some(tr) = t.tracks.get(lab.index as usize) else { continue };
-            for (d, p) in dynamic.iter_mut().zip(points) {
-                if (p[0] - tr.cur[0]).powi(2) + (p[1] - tr.cur[1]).powi(2) <= 4.0 {
-                    *d = true;
-                }
-            }
-        }
+        let labelled: Vec<([f32; 2], bool)> = l
+            .labels
+            .iter()
+            .filter_map(|lab| t.tracks.get(lab.index as usize).map(|tr| (tr.cur, lab.dynamic)))
+            .collect();
+        transfer_labels(&labelled, points, label_radius, &mut dynamic);
     }
     dynamic
 }
@@ -198,7 +241,7 @@ impl Operator for PnpTrack {
             self.last_map = Some(m.clone());
         }
         let uv: Vec<[f32; 2]> = kp.points.iter().map(|p| [p.x, p.y]).collect();
-        let dynamic = dynamic_keypoints(inputs, &uv);
+        let dynamic = dynamic_keypoints(inputs, &uv, self.config.label_radius as f32);
         let features: Vec<Feature> = kp
             .points
             .iter()
@@ -294,5 +337,29 @@ impl PnpTrack {
             f.flush().map_err(io)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::transfer_labels;
+
+    #[test]
+    fn keypoints_take_the_label_of_the_nearest_track_within_the_radius() {
+        // A dynamic track at (10, 10), a static one at (30, 10).
+        let labelled = [([10.0, 10.0], true), ([30.0, 10.0], false)];
+        let points = [[10.0, 10.0], [17.0, 10.0], [22.0, 10.0], [10.0, 25.0], [100.0, 100.0]];
+        let mut dynamic = vec![false; points.len()];
+        transfer_labels(&labelled, &points, 10.0, &mut dynamic);
+        // On the track; nearer the dynamic one; nearer the static one; 15 px away; far away.
+        assert_eq!(dynamic, [true, true, false, false, false]);
+        // Radius 0: only a keypoint exactly on a dynamic track.
+        let mut dynamic = vec![false; points.len()];
+        transfer_labels(&labelled, &points, 0.0, &mut dynamic);
+        assert_eq!(dynamic, [true, false, false, false, false]);
+        // A mask's verdict is never undone by a static track.
+        let mut dynamic = vec![true; points.len()];
+        transfer_labels(&labelled, &points, 10.0, &mut dynamic);
+        assert!(dynamic.iter().all(|&d| d));
     }
 }
