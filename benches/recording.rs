@@ -1,4 +1,5 @@
-//! Recording cost: the default graph (synthetic scene, 640×480) with recording off and with
+//! Recording cost: the default graph (synthetic scene 640×480, MG-SLAM and the baseline) with
+//! recording off and with
 //! the rerun + MCAP recorders on, side by side in one process; prints the time ratio and the
 //! bytes per frame of each file.
 //!
@@ -41,7 +42,7 @@ fn main() {
     let size = |f: &str| std::fs::metadata(out.join(f)).map_or(0, |m| m.len()) as f64 / frames as f64;
     let (a, b) = (best(&off), best(&on));
     println!(
-        "recording cost, default graph (synth 640x480 rgb+depth+mask+pose, mask_stats), {frames} frames, best of 2"
+        "recording cost, default graph (synth 640x480, MG-SLAM S+G next to the ORB-SLAM2-style baseline), {frames} frames, best of 2"
     );
     println!("  recording off : {a:7.2} s  {:6.1} frames/s", frames as f64 / a);
     println!("  rrd + mcap on : {b:7.2} s  {:6.1} frames/s", frames as f64 / b);

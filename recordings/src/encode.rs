@@ -105,6 +105,12 @@ impl EncodeCache {
         Self { inner: std::sync::Arc::default(), users }
     }
 
+    /// Encodings waiting for a user that has not taken them yet (0 once every recorder has
+    /// taken every encoding).
+    pub fn pending(&self) -> usize {
+        self.inner.lock().unwrap_or_else(std::sync::PoisonError::into_inner).entries.len()
+    }
+
     /// The encoding of `msg` (kind `kind`), computed by `encode` by the first user to ask.
     pub fn get_or_encode(
         &self,

@@ -40,7 +40,15 @@ pub struct RrdSink {
     /// Positions of each pose stream so far, drawn as a path.
     trails: HashMap<String, Vec<[f32; 3]>>,
     cache: EncodeCache,
+    /// Bytes logged since the last flush (an estimate: the payloads).
+    pending: usize,
 }
+
+/// The rerun SDK queues logged data for its file writer without bound; when the writer
+/// (Arrow encoding + LZ4) falls behind the graph, memory grows with the run. Waiting for it
+/// after this many payload bytes bounds the queue (the recorder thread waits, not the graph:
+/// the engine's bounded recorder queue stands between them).
+const FLUSH_BYTES: usize = 4 << 20;
 
 /// A pose stream's path is re-logged every this many poses (each log carries the whole path).
 const TRAIL_EVERY: usize = 10;
@@ -56,6 +64,7 @@ impl RrdSink {
             points_by_seq: HashMap::new(),
             trails: HashMap::new(),
             cache: EncodeCache::default(),
+            pending: 0,
         }
     }
 
@@ -136,6 +145,16 @@ fn class_color(id: u16) -> rerun::Color {
     rerun::Color::from_rgb(r, g, b)
 }
 
+/// Rough size of what logging `body` hands the SDK (pixels dominate).
+fn payload_bytes(body: &Body) -> usize {
+    match body {
+        Body::Image(i) => i.data.len(),
+        Body::Depth(d) => d.data.len() * 2,
+        Body::Mask(m) => m.classes.len() * 2,
+        _ => 4096,
+    }
+}
+
 impl Sink for RrdSink {
     fn name(&self) -> &str {
         "rerun"
@@ -209,10 +228,12 @@ impl Sink for RrdSink {
             }
             Body::Depth(d) => {
                 // 16-bit PNG in millimetres: lossless at the sensor's resolution, ~10x smaller than f32.
-                let e = encode::depth_png_mm(d).map_err(|e| self.err(e))?;
+                // Through the shared cache (kind 1, as the MCAP recorder): encoded once, and an
+                // entry every user takes is freed at once instead of waiting for eviction.
+                let e = self.cache.get_or_encode(msg, 1, || encode::depth_png_mm(d)).map_err(|e| self.err(e))?;
                 rec.log(
                     path,
-                    &rerun::EncodedDepthImage::from_file_contents(e.bytes)
+                    &rerun::EncodedDepthImage::from_file_contents(e.bytes.clone())
                         .with_media_type(rerun::MediaType::png())
                         .with_meter(1000.0),
                 )
@@ -348,6 +369,11 @@ impl Sink for RrdSink {
             }
             _ => Ok(()),
         };
+        self.pending += payload_bytes(&msg.body);
+        if self.pending >= FLUSH_BYTES {
+            self.pending = 0;
+            rec.flush_blocking().map_err(|e| self.err(e))?;
+        }
         // Bound the label lookup table: frames older than a few hundred are never labelled.
         if self.points_by_seq.len() > 256 {
             let newest = msg.header.seq;
@@ -361,5 +387,58 @@ impl Sink for RrdSink {
         rec.flush_blocking().map_err(|e| self.err(e))?;
         drop(rec);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+    use std::sync::Arc;
+
+    use dynaflow_engine::msg::{Body, DepthImage, Header, Image, Message, PixelFormat};
+    use dynaflow_engine::sink::{RunInfo, Sink};
+
+    use super::RrdSink;
+    use crate::{EncodeCache, McapSink};
+
+    #[test]
+    fn both_recorders_take_each_shared_encoding_so_none_stays_pinned() {
+        let dir = std::env::temp_dir().join(format!("dynaflow-rrd-cache-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let info = RunInfo {
+            graph: "t".into(),
+            variant: None,
+            seed: 0,
+            graph_yaml: String::new(),
+            params: BTreeMap::new(),
+            version: String::new(),
+            git_commit: String::new(),
+            realtime: false,
+            ports: BTreeMap::new(),
+        };
+        let cache = EncodeCache::new(2);
+        let mut rrd = RrdSink::new(dir.join("t.rrd")).with_cache(cache.clone());
+        let mut mcap = McapSink::new(dir.join("t.mcap")).with_cache(cache.clone());
+        rrd.open(&info).unwrap();
+        mcap.open(&info).unwrap();
+        for seq in 0..3 {
+            let header = Header { seq, stamp: seq as f64 / 30.0, frame_id: Arc::from("camera") };
+            let depth = Arc::new(Message::new(
+                header.clone(),
+                Body::Depth(DepthImage { width: 4, height: 2, data: vec![1.25; 8] }),
+            ));
+            let rgb = Arc::new(Message::new(
+                header,
+                Body::Image(Image { width: 4, height: 2, format: PixelFormat::Rgb8, data: vec![90; 24] }),
+            ));
+            for m in [&depth, &rgb] {
+                rrd.record("camera", "x", m).unwrap();
+                mcap.record("camera", "x", m).unwrap();
+            }
+        }
+        assert_eq!(cache.pending(), 0, "an encoding one recorder made was never taken by the other");
+        rrd.close().unwrap();
+        mcap.close().unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
