@@ -328,31 +328,29 @@ fn render_rows(
         (0..w).map(|u| rays.trace(&c, u as f64, v as f64)).collect()
     };
     let rows = depth.len() / w.max(1);
-    let lit_row = |r: &[Seen]| -> Vec<[f32; 3]> { r.iter().map(lit).collect() };
-    let mut above: Option<(Vec<Seen>, Vec<[f32; 3]>)> = (v0 > 0).then(|| {
-        let r = centre_row(v0 - 1);
-        let l = lit_row(&r);
-        (r, l)
-    });
-    let mut current = centre_row(v0);
+    // A row's centre rays with their lit colours, each traced and lit once.
+    let traced_row = |v: usize| -> (Vec<Seen>, Vec<[f32; 3]>) {
+        let seen = centre_row(v);
+        let lit = seen.iter().map(lit).collect();
+        (seen, lit)
+    };
+    let mut above = (v0 > 0).then(|| traced_row(v0 - 1));
+    let mut current = traced_row(v0);
     for (row, depth_row) in depth.chunks_mut(w).enumerate() {
         let v = v0 + row;
-        let below: Option<Vec<Seen>> = (v + 1 < h).then(|| centre_row(v + 1));
-        let cur_lit = lit_row(&current);
-        let below_lit: Option<Vec<[f32; 3]>> = below.as_deref().map(lit_row);
+        let below = (v + 1 < h).then(|| traced_row(v + 1));
         let candidates = rays.candidates(v);
         for (u, depth_px) in depth_row.iter_mut().enumerate() {
             let idx = row * w + u;
-            let Some(seen) = current.get(u) else { continue };
-            let centre = cur_lit[u];
-            let differs = |r: &[Seen], l: &[[f32; 3]], i: usize| match (r.get(i), l.get(i)) {
+            let (Some(seen), Some(&centre)) = (current.0.get(u), current.1.get(u)) else { continue };
+            let differs = |(r, l): &(Vec<Seen>, Vec<[f32; 3]>), i: usize| match (r.get(i), l.get(i)) {
                 (Some(n), Some(nl)) => straddles(seen, &centre, n, nl),
                 _ => false,
             };
-            let edge = u.checked_sub(1).is_some_and(|l| differs(&current, &cur_lit, l))
-                || differs(&current, &cur_lit, u + 1)
-                || above.as_ref().is_some_and(|(r, l)| differs(r, l, u))
-                || below.as_deref().zip(below_lit.as_deref()).is_some_and(|(r, l)| differs(r, l, u));
+            let edge = u.checked_sub(1).is_some_and(|l| differs(&current, l))
+                || differs(&current, u + 1)
+                || above.as_ref().is_some_and(|r| differs(r, u))
+                || below.as_ref().is_some_and(|r| differs(r, u));
             // On an edge the colour integrates over the pixel like a real sensor:
             // SUPERSAMPLE^2 rays on a stratified grid (the centre one reused). Point sampling
             // would snap edges to whole pixels and hide sub-pixel motion from optical flow.
@@ -386,10 +384,7 @@ fn render_rows(
             }
         }
         match below {
-            Some(b) if row + 1 < rows => {
-                let prev = std::mem::replace(&mut current, b);
-                above = Some((prev, cur_lit));
-            }
+            Some(b) if row + 1 < rows => above = Some(std::mem::replace(&mut current, b)),
             _ => break,
         }
     }
