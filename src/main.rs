@@ -134,9 +134,20 @@ pub struct RunArgs {
     /// Recorders (comma-separated): `rrd` (rerun), `mcap`, `jsonl` (message log); `none` records nothing.
     #[arg(long, default_value = "rrd,mcap", value_delimiter = ',')]
     pub record: Vec<String>,
-    /// How colour images are stored in recordings: `jpeg` (quality 90) or lossless `png`.
-    #[arg(long, default_value = "jpeg", value_parser = ["jpeg", "png"])]
+    /// How colour images are stored in recordings: `jpeg` (quality 90), lossless `png`, or
+    /// lossless `raw` pixels (fast to write, ~7x the bytes of JPEG; docs/benchmarks.md).
+    #[arg(long, default_value = "jpeg", value_parser = ["jpeg", "png", "raw"])]
     pub image_format: String,
+    /// Stream every recorded port to a running rerun viewer or server as the graph runs
+    /// (default: rerun's local viewer, `rerun+http://127.0.0.1:9876/proxy`); files are written
+    /// as before. A slow or vanished viewer never stalls the run: what it cannot take is
+    /// dropped from the stream and counted in the summary.
+    #[arg(long, value_name = "URL", num_args = 0..=1, default_missing_value = dynaflow_recordings::live::DEFAULT_URL)]
+    pub connect: Option<String>,
+    /// Start a local rerun viewer (or use the one already running) and stream to it, as
+    /// `--connect`; with `--realtime` this is the "watch it live" mode.
+    #[arg(long, conflicts_with = "connect")]
+    pub spawn: bool,
     /// MCAP chunk size bound in KiB (a killed run loses at most one chunk, or one second).
     #[arg(long, default_value_t = 1024)]
     pub mcap_chunk_kib: u64,

@@ -27,9 +27,9 @@ fn run_default(dir: &Path, extra: &[&str]) -> std::process::Output {
 fn peer(tool: &str) -> Option<PathBuf> {
     let venv = std::env::var_os("DYNAFLOW_PEERS").map_or_else(|| PathBuf::from("/tmp/dynaflow-peers"), PathBuf::from);
     let candidate = venv.join("bin").join(tool);
-    // A Python counts only with the `mcap` reader installed (a user's `python` usually
+    // A Python counts only with the `mcap` reader and `protobuf` installed (a user's `python` usually
     // lacks it; the test then skips instead of failing).
-    let probe: &[&str] = if tool == "python" { &["-c", "import mcap"] } else { &["--version"] };
+    let probe: &[&str] = if tool == "python" { &["-c", "import mcap, google.protobuf"] } else { &["--version"] };
     let works = |exe: &Path| {
         Command::new(exe)
             .args(probe)
@@ -297,8 +297,8 @@ fn default_synthetic_scene_recording_verifies() {
     let rec = read_mcap(&dir.path().join("default.mcap")).unwrap();
     for (topic, schema) in [
         ("/camera/rgb", "foxglove.CompressedImage"),
-        ("/camera/depth", "foxglove.CompressedImage"),
-        ("/camera/gt_mask", "foxglove.CompressedImage"),
+        ("/camera/depth", "foxglove.RawImage"),
+        ("/camera/gt_mask", "foxglove.RawImage"),
         ("/camera/gt_pose", "foxglove.PoseInFrame"),
         ("/camera/camera_info", "foxglove.CameraCalibration"),
         ("/dynamics/stats", "dynaflow.Scalars"),
@@ -306,14 +306,109 @@ fn default_synthetic_scene_recording_verifies() {
         assert_eq!(rec.topics[topic].schema, schema, "{topic}");
         assert_eq!(rec.topics[topic].frames.len(), 30, "{topic}");
     }
-    peers_accept(&dir.path().join("default.rrd"), &dir.path().join("default.mcap"));
+    // The Python reader decodes the protobuf image messages with the schemas' own descriptors.
+    if let Some(stdout) = peers_accept(&dir.path().join("default.rrd"), &dir.path().join("default.mcap")) {
+        for line in [
+            "pixels /camera/depth foxglove.RawImage 32FC1 640x480",
+            "pixels /camera/gt_mask foxglove.RawImage mono8 640x480",
+            "pixels /camera/rgb foxglove.CompressedImage jpeg 640x480",
+        ] {
+            assert!(stdout.contains(line), "{line} not in {stdout}");
+        }
+    }
+    // The summary says what each recorder wrote, per port and per frame.
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("default.summary.json")).unwrap()).unwrap();
+    let mcap_bytes = std::fs::metadata(dir.path().join("default.mcap")).unwrap().len();
+    assert_eq!(summary["recorders"]["mcap"]["file_bytes"], mcap_bytes);
+    let depth = &summary["recorders"]["mcap"]["ports"]["camera/depth"];
+    assert_eq!(depth["messages"], 30);
+    // 640x480 f32 samples plus the protobuf fields and the payload.
+    let per_frame = depth["bytes_per_frame"].as_f64().unwrap();
+    assert!((640.0 * 480.0 * 4.0..640.0 * 480.0 * 4.0 + 2048.0).contains(&per_frame), "{per_frame}");
+    assert_eq!(summary["recorders"]["rerun"]["ports"]["camera/rgb"]["messages"], 30);
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("recorded mcap:") && stdout.contains("camera/depth"), "{stdout}");
+}
+
+#[test]
+fn recordings_made_before_protobuf_images_still_diff_and_replay() {
+    // tests/fixtures/legacy_mcap: JSON images, depth as millimetre PNG (see its SOURCE.md).
+    let fixture = common::repo().join("tests/fixtures/legacy_mcap");
+    let legacy = fixture.join("legacy.mcap");
+    let dir = common::TempDir::new("legacy");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "mcap", "--out"])
+        .arg(dir.path())
+        .arg(fixture.join("legacy.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let current = dir.path().join("legacy.mcap");
+    let (old, new) = (read_mcap(&legacy).unwrap(), read_mcap(&current).unwrap());
+    assert_eq!(old.topics["/camera/depth"].schema, "foxglove.CompressedImage");
+    assert_eq!(new.topics["/camera/depth"].schema, "foxglove.RawImage");
+    assert_eq!(old.topics.keys().collect::<Vec<_>>(), new.topics.keys().collect::<Vec<_>>());
+    for (topic, t) in &old.topics {
+        assert_eq!(t.frames.len(), 3, "{topic}");
+        assert_eq!(new.topics[topic].frames.len(), 3, "{topic}");
+        assert!(t.frames.values().all(|p| p["digest"].as_str().is_some_and(|d| d.len() == 16)), "{topic}");
+    }
+    // `dynaflow diff` compares the two layouts topic by topic (exit 0 or 1, never a read error);
+    // the old file's digests are scheme 1, so it says it compared numeric payloads only.
+    let out = common::bin().arg("diff").arg(&legacy).arg(&current).arg("--json").output().unwrap();
+    assert!(matches!(out.status.code(), Some(0 | 1)), "{}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(report["topics"].as_array().unwrap().len(), old.topics.len());
+    assert!(report["digests"].as_str().is_some_and(|n| n.contains("dynaflow-digest-1")), "{report}");
+    assert!(!old.metadata.contains_key("digest"));
+    assert_eq!(new.metadata["digest"], dynaflow_engine::msg::DIGEST_SCHEME);
+
+    // `mcap_replay` reads the old file: depth to the millimetre, JPEG colour, exact keypoints.
+    let yaml = format!(
+        "name: old\nnodes:\n  src: {{ op: mcap_replay, params: {{ path: '{}', topics: 'depth=/camera/depth,rgb=/camera/rgb,mask=/camera/gt_mask,keypoints=/orb/keypoints' }} }}\n",
+        legacy.display()
+    );
+    let sink = dynaflow_engine::sink::MemorySink::default();
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+    let report = rt
+        .block_on(dynaflow_engine::runtime::run(
+            &common::graph(&yaml),
+            Default::default(),
+            vec![Box::new(sink.clone())],
+        ))
+        .unwrap();
+    assert_eq!(report.status, dynaflow_engine::runtime::RunStatus::Completed, "{:?}", report.failures);
+    let depth = sink.port("src", "depth");
+    assert_eq!(depth.len(), 3);
+    for m in &depth {
+        let dynaflow_engine::msg::Body::Depth(d) = &m.body else { panic!() };
+        assert_eq!((d.width, d.height), (160, 120));
+        let measured = d.data.iter().filter(|v| **v > 0.0).count();
+        assert!(measured > d.data.len() / 2, "{measured} of {} pixels have depth", d.data.len());
+        assert!(d.data.iter().all(|v| ((v * 1000.0) - (v * 1000.0).round()).abs() < 1e-3), "not whole millimetres");
+    }
+    assert!(
+        sink.port("src", "rgb")
+            .iter()
+            .all(|m| matches!(&m.body, dynaflow_engine::msg::Body::Image(i) if i.width == 160))
+    );
+    assert_eq!(sink.port("src", "mask").len(), 3);
+    let keypoints = sink.port("src", "keypoints");
+    assert_eq!(keypoints.len(), 3);
+    for m in keypoints {
+        let dynaflow_engine::msg::Body::Keypoints(k) = &m.body else { panic!() };
+        let recorded = &old.topics["/orb/keypoints"].frames[&m.header.seq]["data"]["xy"];
+        let xy: Vec<[f32; 2]> = k.points.iter().map(|p| [p.x, p.y]).collect();
+        assert_eq!(serde_json::to_value(&xy).unwrap(), *recorded);
+    }
 }
 
 #[test]
 fn mcap_replay_restores_recorded_messages() {
     let dir = common::TempDir::new("replay");
     let out = common::bin()
-        .args(["run", "--no-progress", "--frames", "12", "--record", "mcap", "--image-format", "png", "--out"])
+        .args(["run", "--no-progress", "--frames", "12", "--record", "mcap", "--image-format", "raw", "--out"])
         .arg(dir.path())
         .arg(common::repo().join("graphs/default.yaml"))
         .output()
@@ -322,7 +417,7 @@ fn mcap_replay_restores_recorded_messages() {
     let mcap = dir.path().join("default.mcap");
     let recorded = read_mcap(&mcap).unwrap();
     let yaml = format!(
-        "name: replay\nnodes:\n  src: {{ op: mcap_replay, params: {{ path: '{}', topics: 'rgb=/camera/rgb,pose=/camera/gt_pose,camera_info=/camera/camera_info,mask=/camera/gt_mask,scalars=/dynamics/stats' }} }}\n  dynamics: {{ op: mask_stats, in: {{ mask: src.mask }} }}\n",
+        "name: replay\nnodes:\n  src: {{ op: mcap_replay, params: {{ path: '{}', topics: 'rgb=/camera/rgb,depth=/camera/depth,pose=/camera/gt_pose,camera_info=/camera/camera_info,mask=/camera/gt_mask,scalars=/dynamics/stats' }} }}\n  dynamics: {{ op: mask_stats, in: {{ mask: src.mask }} }}\n",
         mcap.display()
     );
     let graph = common::graph(&yaml);
@@ -331,9 +426,11 @@ fn mcap_replay_restores_recorded_messages() {
     let report =
         rt.block_on(dynaflow_engine::runtime::run(&graph, Default::default(), vec![Box::new(sink.clone())])).unwrap();
     assert_eq!(report.status, dynaflow_engine::runtime::RunStatus::Completed, "{:?}", report.failures);
-    // Lossless types come back bit-exact: same content digests as recorded.
+    // Lossless types come back bit-exact: same content digests as recorded (depth included:
+    // `32FC1` samples, whatever the source's quantisation).
     for (port, topic) in [
         ("rgb", "/camera/rgb"),
+        ("depth", "/camera/depth"),
         ("pose", "/camera/gt_pose"),
         ("camera_info", "/camera/camera_info"),
         ("scalars", "/dynamics/stats"),
@@ -357,4 +454,204 @@ fn mcap_replay_restores_recorded_messages() {
     let err =
         rt.block_on(dynaflow_engine::runtime::run(&graph, Default::default(), Vec::new())).unwrap_err().to_string();
     assert!(err.contains("no topic `/camera/gt_pos`") && err.contains("/camera/gt_pose"), "{err}");
+}
+
+/// A headless rerun receiver (`rerun --port P --save FILE`).
+struct Receiver {
+    child: std::process::Child,
+    url: String,
+    file: PathBuf,
+}
+
+impl Receiver {
+    fn start(rerun: &Path, dir: &Path) -> Self {
+        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let file = dir.join("received.rrd");
+        let child = Command::new(rerun)
+            .args(["--port", &port.to_string(), "--save"])
+            .arg(&file)
+            .stdin(std::process::Stdio::null())
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .unwrap();
+        let started = Instant::now();
+        while std::net::TcpStream::connect(("127.0.0.1", port)).is_err() {
+            assert!(started.elapsed() < Duration::from_secs(60), "the rerun receiver did not start");
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        Self { child, url: format!("rerun+http://127.0.0.1:{port}/proxy"), file }
+    }
+
+    /// Signal the receiver: the `rerun` script and the viewer binary it started (its
+    /// descendants, found in `/proc`), children first.
+    fn signal(&mut self, sig: &str) {
+        fn descendants(pid: u32, out: &mut Vec<u32>) {
+            let tasks = std::fs::read_dir(format!("/proc/{pid}/task")).into_iter().flatten().flatten();
+            for task in tasks {
+                let children = std::fs::read_to_string(task.path().join("children")).unwrap_or_default();
+                for child in children.split_whitespace().filter_map(|c| c.parse().ok()) {
+                    descendants(child, out);
+                    out.push(child);
+                }
+            }
+        }
+        if self.child.try_wait().ok().flatten().is_some() {
+            return;
+        }
+        let mut pids = Vec::new();
+        descendants(self.child.id(), &mut pids);
+        pids.push(self.child.id());
+        for pid in pids.into_iter().filter(|p| *p > 1) {
+            let _ = Command::new("kill").arg(format!("-{sig}")).arg(pid.to_string()).status();
+        }
+        let _ = self.child.wait();
+    }
+
+    /// Wait until the received file stops growing, then stop the receiver.
+    fn finish(&mut self) {
+        let mut last = (0, Instant::now());
+        while last.1.elapsed() < Duration::from_secs(2) {
+            let len = std::fs::metadata(&self.file).map_or(0, |m| m.len());
+            if len != last.0 {
+                last = (len, Instant::now());
+            }
+            std::thread::sleep(Duration::from_millis(200));
+        }
+        self.signal("TERM");
+    }
+}
+
+impl Drop for Receiver {
+    fn drop(&mut self) {
+        self.signal("KILL");
+    }
+}
+
+/// Rows per entity of the recording in an `.rrd` (`rerun rrd print`), blueprint entities left
+/// out (their ids are random per blueprint).
+fn rows_per_entity(rerun: &Path, file: &Path) -> std::collections::BTreeMap<String, u64> {
+    let out = rerun_rrd(rerun, &["print"], file);
+    assert!(out.status.success(), "rerun rrd print {}: {}", file.display(), String::from_utf8_lossy(&out.stderr));
+    let mut rows = std::collections::BTreeMap::new();
+    for line in String::from_utf8_lossy(&out.stdout).lines() {
+        // `Chunk(id) with N rows (SIZE) - /entity - data columns: [...]`
+        let Some(rest) = line.strip_prefix("Chunk(") else { continue };
+        let mut parts = rest.split(" - ");
+        let head = parts.next().unwrap_or_default();
+        let entity = parts.next().unwrap_or_default().to_owned();
+        let n: u64 = head.split_whitespace().nth(2).and_then(|n| n.parse().ok()).unwrap();
+        if ["/view/", "/container/", "/viewport"].iter().any(|p| entity.starts_with(p)) {
+            continue;
+        }
+        *rows.entry(entity).or_insert(0) += n;
+    }
+    rows
+}
+
+fn live_summary(dir: &Path) -> serde_json::Value {
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("default.summary.json")).unwrap()).unwrap();
+    summary["recorders"].clone()
+}
+
+fn totals(ports: &serde_json::Value) -> (u64, u64) {
+    let ports = ports.as_object().unwrap();
+    let sum = |k: &str| ports.values().map(|p| p[k].as_u64().unwrap()).sum();
+    (sum("messages"), sum("dropped"))
+}
+
+#[test]
+fn live_stream_reaches_a_headless_receiver_with_what_the_file_has() {
+    let Some(rerun) = peer("rerun") else { return };
+    let dir = common::TempDir::new("live");
+    let mut receiver = Receiver::start(&rerun, dir.path());
+    let out = common::bin()
+        .args(["run", "--no-progress", "--frames", "20", "--record", "rrd", "--connect", &receiver.url, "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/default.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    receiver.finish();
+    let recorders = live_summary(dir.path());
+    let (sent, dropped) = totals(&recorders["live"]["ports"]);
+    assert_eq!(dropped, 0, "a local receiver keeps up with 20 frames");
+    assert_eq!(sent, totals(&recorders["rerun"]["ports"]).0, "the stream carried every recorded message");
+    // The received stream has no footer (the receiver was stopped); it must still verify.
+    let v = rerun_rrd(&rerun, &["verify", "--check-footers", "false"], &receiver.file);
+    assert!(v.status.success(), "{}{}", String::from_utf8_lossy(&v.stdout), String::from_utf8_lossy(&v.stderr));
+    let file = dir.path().join("default.rrd");
+    assert!(rerun_rrd(&rerun, &["verify"], &file).status.success());
+    // Same entity paths, same number of messages (rows) per entity as the file.
+    let (live, recorded) = (rows_per_entity(&rerun, &receiver.file), rows_per_entity(&rerun, &file));
+    assert_eq!(live, recorded);
+    assert_eq!(recorded.get("/camera/rgb"), Some(&20), "{recorded:?}");
+    assert!(recorded.keys().any(|k| k.starts_with("/world/track/pose")), "{recorded:?}");
+}
+
+#[test]
+fn live_stream_survives_a_killed_receiver_and_counts_what_it_dropped() {
+    let Some(rerun) = peer("rerun") else { return };
+    let dir = common::TempDir::new("livekill");
+    let mut receiver = Receiver::start(&rerun, dir.path());
+    let run = common::bin()
+        .args(["run", "--no-progress", "--frames", "150", "--connect", &receiver.url, "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/default.yaml"))
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Kill the receiver once it has some of the stream, mid-run.
+    let started = Instant::now();
+    while std::fs::metadata(&receiver.file).map_or(0, |m| m.len()) < 2_000_000 {
+        assert!(started.elapsed() < Duration::from_secs(120), "nothing reached the receiver");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    receiver.signal("KILL");
+    let out = run.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("went away"), "{stderr}");
+    // The files are complete and valid.
+    let rec = read_mcap(&dir.path().join("default.mcap")).unwrap();
+    assert!(!rec.truncated);
+    assert_eq!(rec.topics["/camera/rgb"].frames.len(), 150);
+    peers_accept(&dir.path().join("default.rrd"), &dir.path().join("default.mcap"));
+    // What the stream could not deliver is counted, per port.
+    let recorders = live_summary(dir.path());
+    let (sent, dropped) = totals(&recorders["live"]["ports"]);
+    assert!(sent > 0 && dropped > 0, "sent {sent}, dropped {dropped}");
+    assert_eq!(sent + dropped, totals(&recorders["mcap"]["ports"]).0, "every recorded message is sent or counted");
+    assert!(recorders["live"]["ports"]["camera/rgb"]["dropped"].as_u64().unwrap() > 0);
+}
+
+#[test]
+fn no_viewer_is_a_clear_message_and_the_run_completes() {
+    let dir = common::TempDir::new("noview");
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let url = format!("rerun+http://127.0.0.1:{port}/proxy");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--frames", "5", "--connect", &url, "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains(&format!("no rerun viewer at {url}")) && stderr.contains("--spawn"), "{stderr}");
+    assert!(dir.path().join("engine_smoke.rrd").exists() && dir.path().join("engine_smoke.mcap").exists());
+    // `--spawn` without a viewer installed says how to install one, and runs on.
+    let empty = common::TempDir::new("nopath");
+    let out = common::bin()
+        .env("PATH", empty.path())
+        .args(["run", "--no-progress", "--frames", "5", "--record", "none", "--spawn", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains("pip install rerun-sdk==0.36.3"), "{stderr}");
 }

@@ -87,6 +87,7 @@ impl RunInfo {
             ("dynaflow_version".to_owned(), self.version.clone()),
             ("git_commit".to_owned(), self.git_commit.clone()),
             ("realtime".to_owned(), self.realtime.to_string()),
+            ("digest".to_owned(), crate::msg::DIGEST_SCHEME.to_owned()),
         ])
     }
 }
@@ -101,9 +102,43 @@ pub trait Sink: Send {
     }
     /// One recorded message of `node.port`.
     fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError>;
+    /// The same, given the shared message: a sink that hands messages to another thread
+    /// (the live viewer stream) keeps the `Arc` instead of copying pixels. Defaults to `record`.
+    fn record_shared(&mut self, node: &str, port: &str, msg: &Arc<Message>) -> Result<(), SinkError> {
+        self.record(node, port, msg)
+    }
     /// Called once at the end, also after an interrupt or an operator failure. Must leave a
     /// complete, valid file.
     fn close(&mut self) -> Result<(), SinkError>;
+    /// What the recording cost (after `close`): file size, bytes and drops per port.
+    fn report(&self) -> SinkReport {
+        SinkReport::default()
+    }
+}
+
+/// What one recorder wrote, in the run summary's `recorders`.
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct SinkReport {
+    /// The file written, if any.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub path: Option<String>,
+    /// Its size in bytes (after the container's compression).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub file_bytes: Option<u64>,
+    /// `node/port` → what the recorder took of it.
+    pub ports: BTreeMap<String, PortReport>,
+}
+
+/// One port in one recorder.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct PortReport {
+    /// Messages written.
+    pub messages: u64,
+    /// Their encoded bytes, before the container's compression (0 where a recorder does not
+    /// measure it).
+    pub bytes: u64,
+    /// Messages this recorder could not deliver (a live viewer that fell behind), counted.
+    pub dropped: u64,
 }
 
 /// `(node, port, message)`.

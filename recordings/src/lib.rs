@@ -2,21 +2,23 @@
 //! JSON-lines message log and `dynaflow diff` of two recorded runs. This is the only crate
 //! that depends on `rerun` or `mcap`.
 //!
-//! Modules: `rrd` (rerun), `mcap` (MCAP + Foxglove JSON schemas), `jsonl` (message log),
+//! Modules: `rrd` (rerun), `live` (the same stream to a running viewer), `mcap` (MCAP + Foxglove JSON schemas), `jsonl` (message log),
 //! `payload` (the numeric `dynaflow` object stored with each MCAP message), `encode` (pixel
 //! codecs), `diff` (run comparison), `replay` (the
 //! `mcap_replay` source).
 
 pub mod diff;
-mod encode;
+pub mod encode;
 mod jsonl;
+pub mod live;
 pub mod mcap;
 mod payload;
 pub mod replay;
-mod rrd;
+pub mod rrd;
 
 pub use encode::{EncodeCache, ImageCodec};
 pub use jsonl::MessageLog;
+pub use live::LiveSink;
 pub use mcap::McapSink;
 pub use rrd::RrdSink;
 

@@ -1,11 +1,13 @@
 //! `mcap_replay`: replays topics of a dynaflow MCAP recording as ports, so the late part of a
 //! graph can be re-run on recorded intermediates.
 //!
-//! Messages are rebuilt from the Foxglove JSON and the `dynaflow` payload: exact for camera
-//! info, keypoints (with descriptors), tracks, labels, detections, poses, trajectories and
-//! scalars; images exact when recorded with `--image-format png` (JPEG otherwise); depth to
-//! the millimetre; masks without instance ids. Frame numbers are kept: a topic recorded only
-//! on key frames replays only on those frames.
+//! Messages are rebuilt from the Foxglove messages and the `dynaflow` payload: exact for
+//! camera info, keypoints (with descriptors), tracks, labels, detections, poses, trajectories,
+//! scalars and depth (`32FC1`); images exact when recorded with `--image-format png` or `raw`
+//! (JPEG otherwise); masks without instance ids. Recordings made before images became
+//! protobuf (JSON `foxglove.CompressedImage`, depth as millimetre PNG) replay too, depth to the
+//! millimetre. Frame numbers are kept: a topic recorded only on key frames replays only on
+//! those frames.
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -25,7 +27,11 @@ use serde_json::Value;
 
 const OUTPUTS: &[PortSpec] = &[
     PortSpec::output("rgb", PortType::Image, "image topic"),
-    PortSpec::output("depth", PortType::Depth, "depth topic (millimetre resolution)"),
+    PortSpec::output(
+        "depth",
+        PortType::Depth,
+        "depth topic (bit-exact; to the millimetre from recordings made before protobuf images)",
+    ),
     PortSpec::output("camera_info", PortType::CameraInfo, "camera calibration topic"),
     PortSpec::output("mask", PortType::Mask, "segmentation mask topic (classes only)"),
     PortSpec::output("keypoints", PortType::Keypoints, "keypoints topic"),
@@ -88,8 +94,15 @@ fn build(params: &Params) -> Result<Instance, OpError> {
     Ok(Instance::Source(Box::new(Replay { frames, wanted })))
 }
 
-/// Frame → port → the message's full JSON.
-type Frames = BTreeMap<u64, BTreeMap<&'static str, Value>>;
+/// A recorded message: Foxglove JSON (with its `dynaflow` payload), or a protobuf image
+/// message (`raw`: `foxglove.RawImage`, else `foxglove.CompressedImage`).
+enum Stored {
+    Json(Value),
+    Proto { raw: bool, data: Vec<u8> },
+}
+
+/// Frame → port → the recorded message.
+type Frames = BTreeMap<u64, BTreeMap<&'static str, Stored>>;
 
 fn read(path: &Path, wanted: &[(&'static str, String)]) -> Result<Frames, OpError> {
     let buf = std::fs::read(path).map_err(|source| OpError::Io { path: path.to_path_buf(), source })?;
@@ -106,10 +119,18 @@ fn read(path: &Path, wanted: &[(&'static str, String)]) -> Result<Frames, OpErro
             seen.push(topic.clone());
         }
         for (port, _) in wanted.iter().filter(|(_, t)| t == topic) {
-            let v: Value = serde_json::from_slice(&message.data)
-                .map_err(|e| OpError::Input(format!("{}: {topic}: {e}", path.display())))?;
-            let seq = v["dynaflow"]["seq"].as_u64().unwrap_or(u64::from(message.sequence));
-            frames.entry(seq).or_default().insert(port, v);
+            let bad = |e: String| OpError::Input(format!("{}: {topic}: {e}", path.display()));
+            let (seq, stored) = if message.channel.message_encoding == "protobuf" {
+                let payload: Value = crate::mcap::proto::payload_of(&message.data)
+                    .and_then(|p| serde_json::from_slice(p).map_err(|e| e.to_string()))
+                    .map_err(bad)?;
+                let raw = message.channel.schema.as_ref().is_some_and(|s| s.name == "foxglove.RawImage");
+                (payload["seq"].as_u64(), Stored::Proto { raw, data: message.data.to_vec() })
+            } else {
+                let v: Value = serde_json::from_slice(&message.data).map_err(|e| bad(e.to_string()))?;
+                (v["dynaflow"]["seq"].as_u64(), Stored::Json(v))
+            };
+            frames.entry(seq.unwrap_or(u64::from(message.sequence))).or_default().insert(port, stored);
         }
     }
     for (port, topic) in wanted {
@@ -148,18 +169,84 @@ fn iso(t: &Value, q: &Value) -> Isometry3<f64> {
     Isometry3::from_parts(Translation3::new(g(t, 0), g(t, 1), g(t, 2)), rot)
 }
 
-fn decode_png_or_jpeg(v: &Value) -> Result<image::DynamicImage, String> {
-    let data = base64::engine::general_purpose::STANDARD
-        .decode(v["data"].as_str().unwrap_or_default())
-        .map_err(|e| e.to_string())?;
-    image::load_from_memory(&data).map_err(|e| e.to_string())
+/// Recorded pixels: an image file (JPEG/PNG, `CompressedImage`) or raw samples (`RawImage`).
+enum Pixels<'a> {
+    File(std::borrow::Cow<'a, [u8]>),
+    Raw { width: u32, height: u32, encoding: &'a str, step: u32, data: &'a [u8] },
 }
 
-/// Rebuild a message of port type `ty` from its recorded JSON.
-fn decode(ty: PortType, v: &Value) -> Result<Body, String> {
-    let d = &v["dynaflow"]["data"];
-    Ok(match ty {
-        PortType::Image => match decode_png_or_jpeg(v)? {
+impl Pixels<'_> {
+    fn file(&self) -> Result<image::DynamicImage, String> {
+        match self {
+            Self::File(bytes) => image::load_from_memory(bytes).map_err(|e| e.to_string()),
+            Self::Raw { encoding, .. } => Err(format!("raw `{encoding}` where an image file was expected")),
+        }
+    }
+
+    /// Rows of `width * bytes_per` bytes out of `step`-byte rows, checked against the size.
+    fn rows(&self, bytes_per: u32) -> Result<(u32, u32, Vec<u8>), String> {
+        let Self::Raw { width, height, step, data, encoding } = *self else { return Err("not raw".into()) };
+        let row = width as usize * bytes_per as usize;
+        if (step as usize) < row || data.len() < step as usize * height as usize {
+            return Err(format!("{encoding} {width}x{height}: step {step}, {} bytes", data.len()));
+        }
+        let out = data.chunks(step as usize).take(height as usize).flat_map(|r| &r[..row]).copied().collect();
+        Ok((width, height, out))
+    }
+}
+
+/// The pixels of a recorded image message.
+fn pixels<'a>(stored: &'a Stored, proto: Option<&crate::mcap::proto::ImageMsg<'a>>) -> Result<Pixels<'a>, String> {
+    match (stored, proto) {
+        (_, Some(m)) if m.encoding.is_empty() => Ok(Pixels::File(std::borrow::Cow::Borrowed(m.data))),
+        (_, Some(m)) => {
+            Ok(Pixels::Raw { width: m.width, height: m.height, encoding: m.encoding, step: m.step, data: m.data })
+        }
+        (Stored::Json(v), None) => base64::engine::general_purpose::STANDARD
+            .decode(v["data"].as_str().unwrap_or_default())
+            .map(|b| Pixels::File(std::borrow::Cow::Owned(b)))
+            .map_err(|e| e.to_string()),
+        (Stored::Proto { .. }, None) => Err("protobuf message not decoded".into()),
+    }
+}
+
+/// Rebuild a message of port type `ty` from its recorded form; returns the `dynaflow`
+/// payload (header) and the body.
+fn decode(ty: PortType, stored: &Stored) -> Result<(Value, Body), String> {
+    let proto = match stored {
+        Stored::Proto { raw, data } => Some(crate::mcap::proto::read_image(data, *raw)?),
+        Stored::Json(_) => None,
+    };
+    let payload: Value = match (&proto, stored) {
+        (Some(m), _) => serde_json::from_slice(m.payload).map_err(|e| e.to_string())?,
+        (None, Stored::Json(v)) => v["dynaflow"].clone(),
+        (None, Stored::Proto { .. }) => Value::Null,
+    };
+    let body = match ty {
+        PortType::Image | PortType::Depth | PortType::Mask => {
+            decode_pixels(ty, &pixels(stored, proto.as_ref())?, &payload)?
+        }
+        _ => match stored {
+            Stored::Json(v) => decode_json(ty, v)?,
+            Stored::Proto { .. } => return Err(format!("a protobuf message on a {ty} port")),
+        },
+    };
+    Ok((payload, body))
+}
+
+fn decode_pixels(ty: PortType, px: &Pixels<'_>, payload: &Value) -> Result<Body, String> {
+    let encoding = match px {
+        Pixels::Raw { encoding, .. } => Some(*encoding),
+        Pixels::File(_) => None,
+    };
+    Ok(match (ty, encoding) {
+        (PortType::Image, Some("rgb8" | "mono8")) => {
+            let gray = encoding == Some("mono8");
+            let (width, height, data) = px.rows(if gray { 1 } else { 3 })?;
+            let format = if gray { PixelFormat::Gray8 } else { PixelFormat::Rgb8 };
+            Body::Image(Image { width, height, format, data })
+        }
+        (PortType::Image, None) => match px.file()? {
             image::DynamicImage::ImageLuma8(g) => Body::Image(Image {
                 width: g.width(),
                 height: g.height(),
@@ -176,28 +263,55 @@ fn decode(ty: PortType, v: &Value) -> Result<Body, String> {
                 })
             }
         },
-        PortType::Depth => {
-            let img = decode_png_or_jpeg(v)?.into_luma16();
+        (PortType::Depth, Some("32FC1")) => {
+            let (width, height, data) = px.rows(4)?;
+            let data = data.chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect();
+            Body::Depth(DepthImage { width, height, data })
+        }
+        (PortType::Depth, Some("16UC1")) => {
+            let (width, height, data) = px.rows(2)?;
+            let data = data.chunks_exact(2).map(|b| f32::from(u16::from_le_bytes([b[0], b[1]])) / 1000.0).collect();
+            Body::Depth(DepthImage { width, height, data })
+        }
+        // Recordings before protobuf images: 16-bit PNG in millimetres.
+        (PortType::Depth, None) => {
+            let img = px.file()?.into_luma16();
             Body::Depth(DepthImage {
                 width: img.width(),
                 height: img.height(),
                 data: img.into_raw().into_iter().map(|mm| f32::from(mm) / 1000.0).collect(),
             })
         }
-        PortType::Mask => {
-            let img = decode_png_or_jpeg(v)?.into_luma16();
-            let names = d["class_names"]
+        (PortType::Mask, enc) => {
+            let (width, height, classes) = match enc {
+                Some("mono8") => {
+                    let (w, h, d) = px.rows(1)?;
+                    (w, h, d.into_iter().map(u16::from).collect())
+                }
+                Some("16UC1" | "mono16") => {
+                    let (w, h, d) = px.rows(2)?;
+                    (w, h, d.chunks_exact(2).map(|b| u16::from_le_bytes([b[0], b[1]])).collect())
+                }
+                Some(other) => return Err(format!("mask encoding `{other}` (expected mono8 or 16UC1)")),
+                None => {
+                    let img = px.file()?.into_luma16();
+                    (img.width(), img.height(), img.into_raw())
+                }
+            };
+            let names = payload["data"]["class_names"]
                 .as_array()
                 .map(|a| a.iter().map(|n| Arc::from(n.as_str().unwrap_or(""))).collect())
                 .unwrap_or_default();
-            Body::Mask(SegmentationMask {
-                width: img.width(),
-                height: img.height(),
-                classes: img.into_raw(),
-                instances: None,
-                class_names: names,
-            })
+            Body::Mask(SegmentationMask { width, height, classes, instances: None, class_names: names })
         }
+        (_, enc) => return Err(format!("{ty} with pixel encoding {enc:?}")),
+    })
+}
+
+/// Rebuild a non-image message from its recorded JSON.
+fn decode_json(ty: PortType, v: &Value) -> Result<Body, String> {
+    let d = &v["dynaflow"]["data"];
+    Ok(match ty {
         PortType::CameraInfo => {
             let g = |k: &str| d[k].as_f64().unwrap_or(f64::NAN);
             let mut distortion = [0.0; 5];
@@ -324,11 +438,10 @@ impl Source for Replay {
         }
         let mut out = Outputs::new();
         if let Some(ports) = self.frames.get(&seq) {
-            for (port, v) in ports {
+            for (port, stored) in ports {
                 let ty = OUTPUTS.iter().find(|p| p.name == *port).map_or(PortType::Any, |p| p.ty);
                 let topic = self.wanted.iter().find(|(p, _)| p == port).map_or("", |(_, t)| t.as_str());
-                let body = decode(ty, v).map_err(|e| OpError::Input(format!("{topic} frame {seq}: {e}")))?;
-                let p = &v["dynaflow"];
+                let (p, body) = decode(ty, stored).map_err(|e| OpError::Input(format!("{topic} frame {seq}: {e}")))?;
                 let header = Header {
                     seq,
                     stamp: p["stamp"].as_f64().unwrap_or(0.0),
@@ -345,7 +458,7 @@ impl Source for Replay {
     }
 }
 
-/// Check a replayed message against its recorded digest (tests, `--verify`).
-pub fn same_as_recorded(msg: &Message, v: &Value) -> bool {
-    v["dynaflow"]["digest"].as_str() == Some(format!("{:016x}", msg.digest()).as_str())
+/// Check a replayed message against the digest in its recorded `dynaflow` payload.
+pub fn same_as_recorded(msg: &Message, payload: &Value) -> bool {
+    payload["digest"].as_str() == Some(format!("{:016x}", msg.digest()).as_str())
 }

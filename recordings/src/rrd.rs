@@ -4,34 +4,56 @@
 //!
 //! | port type | entity | archetype |
 //! |---|---|---|
-//! | image | `/<node>/<port>` | `EncodedImage` (JPEG/PNG) |
-//! | depth | `/<node>/<port>` | `EncodedDepthImage` (16-bit PNG, millimetres) |
+//! | image | `/<node>/<port>` | `EncodedImage` (JPEG/PNG), `Image` with `--image-format raw` |
+//! | depth | `/<node>/<port>` | `DepthImage` (raw 16-bit millimetres) |
 //! | camera_info | `/world/camera` | `Pinhole` (with the latest pose) |
 //! | keypoints | `/<node>/<port>` | `Points2D` coloured by octave |
 //! | tracks | `/<node>/<port>` | `Arrows2D` |
 //! | detections | `/<node>/<port>` | `Boxes2D` with class labels |
-//! | mask | `/<node>/<port>` | `SegmentationImage` + `AnnotationContext` |
+//! | mask | `/<node>/<port>` | `SegmentationImage` (8-bit ids when they fit) + `AnnotationContext` |
 //! | point_labels | `/<node>/<port>` | `Points2D` red = dynamic, green = static |
 //! | pose | `/world/<node>/<port>` | `Transform3D` (+ `Pinhole` once intrinsics are known); path so far at `…_path` (`LineStrips3D`) |
 //! | trajectory | `/world/<node>/<port>` | `LineStrips3D` |
 //! | point_cloud | `/world/<node>/<port>` | `Points3D` |
 //! | octree_update | `/world/<node>/<port>` | `Boxes3D` |
 //! | scalars | `/metrics/<node>/<port>/<name>` | `Scalars` |
+//!
+//! Long runs in bounded memory: the SDK batches rows into chunks on a 1 s tick (fewer chunks,
+//! so a smaller RRD footer manifest, which the SDK keeps in memory until the file closes),
+//! and the recorder waits for the SDK's writer every [`FLUSH_BYTES`] of payload.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
 
-use dynaflow_engine::msg::{Body, CameraInfo, Message, PortType};
-use dynaflow_engine::sink::{RunInfo, Sink, SinkError};
+use dynaflow_engine::msg::{Body, CameraInfo, Message, PixelFormat, PortType};
+use dynaflow_engine::sink::{PortReport, RunInfo, Sink, SinkError, SinkReport};
 use rerun::blueprint::{
     Blueprint, BlueprintActivation, ContainerLike, Horizontal, Spatial2DView, Spatial3DView, TimeSeriesView, Vertical,
 };
 
 use crate::encode::{self, EncodeCache, ImageCodec};
 
-/// Writes `<out>/<graph>.rrd`.
+/// Where a [`RrdSink`] sends its stream.
+#[derive(Clone, Debug)]
+pub enum Target {
+    /// An `.rrd` file.
+    File(PathBuf),
+    /// A running rerun viewer or server (`rerun+http://host:port/proxy`).
+    Grpc(String),
+}
+
+impl std::fmt::Display for Target {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::File(p) => write!(f, "{}", p.display()),
+            Self::Grpc(url) => write!(f, "{url}"),
+        }
+    }
+}
+
+/// Writes `<out>/<graph>.rrd` (or streams the same to a viewer: see `live`).
 pub struct RrdSink {
-    path: PathBuf,
+    target: Target,
     rec: Option<rerun::RecordingStream>,
     codec: ImageCodec,
     intrinsics: Option<CameraInfo>,
@@ -42,13 +64,32 @@ pub struct RrdSink {
     cache: EncodeCache,
     /// Bytes logged since the last flush (an estimate: the payloads).
     pending: usize,
+    /// Messages and pixel bytes per `node/port`.
+    ports: std::collections::BTreeMap<String, PortReport>,
 }
 
-/// The rerun SDK queues logged data for its file writer without bound; when the writer
-/// (Arrow encoding + LZ4) falls behind the graph, memory grows with the run. Waiting for it
-/// after this many payload bytes bounds the queue (the recorder thread waits, not the graph:
-/// the engine's bounded recorder queue stands between them).
-const FLUSH_BYTES: usize = 4 << 20;
+/// The rerun SDK queues up to 1024 chunks for its file writer (Arrow encoding + LZ4), and
+/// image chunks are megabytes each; when the writer falls behind the graph, memory grows.
+/// Waiting for it after this many payload bytes bounds the queue (the recorder thread waits,
+/// not the graph: the engine's bounded recorder queue stands between them). Each wait also
+/// cuts every entity's pending rows into a chunk, so it is not smaller than needed.
+const FLUSH_BYTES: usize = 16 << 20;
+
+/// Batching of the live stream: a 50 ms tick, so a viewer shows each frame within a
+/// twentieth of a second, in a few chunks per frame rather than one per entity and row (the
+/// SDK's low-latency 8 ms tick cost 1.14x the file-only run's wall time on the default graph
+/// against a local receiver, docs/benchmarks.md).
+const LIVE_BATCHING: rerun::log::ChunkBatcherConfig = rerun::log::ChunkBatcherConfig {
+    flush_tick: std::time::Duration::from_millis(50),
+    ..rerun::log::ChunkBatcherConfig::DEFAULT
+};
+
+/// How the SDK batches rows into chunks: its defaults, except a 1 s tick (the file is not
+/// watched live; fewer, larger chunks for the slow-changing ports).
+const BATCHING: rerun::log::ChunkBatcherConfig = rerun::log::ChunkBatcherConfig {
+    flush_tick: std::time::Duration::from_secs(1),
+    ..rerun::log::ChunkBatcherConfig::DEFAULT
+};
 
 /// A pose stream's path is re-logged every this many poses (each log carries the whole path).
 const TRAIL_EVERY: usize = 10;
@@ -56,8 +97,13 @@ const TRAIL_EVERY: usize = 10;
 impl RrdSink {
     /// A recorder writing to `path`, colour images as JPEG (q 90).
     pub fn new(path: impl Into<PathBuf>) -> Self {
+        Self::to(Target::File(path.into()))
+    }
+
+    /// A recorder streaming to `target`, colour images as JPEG (q 90).
+    pub fn to(target: Target) -> Self {
         Self {
-            path: path.into(),
+            target,
             rec: None,
             codec: ImageCodec::Jpeg(90),
             intrinsics: None,
@@ -65,6 +111,7 @@ impl RrdSink {
             trails: HashMap::new(),
             cache: EncodeCache::default(),
             pending: 0,
+            ports: std::collections::BTreeMap::new(),
         }
     }
 
@@ -83,7 +130,7 @@ impl RrdSink {
     }
 
     fn err(&self, e: impl std::fmt::Display) -> SinkError {
-        SinkError::new("rerun", format!("{}: {e}", self.path.display()))
+        SinkError::new("rerun", format!("{}: {e}", self.target))
     }
 }
 
@@ -150,7 +197,7 @@ fn payload_bytes(body: &Body) -> usize {
     match body {
         Body::Image(i) => i.data.len(),
         Body::Depth(d) => d.data.len() * 2,
-        Body::Mask(m) => m.classes.len() * 2,
+        Body::Mask(m) => m.classes.len(),
         _ => 4096,
     }
 }
@@ -161,7 +208,17 @@ impl Sink for RrdSink {
     }
 
     fn open(&mut self, info: &RunInfo) -> Result<(), SinkError> {
-        let rec = rerun::RecordingStreamBuilder::new("dynaflow").save(&self.path).map_err(|e| self.err(e))?;
+        let builder = rerun::RecordingStreamBuilder::new("dynaflow");
+        let rec = match &self.target {
+            Target::File(path) => {
+                let file =
+                    rerun::sink::FileSink::with_options(path, rerun::sink::FileSinkOptions { write_footer: true })
+                        .map_err(|e| self.err(e))?;
+                builder.batcher_config(BATCHING).set_sinks((file,))
+            }
+            Target::Grpc(url) => builder.batcher_config(LIVE_BATCHING).connect_grpc_opts(url.clone()),
+        }
+        .map_err(|e| self.err(e))?;
         let name = match &info.variant {
             Some(v) => format!("{} ({v})", info.graph),
             None => info.graph.clone(),
@@ -219,22 +276,32 @@ impl Sink for RrdSink {
         rec.set_duration_secs("sensor_time", msg.header.stamp);
         let path = format!("{node}/{port}");
         let world = format!("world/{node}/{port}");
+        let port_key = format!("{node}/{port}");
+        let mut pixel_bytes = 0;
         let r = match &msg.body {
+            Body::Image(img) if self.codec == ImageCodec::Raw => {
+                pixel_bytes = img.data.len();
+                let image = match img.format {
+                    PixelFormat::Rgb8 => rerun::Image::from_rgb24(img.data.clone(), [img.width, img.height]),
+                    PixelFormat::Gray8 => rerun::Image::from_l8(img.data.clone(), [img.width, img.height]),
+                };
+                rec.log(path, &image)
+            }
             Body::Image(img) => {
                 let codec = self.codec;
                 let e = self.cache.get_or_encode(msg, 0, || encode::image(img, codec)).map_err(|e| self.err(e))?;
+                pixel_bytes = e.bytes.len();
                 let media = if e.format == "jpeg" { rerun::MediaType::jpeg() } else { rerun::MediaType::png() };
                 rec.log(path, &rerun::EncodedImage::from_file_contents(e.bytes.clone()).with_media_type(media))
             }
             Body::Depth(d) => {
-                // 16-bit PNG in millimetres: lossless at the sensor's resolution, ~10x smaller than f32.
-                // Through the shared cache (kind 1, as the MCAP recorder): encoded once, and an
-                // entry every user takes is freed at once instead of waiting for eviction.
-                let e = self.cache.get_or_encode(msg, 1, || encode::depth_png_mm(d)).map_err(|e| self.err(e))?;
+                // Raw 16-bit millimetres (the viewer's depth, half the bytes of f32), compressed
+                // by the file sink; bit-exact depth is the MCAP recording's `32FC1`.
+                let mm: Vec<u8> = encode::depth_mm(d).iter().flat_map(|v| v.to_le_bytes()).collect();
+                pixel_bytes = mm.len();
                 rec.log(
                     path,
-                    &rerun::EncodedDepthImage::from_file_contents(e.bytes.clone())
-                        .with_media_type(rerun::MediaType::png())
+                    &rerun::DepthImage::from_data_type_and_bytes(mm, [d.width, d.height], rerun::ChannelDatatype::U16)
                         .with_meter(1000.0),
                 )
             }
@@ -276,9 +343,11 @@ impl Sink for RrdSink {
                     .collect();
                 let ctx = rerun::AnnotationContext::new(classes.iter().map(|(i, n, c)| (*i, n.as_str(), c.0)));
                 rec.log(path.clone(), &ctx).map_err(|e| self.err(e))?;
-                let bytes: Vec<u8> = m.classes.iter().flat_map(|c| c.to_le_bytes()).collect();
-                let format =
-                    rerun::datatypes::ImageFormat::segmentation([m.width, m.height], rerun::ChannelDatatype::U16);
+                let (bytes, encoding, _) = encode::mask_raw(m);
+                pixel_bytes = bytes.len();
+                let datatype =
+                    if encoding == "mono8" { rerun::ChannelDatatype::U8 } else { rerun::ChannelDatatype::U16 };
+                let format = rerun::datatypes::ImageFormat::segmentation([m.width, m.height], datatype);
                 rec.log(path, &rerun::SegmentationImage::new(bytes, format).with_opacity(0.5))
             }
             Body::PointLabels(l) => {
@@ -369,6 +438,9 @@ impl Sink for RrdSink {
             }
             _ => Ok(()),
         };
+        let entry = self.ports.entry(port_key).or_default();
+        entry.messages += 1;
+        entry.bytes += pixel_bytes as u64;
         self.pending += payload_bytes(&msg.body);
         if self.pending >= FLUSH_BYTES {
             self.pending = 0;
@@ -384,9 +456,25 @@ impl Sink for RrdSink {
 
     fn close(&mut self) -> Result<(), SinkError> {
         let Some(rec) = self.rec.take() else { return Ok(()) };
-        rec.flush_blocking().map_err(|e| self.err(e))?;
+        match self.target {
+            Target::File(_) => rec.flush_blocking().map_err(|e| self.err(e))?,
+            // A viewer that went away must not hold the run's end.
+            Target::Grpc(_) => rec.flush_with_timeout(std::time::Duration::from_secs(3)).map_err(|e| self.err(e))?,
+        }
         drop(rec);
         Ok(())
+    }
+
+    fn report(&self) -> SinkReport {
+        let path = match &self.target {
+            Target::File(p) => Some(p),
+            Target::Grpc(_) => None,
+        };
+        SinkReport {
+            path: path.map(|p| p.display().to_string()),
+            file_bytes: path.and_then(|p| std::fs::metadata(p).ok()).map(|m| m.len()),
+            ports: self.ports.clone(),
+        }
     }
 }
 

@@ -9,7 +9,7 @@ use dynaflow_engine::sink::{DigestSink, Sink};
 use dynaflow_engine::spec::Override;
 use dynaflow_engine::{LoadRequest, SourceOverride};
 use dynaflow_recordings::mcap::DEFAULT_FLUSH_INTERVAL;
-use dynaflow_recordings::{EncodeCache, ImageCodec, McapSink, MessageLog, RrdSink};
+use dynaflow_recordings::{EncodeCache, ImageCodec, LiveSink, McapSink, MessageLog, RrdSink};
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, RunArgs};
 
@@ -70,8 +70,10 @@ pub fn run(args: &RunArgs) -> u8 {
         return EXIT_BAD_INPUT;
     }
 
-    let codec = if args.image_format == "png" { ImageCodec::Png } else { ImageCodec::Jpeg(90) };
-    let image_recorders = args.record.iter().filter(|r| matches!(r.trim(), "rrd" | "mcap")).count();
+    let codec = ImageCodec::from_name(&args.image_format).unwrap_or(ImageCodec::Jpeg(90));
+    let live_url = live_stream(args);
+    let image_recorders =
+        args.record.iter().filter(|r| matches!(r.trim(), "rrd" | "mcap")).count() + usize::from(live_url.is_some());
     let cache = EncodeCache::new(image_recorders);
     let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
     for r in &args.record {
@@ -92,6 +94,9 @@ pub fn run(args: &RunArgs) -> u8 {
                 return EXIT_BAD_INPUT;
             }
         }
+    }
+    if let Some(url) = live_url {
+        sinks.push(Box::new(LiveSink::new(url).with_codec(codec).with_cache(cache.clone())));
     }
     let digest = DigestSink::default();
     if args.digest {
@@ -178,6 +183,9 @@ pub fn run(args: &RunArgs) -> u8 {
     {
         obj.insert("digests".into(), digest.to_json());
     }
+    if let Some(recorders) = summary.get_mut("recorders") {
+        recording_costs(recorders, report.frames);
+    }
     let path = args.out.join(format!("{stem}.summary.json"));
     let written = serde_json::to_string_pretty(&summary)
         .map_err(std::io::Error::other)
@@ -216,4 +224,88 @@ fn spawn_progress(options: &RunOptions) -> (indicatif::ProgressBar, tokio::task:
         }
     });
     (bar, task)
+}
+
+/// Add `bytes_per_frame` to each recorder and port of the summary's `recorders` and print
+/// what each file cost and its largest ports, so a user sees what recording takes.
+fn recording_costs(recorders: &mut serde_json::Value, frames: u64) {
+    use serde_json::Value;
+    let per_frame = |b: u64| b as f64 / frames.max(1) as f64;
+    let kib = |b: f64| b / 1024.0;
+    let Some(map) = recorders.as_object_mut() else { return };
+    for (name, r) in map.iter_mut() {
+        let file = r.get("file_bytes").and_then(Value::as_u64);
+        let mut ports: Vec<(String, u64, u64)> = Vec::new();
+        if let Some(ps) = r.get_mut("ports").and_then(Value::as_object_mut) {
+            for (port, p) in ps.iter_mut() {
+                let bytes = p.get("bytes").and_then(Value::as_u64).unwrap_or(0);
+                let dropped = p.get("dropped").and_then(Value::as_u64).unwrap_or(0);
+                if let Some(o) = p.as_object_mut() {
+                    o.insert("bytes_per_frame".into(), Value::from(per_frame(bytes).round()));
+                }
+                ports.push((port.clone(), bytes, dropped));
+            }
+        }
+        if let Some(f) = file
+            && let Some(o) = r.as_object_mut()
+        {
+            o.insert("bytes_per_frame".into(), Value::from(per_frame(f).round()));
+        }
+        if file.is_none() {
+            let messages: u64 = r
+                .get("ports")
+                .and_then(Value::as_object)
+                .map_or(0, |ps| ps.values().filter_map(|p| p.get("messages").and_then(Value::as_u64)).sum());
+            let dropped: u64 = ports.iter().map(|p| p.2).sum();
+            say!("streamed {name}: {messages} messages, {dropped} dropped (per port in the summary)");
+            continue;
+        }
+        let mut line = format!("recorded {name}:");
+        if let Some(f) = file {
+            line += &format!(" {:.1} MiB, {:.0} KiB/frame", f as f64 / 1048576.0, kib(per_frame(f)));
+        }
+        ports.sort_by_key(|p| std::cmp::Reverse(p.1));
+        let top: Vec<String> = ports
+            .iter()
+            .filter(|p| p.1 > 0)
+            .take(4)
+            .map(|(p, b, _)| format!("{p} {:.0}", kib(per_frame(*b))))
+            .collect();
+        if !top.is_empty() {
+            line += &format!("; largest ports before compression (KiB/frame): {}", top.join(", "));
+        }
+        let dropped: u64 = ports.iter().map(|p| p.2).sum();
+        if dropped > 0 {
+            line += &format!("; {dropped} messages dropped (per port in the summary)");
+        }
+        say!("{line}");
+    }
+}
+
+/// The viewer URL to stream to (`--connect`, `--spawn`), once it answers; a viewer that cannot
+/// be reached or started is a warning, and the run goes on with its files only.
+fn live_stream(args: &RunArgs) -> Option<String> {
+    let url = if args.spawn {
+        match dynaflow_recordings::live::spawn_viewer() {
+            Ok(url) => url,
+            Err(e) => {
+                eprintln!("warning: {e}\n  the run goes on without the live stream");
+                return None;
+            }
+        }
+    } else {
+        args.connect.clone()?
+    };
+    match dynaflow_recordings::live::probe(&url) {
+        Ok(()) => {
+            tracing::info!("streaming to the rerun viewer at {url}");
+            Some(url)
+        }
+        Err(e) => {
+            eprintln!(
+                "warning: no rerun viewer at {url} ({e}); the run goes on without the live stream.\n  start one with `rerun` (pip install rerun-sdk==0.36.3), or use `--spawn`"
+            );
+            None
+        }
+    }
 }

@@ -80,9 +80,7 @@ impl DepthImage {
     pub(super) fn digest_into(&self, d: &mut Digest) {
         d.u64(u64::from(self.width));
         d.u64(u64::from(self.height));
-        for v in &self.data {
-            d.f32(*v);
-        }
+        d.f32s(&self.data);
     }
 }
 

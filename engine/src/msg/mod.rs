@@ -19,7 +19,7 @@ mod semantic;
 use std::fmt;
 use std::sync::Arc;
 
-pub use digest::Digest;
+pub use digest::{DIGEST_SCHEME, Digest};
 pub use features::{Descriptors, Keypoint, Keypoints, LabelReason, PointLabel, PointLabels, Track, Tracks};
 pub use geometry::{
     Isometry3, MapKeyFrame, MapObservation, MapPoint, OctreeUpdate, PointCloud, Pose, SparseMap, StampedPose,

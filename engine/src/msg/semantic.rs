@@ -57,13 +57,9 @@ impl SegmentationMask {
     pub(super) fn digest_into(&self, d: &mut Digest) {
         d.u64(u64::from(self.width));
         d.u64(u64::from(self.height));
-        for c in &self.classes {
-            d.bytes(&c.to_le_bytes());
-        }
+        d.u16s(&self.classes);
         if let Some(inst) = &self.instances {
-            for c in inst {
-                d.bytes(&c.to_le_bytes());
-            }
+            d.u16s(inst);
         }
         for n in &self.class_names {
             d.str(n);

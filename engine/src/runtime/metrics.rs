@@ -195,6 +195,8 @@ pub struct RunReport {
     pub dropped: u64,
     /// Messages recorded but lost because a sink failed.
     pub sink_dropped: u64,
+    /// Per recorder (by name): file size, bytes and drops per port.
+    pub recorders: std::collections::BTreeMap<String, crate::sink::SinkReport>,
     /// Failures.
     pub failures: Vec<Failure>,
 }

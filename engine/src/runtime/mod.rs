@@ -34,7 +34,7 @@ pub use metrics::{EdgeReport, Failure, LatencyStats, NodeReport, RunReport, RunS
 
 use crate::msg::Message;
 use crate::op::{Context, Instance, OpError};
-use crate::sink::{RunInfo, Sink, SinkError};
+use crate::sink::{RunInfo, Sink, SinkError, SinkReport};
 use crate::spec::{RecordPolicy, ResolvedGraph};
 
 /// Options of one run.
@@ -108,9 +108,13 @@ pub enum RunError {
 /// Mix the graph seed and the node id into the node's RNG seed (SplitMix64 finaliser over an
 /// FNV-1a hash of the id), so adding a node never changes another node's random stream.
 pub fn node_seed(graph_seed: u64, node: &str) -> u64 {
-    let mut d = crate::msg::Digest::new();
-    d.str(node);
-    let mut z = graph_seed ^ d.finish();
+    // Byte-wise FNV-1a of the length-prefixed id (what the content digest was before scheme
+    // 2; kept so every node's random stream, and so every documented result, stays the same).
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in (node.len() as u64).to_le_bytes().iter().chain(node.as_bytes()) {
+        h = (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    let mut z = graph_seed ^ h;
     z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
     z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
@@ -244,13 +248,14 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
             }
         }
     }
-    let (mut sink_failures, mut sink_dropped) = (Vec::new(), 0);
+    let (mut sink_failures, mut sink_dropped, mut recorders) = (Vec::new(), 0, std::collections::BTreeMap::new());
     for handle in sink_handles {
         let joined = tokio::task::spawn_blocking(move || handle.join()).await.ok().and_then(Result::ok);
         match joined {
-            Some((f, lost)) => {
-                sink_failures.extend(f);
-                sink_dropped += lost;
+            Some(done) => {
+                sink_failures.extend(done.failures);
+                sink_dropped += done.lost;
+                recorders.insert(done.name, done.report);
             }
             None => sink_failures.push(Failure { node: "sinks".into(), error: "a recorder thread panicked".into() }),
         }
@@ -306,6 +311,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
         edges: edge_reports,
         nodes,
         sink_dropped,
+        recorders,
         failures,
     })
 }
@@ -314,7 +320,16 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
 /// backpressure instead of losing messages.
 const TAP_CAPACITY: usize = 256;
 
-type SinkJoin = std::thread::JoinHandle<(Vec<Failure>, u64)>;
+/// What a recorder thread hands back: its failures, messages it never saw after failing,
+/// and its report.
+struct SinkDone {
+    name: String,
+    failures: Vec<Failure>,
+    lost: u64,
+    report: SinkReport,
+}
+
+type SinkJoin = std::thread::JoinHandle<SinkDone>;
 
 /// Open every sink, then give each its own thread and queue, so a slow recorder (image
 /// encoding) never holds up a fast one.
@@ -347,7 +362,7 @@ fn sink_threads(
                         lost += 1;
                         continue;
                     }
-                    if let Err(e) = sink.record(&tap.node, tap.port, &tap.msg) {
+                    if let Err(e) = sink.record_shared(&tap.node, tap.port, &tap.msg) {
                         tracing::error!("recording stopped: {e}");
                         failures.push(Failure { node: format!("sink:{}", sink.name()), error: e.to_string() });
                         let _ = sink.close();
@@ -357,7 +372,7 @@ fn sink_threads(
                 if live && let Err(e) = sink.close() {
                     failures.push(Failure { node: format!("sink:{}", sink.name()), error: e.to_string() });
                 }
-                (failures, lost)
+                SinkDone { name: sink.name().to_owned(), failures, lost, report: sink.report() }
             })
             .map_err(|e| SinkError::new("sinks", format!("cannot start a recorder thread: {e}")))?;
         senders.push(tx);

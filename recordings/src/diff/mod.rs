@@ -159,6 +159,10 @@ pub struct DiffReport {
     pub first_divergence: Option<(u64, String)>,
     /// True when nothing differs beyond tolerance.
     pub same: bool,
+    /// Set when the recordings use different content-digest schemes (one made before scheme
+    /// 2): frames were compared on their numeric payload only, pixels not at all.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub digests: Option<String>,
 }
 
 fn tolerance_for<'a>(tols: &'a [Tolerance], topic: &str) -> Vec<&'a Tolerance> {
@@ -181,6 +185,10 @@ fn exceeds(tols: &[&Tolerance], metrics: &BTreeMap<String, f64>) -> Option<Strin
 
 /// Compare two recordings.
 pub fn diff(a: &Recording, b: &Recording, tols: &[Tolerance]) -> DiffReport {
+    // Recordings made before digest scheme 2 carry no `digest` metadata (scheme 1); digests of
+    // two schemes never match, so frames are then compared on their numeric payload alone.
+    let scheme = |r: &Recording| r.metadata.get("digest").cloned().unwrap_or_else(|| "dynaflow-digest-1".into());
+    let comparable = scheme(a) == scheme(b);
     let mut topics = Vec::new();
     let mut ate = Vec::new();
     for (name, ta) in &a.topics {
@@ -211,7 +219,8 @@ pub fn diff(a: &Recording, b: &Recording, tols: &[Tolerance]) -> DiffReport {
                         let slot = d.max.entry(key.clone()).or_insert(0.0);
                         *slot = slot.max(*v);
                     }
-                    if pa["digest"] == pb["digest"] {
+                    let same = if comparable { pa["digest"] == pb["digest"] } else { m.values().all(|v| *v == 0.0) };
+                    if same {
                         None
                     } else {
                         d.frames_changed += 1;
@@ -262,6 +271,13 @@ pub fn diff(a: &Recording, b: &Recording, tols: &[Tolerance]) -> DiffReport {
         ate,
         first_divergence,
         same,
+        digests: (!comparable).then(|| {
+            format!(
+                "A and B use different content digests ({} vs {}): frames compared on their numeric payload only; images, depth and masks not compared",
+                scheme(a),
+                scheme(b)
+            )
+        }),
     }
 }
 
@@ -301,6 +317,9 @@ impl DiffReport {
         }
         if self.truncated {
             out.push_str("note: a recording was cut short (killed run); compared up to its last complete chunk\n");
+        }
+        if let Some(note) = &self.digests {
+            out.push_str(&format!("note: {note}\n"));
         }
         match &self.first_divergence {
             None if self.same => out.push_str("identical within tolerance\n"),

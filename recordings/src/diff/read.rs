@@ -113,9 +113,18 @@ pub fn read_mcap_bytes(path: &Path, buf: &[u8]) -> Result<Recording, DiffError> 
                     ty: channel.metadata.get("dynaflow.type").cloned().unwrap_or_default(),
                     frames: BTreeMap::new(),
                 });
-                let value: Value = serde_json::from_slice(&data)
-                    .map_err(|e| bad(format!("message {} on {} is not JSON: {e}", header.sequence, channel.topic)))?;
-                let payload = value.get("dynaflow").cloned().unwrap_or(Value::Null);
+                let payload = if channel.message_encoding == "protobuf" {
+                    // Images, depth and masks: the payload rides in an undeclared field.
+                    let bytes = crate::mcap::proto::payload_of(&data).map_err(|e| {
+                        bad(format!("message {} on {} is not protobuf: {e}", header.sequence, channel.topic))
+                    })?;
+                    serde_json::from_slice(bytes).unwrap_or(Value::Null)
+                } else {
+                    let value: Value = serde_json::from_slice(&data).map_err(|e| {
+                        bad(format!("message {} on {} is not JSON: {e}", header.sequence, channel.topic))
+                    })?;
+                    value.get("dynaflow").cloned().unwrap_or(Value::Null)
+                };
                 let seq = payload.get("seq").and_then(Value::as_u64).unwrap_or(u64::from(header.sequence));
                 topic.frames.insert(seq, payload);
             }

@@ -1,4 +1,5 @@
-//! Messages as Foxglove JSON (`message_encoding: json`, `schema encoding: jsonschema`).
+//! Messages as Foxglove JSON (`message_encoding: json`, `schema encoding: jsonschema`), except
+//! images, depth and masks, which are protobuf (`proto`).
 //!
 //! Foxglove's well-known schema names are used where one fits (images, annotations, poses,
 //! point clouds, calibration, scene updates); `dynaflow.PointLabels` and `dynaflow.Scalars`
@@ -9,13 +10,21 @@ use base64::Engine as _;
 use dynaflow_engine::msg::{Body, Message, PointCloud, PortType, SparseMap};
 use serde_json::{Value, json};
 
+use super::proto;
 use crate::encode::{self, EncodeCache, ImageCodec};
 use crate::payload::payload;
 
-/// The schema name used for a port type.
-pub fn schema_name(ty: PortType) -> &'static str {
+/// Whether a port type's messages are protobuf-encoded (pixels), not JSON.
+pub fn is_protobuf(ty: PortType) -> bool {
+    matches!(ty, PortType::Image | PortType::Depth | PortType::Mask)
+}
+
+/// The schema name used for a port type (colour images depend on the codec).
+pub fn schema_name(ty: PortType, codec: ImageCodec) -> &'static str {
     match ty {
-        PortType::Image | PortType::Depth | PortType::Mask => "foxglove.CompressedImage",
+        PortType::Image if codec == ImageCodec::Raw => "foxglove.RawImage",
+        PortType::Image => "foxglove.CompressedImage",
+        PortType::Depth | PortType::Mask => "foxglove.RawImage",
         PortType::CameraInfo => "foxglove.CameraCalibration",
         PortType::Keypoints | PortType::Tracks | PortType::Detections => "foxglove.ImageAnnotations",
         PortType::Pose => "foxglove.PoseInFrame",
@@ -39,9 +48,6 @@ const DYNAFLOW: &str = r#"{"type":"object","description":"dynaflow header, conte
 pub fn schema_text(name: &str) -> String {
     let pose = format!(r#"{{"type":"object","properties":{{"position":{VEC3},"orientation":{QUAT}}}}}"#);
     let body = match name {
-        "foxglove.CompressedImage" => format!(
-            r#""timestamp":{TIME},"frame_id":{{"type":"string"}},"data":{{"type":"string","contentEncoding":"base64"}},"format":{{"type":"string"}}"#
-        ),
         "foxglove.CameraCalibration" => format!(
             r#""timestamp":{TIME},"frame_id":{{"type":"string"}},"width":{{"type":"integer"}},"height":{{"type":"integer"}},"distortion_model":{{"type":"string"}},"D":{{"type":"array","items":{{"type":"number"}}}},"K":{{"type":"array","items":{{"type":"number"}},"minItems":9,"maxItems":9}},"R":{{"type":"array","items":{{"type":"number"}},"minItems":9,"maxItems":9}},"P":{{"type":"array","items":{{"type":"number"}},"minItems":12,"maxItems":12}}"#
         ),
@@ -74,6 +80,12 @@ fn b64(bytes: &[u8]) -> String {
     base64::engine::general_purpose::STANDARD.encode(bytes)
 }
 
+/// An image coordinate for display, to 1/100 px: `123.46` instead of the 17 digits of the
+/// widened `f32` (the exact values are in the `dynaflow` payload).
+fn px(v: f32) -> f64 {
+    (f64::from(v) * 100.0).round() / 100.0
+}
+
 fn color(r: f32, g: f32, b: f32, a: f32) -> Value {
     json!({"r": r, "g": g, "b": b, "a": a})
 }
@@ -84,23 +96,40 @@ fn pose_json(iso: &nalgebra::Isometry3<f64>) -> Value {
     json!({"position": {"x": t.x, "y": t.y, "z": t.z}, "orientation": {"x": q.x, "y": q.y, "z": q.z, "w": q.w}})
 }
 
-/// Encode a message as its Foxglove JSON object.
-pub fn to_json(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Result<Value, String> {
+/// Encode an image, depth or mask message as its protobuf Foxglove message (`None` for
+/// other types): depth as `32FC1` metres (bit-exact), masks as `mono8`/`16UC1` class ids,
+/// colour as JPEG/PNG (`CompressedImage`) or raw `rgb8`/`mono8`.
+pub fn to_protobuf(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Option<Result<Vec<u8>, String>> {
+    let (stamp, frame_id) = (msg.header.stamp, &*msg.header.frame_id);
+    let payload = || serde_json::to_vec(&payload(msg)).map_err(|e| e.to_string());
+    let out = match &msg.body {
+        Body::Image(img) if codec == ImageCodec::Raw => {
+            let (encoding, step) = encode::raw_image_encoding(img);
+            let layout = proto::RawLayout { width: img.width, height: img.height, encoding, step };
+            payload().map(|p| proto::raw_image(stamp, frame_id, layout, |b| b.extend_from_slice(&img.data), &p))
+        }
+        Body::Image(img) => cache
+            .get_or_encode(msg, 0, || encode::image(img, codec))
+            .and_then(|e| Ok(proto::compressed_image(stamp, frame_id, &e.bytes, e.format, &payload()?))),
+        Body::Depth(d) => {
+            let layout = proto::RawLayout { width: d.width, height: d.height, encoding: "32FC1", step: d.width * 4 };
+            payload().map(|p| proto::raw_image(stamp, frame_id, layout, |b| encode::depth_f32_le_into(d, b), &p))
+        }
+        Body::Mask(m) => {
+            let (encoding, step) = encode::mask_encoding(m);
+            let layout = proto::RawLayout { width: m.width, height: m.height, encoding, step };
+            payload().map(|p| proto::raw_image(stamp, frame_id, layout, |b| encode::mask_raw_into(m, b), &p))
+        }
+        _ => return None,
+    };
+    Some(out)
+}
+
+/// Encode a non-image message as its Foxglove JSON object.
+pub fn to_json(msg: &Message) -> Result<Value, String> {
     let ts = time(msg.header.stamp);
     let frame_id = &*msg.header.frame_id;
     let mut v = match &msg.body {
-        Body::Image(img) => {
-            let e = cache.get_or_encode(msg, 0, || encode::image(img, codec))?;
-            json!({"timestamp": ts, "frame_id": frame_id, "data": b64(&e.bytes), "format": e.format})
-        }
-        Body::Depth(d) => {
-            let e = cache.get_or_encode(msg, 1, || encode::depth_png_mm(d))?;
-            json!({"timestamp": ts, "frame_id": frame_id, "data": b64(&e.bytes), "format": "png"})
-        }
-        Body::Mask(m) => {
-            let e = encode::mask_png(m)?;
-            json!({"timestamp": ts, "frame_id": frame_id, "data": b64(&e.bytes), "format": "png"})
-        }
         Body::CameraInfo(c) => json!({
             "timestamp": ts, "frame_id": frame_id, "width": c.width, "height": c.height,
             "distortion_model": "plumb_bob", "D": c.distortion,
@@ -112,7 +141,7 @@ pub fn to_json(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Result<
             "circles": [], "texts": [],
             "points": [{
                 "timestamp": ts, "type": 1, "thickness": 3.0,
-                "points": k.points.iter().map(|p| json!({"x": p.x, "y": p.y})).collect::<Vec<_>>(),
+                "points": k.points.iter().map(|p| json!({"x": px(p.x), "y": px(p.y)})).collect::<Vec<_>>(),
                 "outline_color": color(0.1, 0.9, 0.2, 1.0), "outline_colors": [], "fill_color": color(0.1, 0.9, 0.2, 1.0),
             }],
         }),
@@ -120,7 +149,7 @@ pub fn to_json(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Result<
             "circles": [], "texts": [],
             "points": [{
                 "timestamp": ts, "type": 4, "thickness": 1.0,
-                "points": t.tracks.iter().flat_map(|t| [json!({"x": t.prev[0], "y": t.prev[1]}), json!({"x": t.cur[0], "y": t.cur[1]})]).collect::<Vec<_>>(),
+                "points": t.tracks.iter().flat_map(|t| [json!({"x": px(t.prev[0]), "y": px(t.prev[1])}), json!({"x": px(t.cur[0]), "y": px(t.cur[1])})]).collect::<Vec<_>>(),
                 "outline_color": color(1.0, 0.8, 0.0, 1.0), "outline_colors": [], "fill_color": color(0.0, 0.0, 0.0, 0.0),
             }],
         }),
