@@ -442,7 +442,9 @@ impl Sink for RrdSink {
         entry.messages += 1;
         entry.bytes += pixel_bytes as u64;
         self.pending += payload_bytes(&msg.body);
-        if self.pending >= FLUSH_BYTES {
+        // The file writer's queue needs this bound; the gRPC client's queue is bounded already
+        // (its backpressure reaches the live stream's own queue, which drops and counts).
+        if self.pending >= FLUSH_BYTES && matches!(self.target, Target::File(_)) {
             self.pending = 0;
             rec.flush_blocking().map_err(|e| self.err(e))?;
         }
