@@ -135,7 +135,7 @@ pub struct RunArgs {
     #[arg(long, default_value = "rrd,mcap", value_delimiter = ',')]
     pub record: Vec<String>,
     /// How colour images are stored in recordings: `jpeg` (quality 90), lossless `png`, or
-    /// lossless `raw` pixels (fast to write, ~7x the bytes of JPEG; docs/benchmarks.md).
+    /// lossless `raw` pixels (fast to write, 8.5x the bytes of JPEG; docs/benchmarks.md).
     #[arg(long, default_value = "jpeg", value_parser = ["jpeg", "png", "raw"])]
     pub image_format: String,
     /// Stream every recorded port to a running rerun viewer or server as the graph runs

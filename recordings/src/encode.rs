@@ -121,7 +121,7 @@ pub fn depth_mm(depth: &DepthImage) -> Vec<u16> {
 pub fn mask_raw(mask: &SegmentationMask) -> (Vec<u8>, &'static str, u32) {
     let (encoding, step) = mask_encoding(mask);
     let mut out = Vec::with_capacity(step as usize * mask.height as usize);
-    mask_raw_into(mask, &mut out);
+    mask_raw_into(mask, encoding, &mut out);
     (out, encoding, step)
 }
 
@@ -130,9 +130,9 @@ pub fn mask_encoding(mask: &SegmentationMask) -> (&'static str, u32) {
     if mask.classes.iter().all(|&c| c <= 255) { ("mono8", mask.width) } else { ("16UC1", mask.width * 2) }
 }
 
-/// [`mask_raw`]'s samples, appended to `out`.
-pub fn mask_raw_into(mask: &SegmentationMask, out: &mut Vec<u8>) {
-    if mask_encoding(mask).0 == "mono8" {
+/// [`mask_raw`]'s samples in `encoding` (from [`mask_encoding`]), appended to `out`.
+pub fn mask_raw_into(mask: &SegmentationMask, encoding: &str, out: &mut Vec<u8>) {
+    if encoding == "mono8" {
         out.extend(mask.classes.iter().map(|&c| c as u8));
     } else {
         out.extend(mask.classes.iter().flat_map(|c| c.to_le_bytes()));

@@ -127,16 +127,18 @@ impl LiveSink {
 
 fn worker(mut rrd: RrdSink, rx: &Receiver<Item>, shared: &Shared, url: &str) {
     let mut last_probe = Instant::now();
+    let went_away = |seq: u64, why: &dyn std::fmt::Display| {
+        tracing::warn!(
+            "the rerun viewer at {url} went away at frame {seq} ({why}); the run goes on and the files get everything, the live stream stops (its drops are counted in the summary)"
+        );
+        shared.gone.store(true, Ordering::Relaxed);
+    };
     while let Ok((node, port, msg)) = rx.recv() {
         let key = format!("{node}/{port}");
         if !shared.gone.load(Ordering::Relaxed) && last_probe.elapsed() >= PROBE_EVERY {
             last_probe = Instant::now();
             if let Err(e) = probe(url) {
-                tracing::warn!(
-                    "the rerun viewer at {url} went away at frame {} ({e}); the run goes on and the files get everything, the live stream stops (its drops are counted in the summary)",
-                    msg.header.seq
-                );
-                shared.gone.store(true, Ordering::Relaxed);
+                went_away(msg.header.seq, &e);
             }
         }
         if shared.gone.load(Ordering::Relaxed) {
@@ -146,11 +148,7 @@ fn worker(mut rrd: RrdSink, rx: &Receiver<Item>, shared: &Shared, url: &str) {
         match rrd.record(&node, &port, &msg) {
             Ok(()) => shared.count(&key, |p| p.messages += 1),
             Err(e) => {
-                tracing::warn!(
-                    "the rerun viewer at {url} went away at frame {} ({e}); the run goes on and the files get everything, the live stream stops (its drops are counted in the summary)",
-                    msg.header.seq
-                );
-                shared.gone.store(true, Ordering::Relaxed);
+                went_away(msg.header.seq, &e);
                 shared.count(&key, |p| p.dropped += 1);
             }
         }
@@ -221,19 +219,18 @@ impl Sink for LiveSink {
 
 impl LiveSink {
     fn enqueue(&mut self, node: &str, port: &str, msg: &Arc<Message>) -> Result<(), SinkError> {
-        let key = format!("{node}/{port}");
         let Some(queue) = &self.queue else { return Err(SinkError::new("live", "not open")) };
-        if self.shared.gone.load(Ordering::Relaxed) {
-            self.shared.count(&key, |p| p.dropped += 1);
-            return Ok(());
-        }
-        match queue.try_send((node.to_owned(), port.to_owned(), msg.clone())) {
-            Ok(()) => {}
-            Err(TrySendError::Full(_)) => self.shared.count(&key, |p| p.dropped += 1),
-            Err(TrySendError::Disconnected(_)) => {
-                self.shared.gone.store(true, Ordering::Relaxed);
-                self.shared.count(&key, |p| p.dropped += 1);
-            }
+        let sent = !self.shared.gone.load(Ordering::Relaxed)
+            && match queue.try_send((node.to_owned(), port.to_owned(), msg.clone())) {
+                Ok(()) => true,
+                Err(TrySendError::Full(_)) => false,
+                Err(TrySendError::Disconnected(_)) => {
+                    self.shared.gone.store(true, Ordering::Relaxed);
+                    false
+                }
+            };
+        if !sent {
+            self.shared.count(&format!("{node}/{port}"), |p| p.dropped += 1);
         }
         Ok(())
     }

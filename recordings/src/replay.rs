@@ -190,6 +190,9 @@ impl Pixels<'_> {
         if (step as usize) < row || data.len() < step as usize * height as usize {
             return Err(format!("{encoding} {width}x{height}: step {step}, {} bytes", data.len()));
         }
+        if row == 0 || height == 0 {
+            return Ok((width, height, Vec::new()));
+        }
         let out = data.chunks(step as usize).take(height as usize).flat_map(|r| &r[..row]).copied().collect();
         Ok((width, height, out))
     }
@@ -461,4 +464,28 @@ impl Source for Replay {
 /// Check a replayed message against the digest in its recorded `dynaflow` payload.
 pub fn same_as_recorded(msg: &Message, payload: &Value) -> bool {
     payload["digest"].as_str() == Some(format!("{:016x}", msg.digest()).as_str())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{PortType, Stored, decode};
+    use crate::mcap::proto::{RawLayout, raw_image};
+
+    fn mono8(width: u32, height: u32, step: u32, data: &[u8]) -> Stored {
+        let payload = br#"{"seq":0,"stamp":0.0,"frame_id":"c","data":{}}"#;
+        let layout = RawLayout { width, height, encoding: "mono8", step };
+        Stored::Proto { raw: true, data: raw_image(0.0, "c", layout, |b| b.extend_from_slice(data), payload) }
+    }
+
+    #[test]
+    fn raw_images_with_odd_sizes_are_errors_or_empty_never_panics() {
+        // A zero-width image (step 0) decodes to an empty mask.
+        let (_, body) = decode(PortType::Mask, &mono8(0, 3, 0, &[])).unwrap();
+        assert!(matches!(body, dynaflow_engine::msg::Body::Mask(m) if m.classes.is_empty()));
+        // A step shorter than a row is an error naming the sizes.
+        let err = decode(PortType::Mask, &mono8(4, 2, 1, &[1; 2])).unwrap_err();
+        assert!(err.contains("mono8 4x2: step 1"), "{err}");
+        let (_, body) = decode(PortType::Mask, &mono8(4, 2, 4, &[1; 8])).unwrap();
+        assert!(matches!(body, dynaflow_engine::msg::Body::Mask(m) if m.classes == vec![1; 8]));
+    }
 }

@@ -234,47 +234,39 @@ fn recording_costs(recorders: &mut serde_json::Value, frames: u64) {
     let kib = |b: f64| b / 1024.0;
     let Some(map) = recorders.as_object_mut() else { return };
     for (name, r) in map.iter_mut() {
-        let file = r.get("file_bytes").and_then(Value::as_u64);
-        let mut ports: Vec<(String, u64, u64)> = Vec::new();
+        let field = |p: &Value, k: &str| p.get(k).and_then(Value::as_u64).unwrap_or(0);
+        // (port, bytes, dropped, messages)
+        let mut ports: Vec<(String, u64, u64, u64)> = Vec::new();
         if let Some(ps) = r.get_mut("ports").and_then(Value::as_object_mut) {
             for (port, p) in ps.iter_mut() {
-                let bytes = p.get("bytes").and_then(Value::as_u64).unwrap_or(0);
-                let dropped = p.get("dropped").and_then(Value::as_u64).unwrap_or(0);
+                let bytes = field(p, "bytes");
+                ports.push((port.clone(), bytes, field(p, "dropped"), field(p, "messages")));
                 if let Some(o) = p.as_object_mut() {
                     o.insert("bytes_per_frame".into(), Value::from(per_frame(bytes).round()));
                 }
-                ports.push((port.clone(), bytes, dropped));
             }
         }
-        if let Some(f) = file
-            && let Some(o) = r.as_object_mut()
-        {
-            o.insert("bytes_per_frame".into(), Value::from(per_frame(f).round()));
-        }
-        if file.is_none() {
-            let messages: u64 = r
-                .get("ports")
-                .and_then(Value::as_object)
-                .map_or(0, |ps| ps.values().filter_map(|p| p.get("messages").and_then(Value::as_u64)).sum());
-            let dropped: u64 = ports.iter().map(|p| p.2).sum();
+        let dropped: u64 = ports.iter().map(|p| p.2).sum();
+        let Some(file) = r.get("file_bytes").and_then(Value::as_u64) else {
+            let messages: u64 = ports.iter().map(|p| p.3).sum();
             say!("streamed {name}: {messages} messages, {dropped} dropped (per port in the summary)");
             continue;
+        };
+        if let Some(o) = r.as_object_mut() {
+            o.insert("bytes_per_frame".into(), Value::from(per_frame(file).round()));
         }
-        let mut line = format!("recorded {name}:");
-        if let Some(f) = file {
-            line += &format!(" {:.1} MiB, {:.0} KiB/frame", f as f64 / 1048576.0, kib(per_frame(f)));
-        }
+        let mut line =
+            format!("recorded {name}: {:.1} MiB, {:.0} KiB/frame", file as f64 / 1048576.0, kib(per_frame(file)));
         ports.sort_by_key(|p| std::cmp::Reverse(p.1));
         let top: Vec<String> = ports
             .iter()
             .filter(|p| p.1 > 0)
             .take(4)
-            .map(|(p, b, _)| format!("{p} {:.0}", kib(per_frame(*b))))
+            .map(|(p, b, ..)| format!("{p} {:.0}", kib(per_frame(*b))))
             .collect();
         if !top.is_empty() {
             line += &format!("; largest ports before compression (KiB/frame): {}", top.join(", "));
         }
-        let dropped: u64 = ports.iter().map(|p| p.2).sum();
         if dropped > 0 {
             line += &format!("; {dropped} messages dropped (per port in the summary)");
         }
@@ -285,17 +277,14 @@ fn recording_costs(recorders: &mut serde_json::Value, frames: u64) {
 /// The viewer URL to stream to (`--connect`, `--spawn`), once it answers; a viewer that cannot
 /// be reached or started is a warning, and the run goes on with its files only.
 fn live_stream(args: &RunArgs) -> Option<String> {
-    let url = if args.spawn {
-        match dynaflow_recordings::live::spawn_viewer() {
-            Ok(url) => url,
-            Err(e) => {
-                eprintln!("warning: {e}\n  the run goes on without the live stream");
-                return None;
-            }
-        }
-    } else {
-        args.connect.clone()?
-    };
+    if args.spawn {
+        // `spawn_viewer` returns once the viewer listens.
+        return dynaflow_recordings::live::spawn_viewer()
+            .inspect(|url| tracing::info!("streaming to the rerun viewer at {url}"))
+            .inspect_err(|e| eprintln!("warning: {e}\n  the run goes on without the live stream"))
+            .ok();
+    }
+    let url = args.connect.clone()?;
     match dynaflow_recordings::live::probe(&url) {
         Ok(()) => {
             tracing::info!("streaming to the rerun viewer at {url}");

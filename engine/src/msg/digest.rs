@@ -52,16 +52,6 @@ impl Digest {
             self.bytes(&s.to_le_bytes());
         }
     }
-    /// Feed `u32` samples as their little-endian bytes (two per word).
-    pub fn u32s(&mut self, v: &[u32]) {
-        let mut words = v.chunks_exact(2);
-        for w in &mut words {
-            self.word(u64::from(w[0]) | u64::from(w[1]) << 32);
-        }
-        for s in words.remainder() {
-            self.bytes(&s.to_le_bytes());
-        }
-    }
     /// Feed `f32` samples by their bits (two per word).
     pub fn f32s(&mut self, v: &[f32]) {
         let mut words = v.chunks_exact(2);
@@ -114,9 +104,6 @@ mod tests {
         let v16: Vec<u16> = (0..11).map(|i| i * 4099).collect();
         let b16: Vec<u8> = v16.iter().flat_map(|v| v.to_le_bytes()).collect();
         assert_eq!(of(|d| d.u16s(&v16)), of(|d| d.bytes(&b16)));
-        let v32: Vec<u32> = (0..7).map(|i| i * 0x0101_0101).collect();
-        let b32: Vec<u8> = v32.iter().flat_map(|v| v.to_le_bytes()).collect();
-        assert_eq!(of(|d| d.u32s(&v32)), of(|d| d.bytes(&b32)));
         let vf: Vec<f32> = (0..5).map(|i| i as f32 * 0.37).collect();
         let bf: Vec<u8> = vf.iter().flat_map(|v| v.to_le_bytes()).collect();
         assert_eq!(of(|d| d.f32s(&vf)), of(|d| d.bytes(&bf)));

@@ -118,7 +118,7 @@ pub fn to_protobuf(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Opt
         Body::Mask(m) => {
             let (encoding, step) = encode::mask_encoding(m);
             let layout = proto::RawLayout { width: m.width, height: m.height, encoding, step };
-            payload().map(|p| proto::raw_image(stamp, frame_id, layout, |b| encode::mask_raw_into(m, b), &p))
+            payload().map(|p| proto::raw_image(stamp, frame_id, layout, |b| encode::mask_raw_into(m, encoding, b), &p))
         }
         _ => return None,
     };
