@@ -316,6 +316,18 @@ fn default_synthetic_scene_recording_verifies() {
             assert!(stdout.contains(line), "{line} not in {stdout}");
         }
     }
+    // The rerun file, read back by the rerun CLI: a row per message on each port's entity, one
+    // metrics entity per scalar port (its names are series), a pose path in segments.
+    if let Some(rerun) = peer("rerun") {
+        let rows = rows_per_entity(&rerun, &dir.path().join("default.rrd"));
+        for entity in ["/camera/depth", "/camera/rgb", "/orb/keypoints"] {
+            assert_eq!(rows.get(entity), Some(&30), "{entity}: {rows:?}");
+        }
+        // 30 rows of values and one static row of series names.
+        assert_eq!(rows.get("/metrics/track/stats"), Some(&31), "{rows:?}");
+        assert!(!rows.keys().any(|e| e.starts_with("/metrics/track/stats/")), "{rows:?}");
+        assert!(rows.get("/world/track/pose_path/0").is_some_and(|n| *n >= 1), "{rows:?}");
+    }
     // The summary says what each recorder wrote, per port and per frame.
     let summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.path().join("default.summary.json")).unwrap()).unwrap();

@@ -12,15 +12,19 @@
 //! | detections | `/<node>/<port>` | `Boxes2D` with class labels |
 //! | mask | `/<node>/<port>` | `SegmentationImage` (8-bit ids when they fit) + `AnnotationContext` |
 //! | point_labels | `/<node>/<port>` | `Points2D` red = dynamic, green = static |
-//! | pose | `/world/<node>/<port>` | `Transform3D` (+ `Pinhole` once intrinsics are known); path so far at `…_path` (`LineStrips3D`) |
+//! | pose | `/world/<node>/<port>` | `Transform3D` (+ `Pinhole` once intrinsics are known); path so far at `…_path/<k>` (`LineStrips3D`, 100 poses per segment) |
 //! | trajectory | `/world/<node>/<port>` | `LineStrips3D` |
 //! | point_cloud | `/world/<node>/<port>` | `Points3D` |
 //! | octree_update | `/world/<node>/<port>` | `Boxes3D` |
-//! | scalars | `/metrics/<node>/<port>/<name>` | `Scalars` |
+//! | scalars | `/metrics/<node>/<port>` | `Scalars`, one series per name (`SeriesLines` names) |
 //!
-//! Long runs in bounded memory: the SDK batches rows into chunks on a 1 s tick (fewer chunks,
-//! so a smaller RRD footer manifest, which the SDK keeps in memory until the file closes),
-//! and the recorder waits for the SDK's writer every [`FLUSH_BYTES`] of payload.
+//! Long runs in bounded memory. The SDK keeps a row of its RRD footer manifest in memory for
+//! every chunk it writes, until the file closes (a few hundred bytes to kilobytes each, one
+//! column per timeline and component), so the file recorder makes few, large chunks: every
+//! entity's rows are cut once per [`CUT_EVERY_FRAMES`] frames or at 8 MiB, there is no
+//! `log_time` timeline, one entity per scalar port, pose paths in segments. What waits to be
+//! written is bounded in bytes at every stage: rows per entity in the batcher, the batcher's
+//! in-flight budget, and [`BoundedFile`] in front of the file writer's queue.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -62,18 +66,13 @@ pub struct RrdSink {
     /// Positions of each pose stream so far, drawn as a path.
     trails: HashMap<String, Vec<[f32; 3]>>,
     cache: EncodeCache,
-    /// Bytes logged since the last flush (an estimate: the payloads).
-    pending: usize,
+    /// The last `frame / CUT_EVERY_FRAMES` at which the file's pending rows were cut.
+    cut: u64,
+    /// Series names of each scalar port, in first-seen order (the `Scalars` instance index).
+    series: HashMap<String, Vec<std::sync::Arc<str>>>,
     /// Messages and pixel bytes per `node/port`.
     ports: std::collections::BTreeMap<String, PortReport>,
 }
-
-/// The rerun SDK queues up to 1024 chunks for its file writer (Arrow encoding + LZ4), and
-/// image chunks are megabytes each; when the writer falls behind the graph, memory grows.
-/// Waiting for it after this many payload bytes bounds the queue (the recorder thread waits,
-/// not the graph: the engine's bounded recorder queue stands between them). Each wait also
-/// cuts every entity's pending rows into a chunk, so it is not smaller than needed.
-const FLUSH_BYTES: usize = 16 << 20;
 
 /// Batching of the live stream: a 50 ms tick, so a viewer shows each frame within a
 /// twentieth of a second, in a few chunks per frame rather than one per entity and row (the
@@ -84,15 +83,85 @@ const LIVE_BATCHING: rerun::log::ChunkBatcherConfig = rerun::log::ChunkBatcherCo
     ..rerun::log::ChunkBatcherConfig::DEFAULT
 };
 
-/// How the SDK batches rows into chunks: its defaults, except a 1 s tick (the file is not
-/// watched live; fewer, larger chunks for the slow-changing ports).
+/// How the file recorder batches rows into chunks. Every chunk costs a manifest row in memory
+/// until the file closes (see the module doc), so chunks are large: an entity's rows are cut
+/// at 8 MiB (about 13 frames of 640x480 depth) or by the recorder every [`CUT_EVERY_FRAMES`]
+/// frames, not on the SDK's 0.2 s tick / 2 MiB. The file is not watched live; a killed run's
+/// `.rrd` lacks the rows since the last cut (the MCAP recorder writes its own chunks). Rows
+/// wait in the batcher raw, so 8 MiB per image port is what the batching costs in memory;
+/// 32 MiB in flight between the recorder, the batcher and the writer (the SDK's default is
+/// 100 MiB). Measured: 0.42 chunks per frame on the default graph (docs/benchmarks.md).
 const BATCHING: rerun::log::ChunkBatcherConfig = rerun::log::ChunkBatcherConfig {
-    flush_tick: std::time::Duration::from_secs(1),
+    flush_tick: std::time::Duration::MAX,
+    flush_num_bytes: 8 << 20,
+    max_bytes_in_flight: 32 << 20,
     ..rerun::log::ChunkBatcherConfig::DEFAULT
 };
 
-/// A pose stream's path is re-logged every this many poses (each log carries the whole path).
+/// `config`, overridden by the rerun SDK's documented environment variables
+/// (`RERUN_FLUSH_NUM_BYTES`, `RERUN_FLUSH_NUM_ROWS`, `RERUN_FLUSH_TICK_SECS`), which the SDK
+/// applies only when no configuration is given. An unreadable value keeps `config`, with a warning.
+fn with_env(config: rerun::log::ChunkBatcherConfig) -> rerun::log::ChunkBatcherConfig {
+    config.apply_env().unwrap_or_else(|e| {
+        tracing::warn!("ignoring the rerun batching environment: {e}");
+        config
+    })
+}
+
+/// Bytes the file writer may have queued (Arrow-encoded chunks it has not compressed and
+/// written yet) before the SDK's forwarding thread waits for it.
+const WRITER_QUEUE_BYTES: u64 = 32 << 20;
+
+/// The SDK's file sink, with its queue bounded in bytes. `FileSink` queues up to 1024 messages
+/// for its writer thread whatever their size, and image chunks are megabytes each, so a writer
+/// that falls behind the graph would grow memory; this sink waits for the writer (on the SDK's
+/// forwarding thread: backpressure reaches the recorder through the batcher's bounded
+/// channels, and the engine's recorder queue stands between it and the graph) once
+/// [`WRITER_QUEUE_BYTES`] have been handed over since the last wait. Waiting does not cut the
+/// batcher's pending rows into chunks, unlike `RecordingStream::flush_blocking`.
+struct BoundedFile {
+    inner: rerun::sink::FileSink,
+    queued: std::sync::atomic::AtomicU64,
+}
+
+impl rerun::sink::LogSink for BoundedFile {
+    fn send(&self, msg: rerun::log::LogMsg) {
+        use std::sync::atomic::Ordering;
+        let bytes = match &msg {
+            rerun::log::LogMsg::ArrowMsg(_, arrow) => arrow.batch.get_array_memory_size() as u64,
+            _ => 0,
+        };
+        self.inner.send(msg);
+        if self.queued.fetch_add(bytes, Ordering::Relaxed) + bytes >= WRITER_QUEUE_BYTES {
+            self.queued.store(0, Ordering::Relaxed);
+            // An error here is the writer's (a full disk): the SDK reports it on close.
+            let _ = self.inner.flush_blocking(std::time::Duration::MAX);
+        }
+    }
+
+    fn flush_blocking(&self, timeout: std::time::Duration) -> Result<(), rerun::sink::SinkFlushError> {
+        self.queued.store(0, std::sync::atomic::Ordering::Relaxed);
+        rerun::sink::LogSink::flush_blocking(&self.inner, timeout)
+    }
+
+    fn defers_finalization_to_shutdown(&self) -> bool {
+        true
+    }
+}
+
+/// A pose stream's path is drawn as segments of this many poses, each its own entity
+/// `…_path/<k>` (so every log carries at most one segment, and the file grows linearly with
+/// the run, not quadratically), re-logged every [`TRAIL_EVERY`] poses.
+const TRAIL_SEGMENT: usize = 100;
+
+/// How often the current segment of a pose stream's path is re-logged, in poses.
 const TRAIL_EVERY: usize = 10;
+
+/// The file recorder cuts every entity's pending rows into chunks once per this many frames
+/// (by frame number, so the cut points do not depend on the machine's speed). The SDK's own
+/// tick is off for the file: it skips a tick after any entity was cut by size, which with
+/// images cut every second starved the small entities, which then grew to the size limit.
+const CUT_EVERY_FRAMES: u64 = 200;
 
 impl RrdSink {
     /// A recorder writing to `path`, colour images as JPEG (q 90).
@@ -110,7 +179,8 @@ impl RrdSink {
             points_by_seq: HashMap::new(),
             trails: HashMap::new(),
             cache: EncodeCache::default(),
-            pending: 0,
+            series: HashMap::new(),
+            cut: 0,
             ports: std::collections::BTreeMap::new(),
         }
     }
@@ -172,6 +242,14 @@ fn blueprint(info: &RunInfo) -> Blueprint {
     Blueprint::new(Horizontal::new(columns))
 }
 
+/// Segment `k` of a path: poses `k * TRAIL_SEGMENT ..= (k + 1) * TRAIL_SEGMENT` (it shares
+/// its last pose with the next segment's first, so the drawn path has no gaps), as far as the
+/// path goes.
+fn trail_segment(trail: &[[f32; 3]], k: usize) -> Vec<[f32; 3]> {
+    let start = k * TRAIL_SEGMENT;
+    trail[start.min(trail.len())..((k + 1) * TRAIL_SEGMENT + 1).min(trail.len())].to_vec()
+}
+
 fn octave_color(octave: u8) -> rerun::Color {
     const PALETTE: [[u8; 3]; 8] = [
         [230, 25, 75],
@@ -192,16 +270,6 @@ fn class_color(id: u16) -> rerun::Color {
     rerun::Color::from_rgb(r, g, b)
 }
 
-/// Rough size of what logging `body` hands the SDK (pixels dominate).
-fn payload_bytes(body: &Body) -> usize {
-    match body {
-        Body::Image(i) => i.data.len(),
-        Body::Depth(d) => d.data.len() * 2,
-        Body::Mask(m) => m.classes.len(),
-        _ => 4096,
-    }
-}
-
 impl Sink for RrdSink {
     fn name(&self) -> &str {
         "rerun"
@@ -214,11 +282,15 @@ impl Sink for RrdSink {
                 let file =
                     rerun::sink::FileSink::with_options(path, rerun::sink::FileSinkOptions { write_footer: true })
                         .map_err(|e| self.err(e))?;
-                builder.batcher_config(BATCHING).set_sinks((file,))
+                let file = BoundedFile { inner: file, queued: std::sync::atomic::AtomicU64::new(0) };
+                builder.batcher_config(with_env(BATCHING)).buffered().inspect(|rec| rec.set_sink(Box::new(file)))
             }
-            Target::Grpc(url) => builder.batcher_config(LIVE_BATCHING).connect_grpc_opts(url.clone()),
+            Target::Grpc(url) => builder.batcher_config(with_env(LIVE_BATCHING)).connect_grpc_opts(url.clone()),
         }
         .map_err(|e| self.err(e))?;
+        // Wall-clock log time is not a dynaflow timeline (`frame` and `sensor_time` are), and
+        // each timeline adds a column to every chunk's manifest row.
+        rec.set_log_time_enabled(false);
         let name = match &info.variant {
             Some(v) => format!("{} ({v})", info.graph),
             None => info.graph.clone(),
@@ -387,9 +459,16 @@ impl Sink for RrdSink {
                 rec.log(world.clone(), &tf).map_err(|e| self.err(e))?;
                 let trail = self.trails.entry(world.clone()).or_default();
                 trail.push([t.x as f32, t.y as f32, t.z as f32]);
-                if trail.len() % TRAIL_EVERY == 1 {
-                    rec.log(format!("{world}_path"), &rerun::LineStrips3D::new([trail.clone()]))
-                        .map_err(|e| self.err(e))?;
+                let newest = trail.len() - 1;
+                if newest.is_multiple_of(TRAIL_EVERY) {
+                    let segment = newest / TRAIL_SEGMENT;
+                    // A segment's first pose closes the previous one (its last stretch).
+                    let first = if newest.is_multiple_of(TRAIL_SEGMENT) { segment.saturating_sub(1) } else { segment };
+                    let strips: Vec<_> = (first..=segment).map(|k| (k, trail_segment(trail, k))).collect();
+                    for (k, strip) in strips {
+                        rec.log(format!("{world}_path/{k}"), &rerun::LineStrips3D::new([strip]))
+                            .map_err(|e| self.err(e))?;
+                    }
                 }
                 match &self.intrinsics {
                     Some(c) => rec.log(
@@ -430,23 +509,35 @@ impl Sink for RrdSink {
                 rec.log(world, &rerun::Boxes3D::from_centers_and_half_sizes(centers, [[h, h, h]]).with_colors(colors))
             }
             Body::Scalars(s) => {
-                for (name, v) in &s.values {
-                    rec.log(format!("metrics/{node}/{port}/{name}"), &rerun::Scalars::new([*v]))
-                        .map_err(|e| self.err(e))?;
+                // One entity per port, one series per name: a name not seen before on this
+                // port becomes a new series (its names re-logged); a name missing from a
+                // message is NaN there (a gap in the plot).
+                let entity = format!("metrics/{node}/{port}");
+                let names = self.series.entry(port_key.clone()).or_default();
+                let known = names.len();
+                for (name, _) in &s.values {
+                    if !names.contains(name) {
+                        names.push(name.clone());
+                    }
                 }
-                Ok(())
+                let values: Vec<f64> = names
+                    .iter()
+                    .map(|n| s.values.iter().find(|(name, _)| name == n).map_or(f64::NAN, |(_, v)| *v))
+                    .collect();
+                if names.len() != known {
+                    let lines = rerun::SeriesLines::new().with_names(names.iter().map(|n| n.to_string()));
+                    rec.log_static(entity.as_str(), &lines).map_err(|e| self.err(e))?;
+                }
+                rec.log(entity, &rerun::Scalars::new(values))
             }
             _ => Ok(()),
         };
         let entry = self.ports.entry(port_key).or_default();
         entry.messages += 1;
         entry.bytes += pixel_bytes as u64;
-        self.pending += payload_bytes(&msg.body);
-        // The file writer's queue needs this bound; the gRPC client's queue is bounded already
-        // (its backpressure reaches the live stream's own queue, which drops and counts).
-        if self.pending >= FLUSH_BYTES && matches!(self.target, Target::File(_)) {
-            self.pending = 0;
-            rec.flush_blocking().map_err(|e| self.err(e))?;
+        if matches!(self.target, Target::File(_)) && msg.header.seq / CUT_EVERY_FRAMES > self.cut {
+            self.cut = msg.header.seq / CUT_EVERY_FRAMES;
+            rec.flush_async().map_err(|e| self.err(e))?;
         }
         // Bound the label lookup table: frames older than a few hundred are never labelled.
         if self.points_by_seq.len() > 256 {
@@ -458,6 +549,14 @@ impl Sink for RrdSink {
 
     fn close(&mut self) -> Result<(), SinkError> {
         let Some(rec) = self.rec.take() else { return Ok(()) };
+        // Each path's current segment as it ended (it is re-logged every few poses only).
+        for (world, trail) in &self.trails {
+            if let Some(newest) = trail.len().checked_sub(1) {
+                let k = newest / TRAIL_SEGMENT;
+                rec.log(format!("{world}_path/{k}"), &rerun::LineStrips3D::new([trail_segment(trail, k)]))
+                    .map_err(|e| self.err(e))?;
+            }
+        }
         match self.target {
             Target::File(_) => rec.flush_blocking().map_err(|e| self.err(e))?,
             // A viewer that went away must not hold the run's end.
@@ -490,6 +589,21 @@ mod tests {
 
     use super::RrdSink;
     use crate::{EncodeCache, McapSink};
+
+    #[test]
+    fn path_segments_cover_the_path_and_join_end_to_start() {
+        let path: Vec<[f32; 3]> = (0..250).map(|i| [i as f32, 0.0, 0.0]).collect();
+        let segments: Vec<_> = (0..3).map(|k| super::trail_segment(&path, k)).collect();
+        assert_eq!(segments.iter().map(Vec::len).collect::<Vec<_>>(), [101, 101, 50]);
+        // Each segment starts where the previous one ended; together they are the path.
+        let mut joined = segments[0].clone();
+        for s in &segments[1..] {
+            assert_eq!(s[0], *joined.last().unwrap());
+            joined.extend_from_slice(&s[1..]);
+        }
+        assert_eq!(joined, path);
+        assert!(super::trail_segment(&path, 3).is_empty());
+    }
 
     #[test]
     fn both_recorders_take_each_shared_encoding_so_none_stays_pinned() {
