@@ -149,7 +149,7 @@ pub struct RunArgs {
     #[arg(long, conflicts_with = "connect")]
     pub spawn: bool,
     /// MCAP chunk size bound in KiB (a killed run loses at most one chunk, or one second).
-    #[arg(long, default_value_t = 1024)]
+    #[arg(long, default_value_t = dynaflow_recordings::mcap::DEFAULT_CHUNK_SIZE / 1024)]
     pub mcap_chunk_kib: u64,
     /// Add per-port content digests to the summary (for comparing runs).
     #[arg(long)]

@@ -23,8 +23,13 @@ use dynaflow_engine::sink::{PortReport, RunInfo, Sink, SinkError, SinkReport};
 
 use crate::encode::{EncodeCache, ImageCodec};
 
-/// Default chunk size bound (bytes before compression).
-pub const DEFAULT_CHUNK_SIZE: u64 = 1 << 20;
+/// Default chunk size bound (bytes before compression): about three frames of the default
+/// graph (640x480 `32FC1` depth, masks, JPEG colour, keypoints). The writer keeps an index entry
+/// per chunk (with an offset per channel in it) until the file closes, for the summary section
+/// readers seek with: 1 MiB chunks made 2.5 a frame, 8 MiB 0.37 (1.6 MB less peak memory at
+/// 10 000 frames). A reader decompresses at most this much to reach a message (zstd: a few ms);
+/// the one-second bound still limits what a crash loses.
+pub const DEFAULT_CHUNK_SIZE: u64 = 8 << 20;
 /// Default longest time a chunk stays open.
 pub const DEFAULT_FLUSH_INTERVAL: Duration = Duration::from_secs(1);
 
