@@ -250,6 +250,16 @@ fn trail_segment(trail: &[[f32; 3]], k: usize) -> Vec<[f32; 3]> {
     trail[start.min(trail.len())..((k + 1) * TRAIL_SEGMENT + 1).min(trail.len())].to_vec()
 }
 
+/// Logs segment `k` of the path of pose entity `world` as `<world>_path/<k>`.
+fn log_trail_segment(
+    rec: &rerun::RecordingStream,
+    world: &str,
+    trail: &[[f32; 3]],
+    k: usize,
+) -> rerun::RecordingStreamResult<()> {
+    rec.log(format!("{world}_path/{k}"), &rerun::LineStrips3D::new([trail_segment(trail, k)]))
+}
+
 fn octave_color(octave: u8) -> rerun::Color {
     const PALETTE: [[u8; 3]; 8] = [
         [230, 25, 75],
@@ -346,9 +356,9 @@ impl Sink for RrdSink {
         let Some(rec) = self.rec.clone() else { return Err(self.err("not open")) };
         rec.set_time_sequence("frame", msg.header.seq as i64);
         rec.set_duration_secs("sensor_time", msg.header.stamp);
+        // The entity path, also the key of the per-port counts and series names.
         let path = format!("{node}/{port}");
         let world = format!("world/{node}/{port}");
-        let port_key = format!("{node}/{port}");
         let mut pixel_bytes = 0;
         let r = match &msg.body {
             Body::Image(img) if self.codec == ImageCodec::Raw => {
@@ -357,14 +367,14 @@ impl Sink for RrdSink {
                     PixelFormat::Rgb8 => rerun::Image::from_rgb24(img.data.clone(), [img.width, img.height]),
                     PixelFormat::Gray8 => rerun::Image::from_l8(img.data.clone(), [img.width, img.height]),
                 };
-                rec.log(path, &image)
+                rec.log(path.as_str(), &image)
             }
             Body::Image(img) => {
                 let codec = self.codec;
                 let e = self.cache.get_or_encode(msg, 0, || encode::image(img, codec)).map_err(|e| self.err(e))?;
                 pixel_bytes = e.bytes.len();
                 let media = if e.format == "jpeg" { rerun::MediaType::jpeg() } else { rerun::MediaType::png() };
-                rec.log(path, &rerun::EncodedImage::from_file_contents(e.bytes.clone()).with_media_type(media))
+                rec.log(path.as_str(), &rerun::EncodedImage::from_file_contents(e.bytes.clone()).with_media_type(media))
             }
             Body::Depth(d) => {
                 // Raw 16-bit millimetres (the viewer's depth, half the bytes of f32), compressed
@@ -372,7 +382,7 @@ impl Sink for RrdSink {
                 let mm: Vec<u8> = encode::depth_mm(d).iter().flat_map(|v| v.to_le_bytes()).collect();
                 pixel_bytes = mm.len();
                 rec.log(
-                    path,
+                    path.as_str(),
                     &rerun::DepthImage::from_data_type_and_bytes(mm, [d.width, d.height], rerun::ChannelDatatype::U16)
                         .with_meter(1000.0),
                 )
@@ -385,7 +395,7 @@ impl Sink for RrdSink {
                 let xy: Vec<[f32; 2]> = k.points.iter().map(|p| [p.x, p.y]).collect();
                 self.points_by_seq.insert(msg.header.seq, xy.clone());
                 rec.log(
-                    path,
+                    path.as_str(),
                     &rerun::Points2D::new(xy)
                         .with_colors(k.points.iter().map(|p| octave_color(p.octave)))
                         .with_radii([2.0]),
@@ -396,7 +406,7 @@ impl Sink for RrdSink {
                 let origins: Vec<[f32; 2]> = t.tracks.iter().map(|t| t.prev).collect();
                 let vectors: Vec<[f32; 2]> =
                     t.tracks.iter().map(|t| [t.cur[0] - t.prev[0], t.cur[1] - t.prev[1]]).collect();
-                rec.log(path, &rerun::Arrows2D::from_vectors(vectors).with_origins(origins))
+                rec.log(path.as_str(), &rerun::Arrows2D::from_vectors(vectors).with_origins(origins))
             }
             Body::Detections(d) => {
                 let mins: Vec<[f32; 2]> = d.detections.iter().map(|b| [b.bbox[0], b.bbox[1]]).collect();
@@ -404,7 +414,10 @@ impl Sink for RrdSink {
                     d.detections.iter().map(|b| [b.bbox[2] - b.bbox[0], b.bbox[3] - b.bbox[1]]).collect();
                 let labels: Vec<String> = d.detections.iter().map(|b| format!("{} {:.2}", b.label, b.score)).collect();
                 let ids: Vec<u16> = d.detections.iter().map(|b| b.class_id as u16).collect();
-                rec.log(path, &rerun::Boxes2D::from_mins_and_sizes(mins, sizes).with_labels(labels).with_class_ids(ids))
+                rec.log(
+                    path.as_str(),
+                    &rerun::Boxes2D::from_mins_and_sizes(mins, sizes).with_labels(labels).with_class_ids(ids),
+                )
             }
             Body::Mask(m) => {
                 let classes: Vec<(u16, String, rerun::Color)> = m
@@ -414,13 +427,13 @@ impl Sink for RrdSink {
                     .map(|(i, n)| (i as u16, n.to_string(), class_color(i as u16)))
                     .collect();
                 let ctx = rerun::AnnotationContext::new(classes.iter().map(|(i, n, c)| (*i, n.as_str(), c.0)));
-                rec.log(path.clone(), &ctx).map_err(|e| self.err(e))?;
+                rec.log(path.as_str(), &ctx).map_err(|e| self.err(e))?;
                 let (bytes, encoding, _) = encode::mask_raw(m);
                 pixel_bytes = bytes.len();
                 let datatype =
                     if encoding == "mono8" { rerun::ChannelDatatype::U8 } else { rerun::ChannelDatatype::U16 };
                 let format = rerun::datatypes::ImageFormat::segmentation([m.width, m.height], datatype);
-                rec.log(path, &rerun::SegmentationImage::new(bytes, format).with_opacity(0.5))
+                rec.log(path.as_str(), &rerun::SegmentationImage::new(bytes, format).with_opacity(0.5))
             }
             Body::PointLabels(l) => {
                 let pts = self.points_by_seq.get(&msg.header.seq).cloned().unwrap_or_default();
@@ -441,7 +454,7 @@ impl Sink for RrdSink {
                     texts.push(format!("{reason} {:.2}", lab.score));
                 }
                 rec.log(
-                    path,
+                    path.as_str(),
                     &rerun::Points2D::new(xy)
                         .with_colors(colors)
                         .with_radii([3.0])
@@ -464,11 +477,8 @@ impl Sink for RrdSink {
                     let segment = newest / TRAIL_SEGMENT;
                     // A segment's first pose closes the previous one (its last stretch).
                     let first = if newest.is_multiple_of(TRAIL_SEGMENT) { segment.saturating_sub(1) } else { segment };
-                    let strips: Vec<_> = (first..=segment).map(|k| (k, trail_segment(trail, k))).collect();
-                    for (k, strip) in strips {
-                        rec.log(format!("{world}_path/{k}"), &rerun::LineStrips3D::new([strip]))
-                            .map_err(|e| self.err(e))?;
-                    }
+                    let logged = (first..=segment).try_for_each(|k| log_trail_segment(&rec, &world, trail, k));
+                    logged.map_err(|e| self.err(e))?;
                 }
                 match &self.intrinsics {
                     Some(c) => rec.log(
@@ -513,7 +523,7 @@ impl Sink for RrdSink {
                 // port becomes a new series (its names re-logged); a name missing from a
                 // message is NaN there (a gap in the plot).
                 let entity = format!("metrics/{node}/{port}");
-                let names = self.series.entry(port_key.clone()).or_default();
+                let names = self.series.entry(path.clone()).or_default();
                 let known = names.len();
                 for (name, _) in &s.values {
                     if !names.contains(name) {
@@ -532,7 +542,7 @@ impl Sink for RrdSink {
             }
             _ => Ok(()),
         };
-        let entry = self.ports.entry(port_key).or_default();
+        let entry = self.ports.entry(path).or_default();
         entry.messages += 1;
         entry.bytes += pixel_bytes as u64;
         if matches!(self.target, Target::File(_)) && msg.header.seq / CUT_EVERY_FRAMES > self.cut {
@@ -552,9 +562,7 @@ impl Sink for RrdSink {
         // Each path's current segment as it ended (it is re-logged every few poses only).
         for (world, trail) in &self.trails {
             if let Some(newest) = trail.len().checked_sub(1) {
-                let k = newest / TRAIL_SEGMENT;
-                rec.log(format!("{world}_path/{k}"), &rerun::LineStrips3D::new([trail_segment(trail, k)]))
-                    .map_err(|e| self.err(e))?;
+                log_trail_segment(&rec, world, trail, newest / TRAIL_SEGMENT).map_err(|e| self.err(e))?;
             }
         }
         match self.target {
