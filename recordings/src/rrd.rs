@@ -1,6 +1,8 @@
 //! The rerun recorder: every recorded port becomes entity `/<node>/<port>` logged as its
-//! natural archetype, on the `frame` (sequence) and `sensor_time` (seconds) timelines, with
-//! provenance as recording properties and a default blueprint.
+//! natural archetype, on the `frame` (sequence number) timeline, with provenance as recording
+//! properties and a default blueprint. (Each message's sensor time is its MCAP `log_time` and
+//! the timestamp column of the trajectory files; a second timeline here would double the
+//! per-chunk manifest the SDK keeps in memory, see below.)
 //!
 //! | port type | entity | archetype |
 //! |---|---|---|
@@ -20,9 +22,10 @@
 //!
 //! Long runs in bounded memory. The SDK keeps a row of its RRD footer manifest in memory for
 //! every chunk it writes, until the file closes (a few hundred bytes to kilobytes each, one
-//! column per timeline and component), so the file recorder makes few, large chunks: every
-//! entity's rows are cut once per [`CUT_EVERY_FRAMES`] frames or at 8 MiB, there is no
-//! `log_time` timeline, one entity per scalar port, pose paths in segments. What waits to be
+//! column per timeline and component: 132 on the default graph), so the file recorder makes
+//! few chunks and narrow rows: every entity's rows are cut once per [`CUT_EVERY_FRAMES`] frames
+//! or at 4 MiB, one timeline (no `log_time`, no second clock), one entity per scalar port, pose
+//! paths in segments. What waits to be
 //! written is bounded in bytes at every stage: rows per entity in the batcher, the batcher's
 //! in-flight budget, and [`BoundedFile`] in front of the file writer's queue.
 
@@ -83,18 +86,20 @@ const LIVE_BATCHING: rerun::log::ChunkBatcherConfig = rerun::log::ChunkBatcherCo
     ..rerun::log::ChunkBatcherConfig::DEFAULT
 };
 
-/// How the file recorder batches rows into chunks. Every chunk costs a manifest row in memory
-/// until the file closes (see the module doc), so chunks are large: an entity's rows are cut
-/// at 8 MiB (about 13 frames of 640x480 depth) or by the recorder every [`CUT_EVERY_FRAMES`]
-/// frames, not on the SDK's 0.2 s tick / 2 MiB. The file is not watched live; a killed run's
-/// `.rrd` lacks the rows since the last cut (the MCAP recorder writes its own chunks). Rows
-/// wait in the batcher raw, so 8 MiB per image port is what the batching costs in memory;
-/// 32 MiB in flight between the recorder, the batcher and the writer (the SDK's default is
-/// 100 MiB). Measured: 0.42 chunks per frame on the default graph (docs/benchmarks.md).
+/// How the file recorder batches rows into chunks. Two costs pull apart: every chunk costs a
+/// manifest row in memory until the file closes (about 1 KB on the default graph, see the
+/// module doc), and every chunk passes through the SDK as several transient copies of its size
+/// (concatenated rows, Arrow IPC, LZ4 output, the framed message: heaptrack at the peak of a
+/// 600-frame run held about 5x the chunk size there). So an entity's rows are cut at 4 MiB
+/// (about 6 frames of 640x480 depth) or by the recorder every [`CUT_EVERY_FRAMES`] frames, not
+/// on the SDK's 0.2 s tick / 2 MiB; 16 MiB in flight between the recorder, the batcher and the
+/// writer (the SDK's default is 100 MiB). The file is not watched live; a killed run's `.rrd`
+/// lacks the rows since the last cut (the MCAP recorder writes its own chunks). Measured on
+/// the default graph: docs/benchmarks.md.
 const BATCHING: rerun::log::ChunkBatcherConfig = rerun::log::ChunkBatcherConfig {
     flush_tick: std::time::Duration::MAX,
-    flush_num_bytes: 8 << 20,
-    max_bytes_in_flight: 32 << 20,
+    flush_num_bytes: 4 << 20,
+    max_bytes_in_flight: 16 << 20,
     ..rerun::log::ChunkBatcherConfig::DEFAULT
 };
 
@@ -110,7 +115,7 @@ fn with_env(config: rerun::log::ChunkBatcherConfig) -> rerun::log::ChunkBatcherC
 
 /// Bytes the file writer may have queued (Arrow-encoded chunks it has not compressed and
 /// written yet) before the SDK's forwarding thread waits for it.
-const WRITER_QUEUE_BYTES: u64 = 32 << 20;
+const WRITER_QUEUE_BYTES: u64 = 16 << 20;
 
 /// The SDK's file sink, with its queue bounded in bytes. `FileSink` queues up to 1024 messages
 /// for its writer thread whatever their size, and image chunks are megabytes each, so a writer
@@ -161,7 +166,10 @@ const TRAIL_EVERY: usize = 10;
 /// (by frame number, so the cut points do not depend on the machine's speed). The SDK's own
 /// tick is off for the file: it skips a tick after any entity was cut by size, which with
 /// images cut every second starved the small entities, which then grew to the size limit.
-const CUT_EVERY_FRAMES: u64 = 200;
+/// The small entities (scalars, poses, keypoints) are what this cuts: 500 frames (17 s at
+/// 30 Hz) keeps their chunks to one per 500 frames each, at the price of what a killed run's
+/// `.rrd` loses (the MCAP file loses at most a second).
+const CUT_EVERY_FRAMES: u64 = 500;
 
 impl RrdSink {
     /// A recorder writing to `path`, colour images as JPEG (q 90).
@@ -298,8 +306,8 @@ impl Sink for RrdSink {
             Target::Grpc(url) => builder.batcher_config(with_env(LIVE_BATCHING)).connect_grpc_opts(url.clone()),
         }
         .map_err(|e| self.err(e))?;
-        // Wall-clock log time is not a dynaflow timeline (`frame` and `sensor_time` are), and
-        // each timeline adds a column to every chunk's manifest row.
+        // Wall-clock log time is not a dynaflow timeline (`frame` is), and each timeline adds
+        // a column per component to every chunk's manifest row.
         rec.set_log_time_enabled(false);
         let name = match &info.variant {
             Some(v) => format!("{} ({v})", info.graph),
@@ -355,7 +363,6 @@ impl Sink for RrdSink {
     fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError> {
         let Some(rec) = self.rec.clone() else { return Err(self.err("not open")) };
         rec.set_time_sequence("frame", msg.header.seq as i64);
-        rec.set_duration_secs("sensor_time", msg.header.stamp);
         // The entity path, also the key of the per-port counts and series names.
         let path = format!("{node}/{port}");
         let world = format!("world/{node}/{port}");
