@@ -25,9 +25,9 @@
 //! column per timeline and component: 132 on the default graph), so the file recorder makes
 //! few chunks and narrow rows: every entity's rows are cut once per [`CUT_EVERY_FRAMES`] frames
 //! or at 4 MiB, one timeline (no `log_time`, no second clock), one entity per scalar port, pose
-//! paths in segments. What waits to be
-//! written is bounded in bytes at every stage: rows per entity in the batcher, the batcher's
-//! in-flight budget, and [`BoundedFile`] in front of the file writer's queue.
+//! paths in segments. What waits to be written is bounded in bytes at every stage: rows per
+//! entity in the batcher, the batcher's in-flight budget, and [`BoundedFile`] in front of the
+//! file writer's queue.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
