@@ -21,6 +21,8 @@ use image::ImageEncoder;
 const ROUNDS: usize = 3;
 
 fn main() {
+    // The allocator as `dynaflow run` sets it, for both the runs with and without recording.
+    dynaflow::tune_allocator();
     let frames: u64 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(150);
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = std::env::temp_dir().join(format!("dynaflow-bench-rec-{}", std::process::id()));

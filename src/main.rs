@@ -196,31 +196,8 @@ fn init_logging(verbose: u8, quiet: bool) {
         .init();
 }
 
-/// Pin glibc's mmap threshold at its default (128 KiB). glibc otherwise raises it after each
-/// freed large block, so the recorders' per-frame image buffers (300 KB-1 MB, allocated and
-/// freed on several threads) come from the heap arenas instead, which fragment: a recorded
-/// run's resident memory then grew by about 100 KB per frame (measured: 233 MB at 1200 frames
-/// against 131 MB with the threshold pinned, rrd recording; docs/benchmarks.md).
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
-#[allow(unsafe_code)]
-fn pin_mmap_threshold() {
-    unsafe extern "C" {
-        fn mallopt(param: std::os::raw::c_int, value: std::os::raw::c_int) -> std::os::raw::c_int;
-    }
-    /// glibc's `M_MMAP_THRESHOLD` (malloc.h).
-    const M_MMAP_THRESHOLD: std::os::raw::c_int = -3;
-    // SAFETY: mallopt only sets an allocator parameter; it is called before any thread starts
-    // and takes no pointers.
-    unsafe {
-        mallopt(M_MMAP_THRESHOLD, 128 * 1024);
-    }
-}
-
-#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn pin_mmap_threshold() {}
-
 fn main() -> ExitCode {
-    pin_mmap_threshold();
+    dynaflow::tune_allocator();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => {

@@ -271,17 +271,23 @@ fn full_disk_fails_the_run_with_the_file_named() {
     if !Path::new("/dev/full").exists() {
         return;
     }
-    let dir = common::TempDir::new("full");
-    std::os::unix::fs::symlink("/dev/full", dir.path().join("engine_smoke.messages.jsonl")).unwrap();
-    let out = common::bin()
-        .args(["run", "--no-progress", "--record", "jsonl", "--out"])
-        .arg(dir.path())
-        .arg(common::repo().join("graphs/engine_smoke.yaml"))
-        .output()
-        .unwrap();
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert_ne!(out.status.code(), Some(0), "{stderr}");
-    assert!(stderr.contains("engine_smoke.messages.jsonl") && stderr.to_lowercase().contains("no space"), "{stderr}");
+    // Each recorder in turn: the run fails naming the file and the cause (the MCAP writer's
+    // own message hides the cause; the rerun file is written by dynaflow's own sink).
+    for (format, file) in
+        [("jsonl", "engine_smoke.messages.jsonl"), ("rrd", "engine_smoke.rrd"), ("mcap", "engine_smoke.mcap")]
+    {
+        let dir = common::TempDir::new(&format!("full-{format}"));
+        std::os::unix::fs::symlink("/dev/full", dir.path().join(file)).unwrap();
+        let out = common::bin()
+            .args(["run", "--no-progress", "--record", format, "--out"])
+            .arg(dir.path())
+            .arg(common::repo().join("graphs/engine_smoke.yaml"))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_ne!(out.status.code(), Some(0), "{format}: {stderr}");
+        assert!(stderr.contains(file) && stderr.to_lowercase().contains("no space"), "{format}: {stderr}");
+    }
 }
 
 #[test]

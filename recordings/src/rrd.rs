@@ -8,13 +8,13 @@
 //! |---|---|---|
 //! | image | `/<node>/<port>` | `EncodedImage` (JPEG/PNG), `Image` with `--image-format raw` |
 //! | depth | `/<node>/<port>` | `DepthImage` (raw 16-bit millimetres) |
-//! | camera_info | `/world/camera` | `Pinhole` (with the latest pose) |
+//! | camera_info | (none of its own) | the intrinsics of each pose's `Pinhole` |
 //! | keypoints | `/<node>/<port>` | `Points2D` coloured by octave |
 //! | tracks | `/<node>/<port>` | `Arrows2D` |
 //! | detections | `/<node>/<port>` | `Boxes2D` with class labels |
-//! | mask | `/<node>/<port>` | `SegmentationImage` (8-bit ids when they fit) + `AnnotationContext` |
+//! | mask | `/<node>/<port>` | `SegmentationImage` (8-bit ids when they fit) + `AnnotationContext` (when the class names change) |
 //! | point_labels | `/<node>/<port>` | `Points2D` red = dynamic, green = static |
-//! | pose | `/world/<node>/<port>` | `Transform3D` (+ `Pinhole` once intrinsics are known); path so far at `…_path/<k>` (`LineStrips3D`, 100 poses per segment) |
+//! | pose | `/world/<node>/<port>` | `Transform3D` (+ `Pinhole` when the intrinsics are first known or change); path so far at `…_path/<k>` (`LineStrips3D`, 100 poses per segment) |
 //! | trajectory | `/world/<node>/<port>` | `LineStrips3D` |
 //! | point_cloud | `/world/<node>/<port>` | `Points3D` |
 //! | octree_update | `/world/<node>/<port>` | `Boxes3D` |
@@ -26,8 +26,8 @@
 //! few chunks and narrow rows: every entity's rows are cut once per [`CUT_EVERY_FRAMES`] frames
 //! or at 4 MiB, one timeline (no `log_time`, no second clock), one entity per scalar port, pose
 //! paths in segments. What waits to be written is bounded in bytes at every stage: rows per
-//! entity in the batcher, the batcher's in-flight budget, and [`BoundedFile`] in front of the
-//! file writer's queue.
+//! entity in the batcher and the batcher's in-flight budget; [`RrdFile`] encodes and writes each
+//! chunk as it comes, with no queue of its own.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -75,6 +75,14 @@ pub struct RrdSink {
     series: HashMap<String, Vec<std::sync::Arc<str>>>,
     /// Messages and pixel bytes per `node/port`.
     ports: std::collections::BTreeMap<String, PortReport>,
+    /// The `.rrd` file's writer (file targets), to finish it and read its error.
+    file: Option<std::sync::Arc<SharedFile>>,
+    /// Per entity, what was last logged of what rarely changes (a mask's class names, a pose's
+    /// intrinsics): logged again only when it changes, as the viewer shows the latest at each
+    /// frame. Logged with every message, each became a chunk of its own at every cut (a
+    /// component set is its own chunk), a quarter of the file's chunks on the default graph.
+    logged_classes: HashMap<String, Vec<std::sync::Arc<str>>>,
+    logged_pinholes: HashMap<String, CameraInfo>,
 }
 
 /// Batching of the live stream: a 50 ms tick, so a viewer shows each frame within a
@@ -113,40 +121,110 @@ fn with_env(config: rerun::log::ChunkBatcherConfig) -> rerun::log::ChunkBatcherC
     })
 }
 
-/// Bytes the file writer may have queued (Arrow-encoded chunks it has not compressed and
-/// written yet) before the SDK's forwarding thread waits for it.
-const WRITER_QUEUE_BYTES: u64 = 16 << 20;
-
-/// The SDK's file sink, with its queue bounded in bytes. `FileSink` queues up to 1024 messages
-/// for its writer thread whatever their size, and image chunks are megabytes each, so a writer
-/// that falls behind the graph would grow memory; this sink waits for the writer (on the SDK's
-/// forwarding thread: backpressure reaches the recorder through the batcher's bounded
-/// channels, and the engine's recorder queue stands between it and the graph) once
-/// [`WRITER_QUEUE_BYTES`] have been handed over since the last wait. Waiting does not cut the
-/// batcher's pending rows into chunks, unlike `RecordingStream::flush_blocking`.
-struct BoundedFile {
-    inner: rerun::sink::FileSink,
-    queued: std::sync::atomic::AtomicU64,
+/// The `.rrd` file writer: each chunk the batcher hands over is encoded (Arrow IPC, LZ4,
+/// protobuf framing) and written on the SDK's forwarding thread, there and then. The SDK's own
+/// `FileSink` queues up to 1024 messages for a writer thread of its own, whatever their size
+/// (image chunks are megabytes), so what waits between the batcher and the disk varied with how
+/// far the writer lagged; here nothing waits: a slow disk blocks the forwarding thread, which
+/// fills the batcher's bounded channel, which blocks the recorder, and the engine's recorder
+/// queue stands between it and the graph. The first write error (a full disk) is kept, stops
+/// the writing, and fails the recorder with the file's name.
+struct RrdFile {
+    state: std::sync::Arc<SharedFile>,
 }
 
-impl rerun::sink::LogSink for BoundedFile {
-    fn send(&self, msg: rerun::log::LogMsg) {
-        use std::sync::atomic::Ordering;
-        let bytes = match &msg {
-            rerun::log::LogMsg::ArrowMsg(_, arrow) => arrow.batch.get_array_memory_size() as u64,
-            _ => 0,
-        };
-        self.inner.send(msg);
-        if self.queued.fetch_add(bytes, Ordering::Relaxed) + bytes >= WRITER_QUEUE_BYTES {
-            self.queued.store(0, Ordering::Relaxed);
-            // An error here is the writer's (a full disk): the SDK reports it on close.
-            let _ = self.inner.flush_blocking(std::time::Duration::MAX);
+type RrdEncoder = rerun::external::re_log_encoding::Encoder<std::io::BufWriter<std::fs::File>>;
+
+/// The encoder, shared by the sink the SDK drives and the recorder that finishes the file.
+struct SharedFile {
+    /// `None` once the file is finished.
+    encoder: std::sync::Mutex<Option<RrdEncoder>>,
+    /// The first write error, readable without waiting for a chunk being encoded.
+    failed: std::sync::OnceLock<String>,
+}
+
+impl SharedFile {
+    fn create(path: &std::path::Path) -> Result<Self, String> {
+        use rerun::external::re_log_encoding::{CrateVersion, Encoder, EncodingOptions};
+        let file = std::fs::File::create(path).map_err(|e| e.to_string())?;
+        // Compressed chunks and a footer with the manifest of every chunk, as `FileSink` writes.
+        let mut encoder = Encoder::new_eager(
+            CrateVersion::LOCAL,
+            EncodingOptions::PROTOBUF_COMPRESSED,
+            std::io::BufWriter::with_capacity(1 << 20, file),
+        )
+        .map_err(|e| e.to_string())?;
+        // The stream header reaches the file now, so a file that cannot be written (a full
+        // disk) fails the run before it starts, as the other recorders do.
+        if let Err(e) = encoder.flush_blocking() {
+            // Unwrapped, the encoder does not try (and warn about) its end-of-stream on drop.
+            let _ = encoder.into_inner();
+            return Err(e.to_string());
         }
+        Ok(Self { encoder: std::sync::Mutex::new(Some(encoder)), failed: std::sync::OnceLock::new() })
     }
 
-    fn flush_blocking(&self, timeout: std::time::Duration) -> Result<(), rerun::sink::SinkFlushError> {
-        self.queued.store(0, std::sync::atomic::Ordering::Relaxed);
-        rerun::sink::LogSink::flush_blocking(&self.inner, timeout)
+    fn lock(&self) -> std::sync::MutexGuard<'_, Option<RrdEncoder>> {
+        // A panic while encoding leaves nothing half-mutated that matters here: keep writing.
+        self.encoder.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
+    }
+
+    /// Runs `f` on the encoder unless an earlier write failed or the file is finished; keeps
+    /// the first error, after which nothing more is written.
+    fn write(
+        &self,
+        f: impl FnOnce(&mut RrdEncoder) -> Result<(), rerun::external::re_log_encoding::EncodeError>,
+    ) -> Result<(), String> {
+        let mut encoder = self.lock();
+        if let Some(e) = self.failed() {
+            return Err(e.to_owned());
+        }
+        let Some(encoder) = encoder.as_mut() else { return Err("the file is already finished".into()) };
+        f(encoder).map_err(|e| {
+            let e = e.to_string();
+            let _ = self.failed.set(e.clone());
+            e
+        })
+    }
+
+    /// Writes the footer and the end-of-stream marker, flushes, and closes the file.
+    fn finish(&self) -> Result<(), String> {
+        self.write(|e| {
+            e.finish()?;
+            e.flush_blocking()
+        })?;
+        *self.lock() = None;
+        Ok(())
+    }
+
+    fn failed(&self) -> Option<&str> {
+        self.failed.get().map(String::as_str)
+    }
+}
+
+impl Drop for SharedFile {
+    /// A recording dropped without `close` (an error elsewhere ended the run) still gets its
+    /// footer, as the SDK's file sink does.
+    fn drop(&mut self) {
+        if self.lock().is_some() {
+            let _ = self.finish();
+        }
+        // After a write error: the file is given up (the error was reported), and the encoder
+        // unwrapped does not try its end-of-stream again on drop.
+        if let Some(encoder) = self.lock().take() {
+            let _ = encoder.into_inner();
+        }
+    }
+}
+
+impl rerun::sink::LogSink for RrdFile {
+    fn send(&self, msg: rerun::log::LogMsg) {
+        // An error is kept and reported by the recorder.
+        let _ = self.state.write(|e| e.append(&msg).map(|_| ()));
+    }
+
+    fn flush_blocking(&self, _timeout: std::time::Duration) -> Result<(), rerun::sink::SinkFlushError> {
+        self.state.write(RrdEncoder::flush_blocking).map_err(rerun::sink::SinkFlushError::failed)
     }
 
     fn defers_finalization_to_shutdown(&self) -> bool {
@@ -190,6 +268,9 @@ impl RrdSink {
             series: HashMap::new(),
             cut: 0,
             ports: std::collections::BTreeMap::new(),
+            file: None,
+            logged_classes: HashMap::new(),
+            logged_pinholes: HashMap::new(),
         }
     }
 
@@ -297,11 +378,12 @@ impl Sink for RrdSink {
         let builder = rerun::RecordingStreamBuilder::new("dynaflow");
         let rec = match &self.target {
             Target::File(path) => {
-                let file =
-                    rerun::sink::FileSink::with_options(path, rerun::sink::FileSinkOptions { write_footer: true })
-                        .map_err(|e| self.err(e))?;
-                let file = BoundedFile { inner: file, queued: std::sync::atomic::AtomicU64::new(0) };
-                builder.batcher_config(with_env(BATCHING)).buffered().inspect(|rec| rec.set_sink(Box::new(file)))
+                let state = std::sync::Arc::new(SharedFile::create(path).map_err(|e| self.err(e))?);
+                self.file = Some(state.clone());
+                builder
+                    .batcher_config(with_env(BATCHING))
+                    .buffered()
+                    .inspect(|rec| rec.set_sink(Box::new(RrdFile { state })))
             }
             Target::Grpc(url) => builder.batcher_config(with_env(LIVE_BATCHING)).connect_grpc_opts(url.clone()),
         }
@@ -362,6 +444,9 @@ impl Sink for RrdSink {
 
     fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError> {
         let Some(rec) = self.rec.clone() else { return Err(self.err("not open")) };
+        if let Some(e) = self.file.as_ref().and_then(|f| f.failed()) {
+            return Err(self.err(e));
+        }
         rec.set_time_sequence("frame", msg.header.seq as i64);
         // The entity path, also the key of the per-port counts and series names.
         let path = format!("{node}/{port}");
@@ -427,14 +512,13 @@ impl Sink for RrdSink {
                 )
             }
             Body::Mask(m) => {
-                let classes: Vec<(u16, String, rerun::Color)> = m
-                    .class_names
-                    .iter()
-                    .enumerate()
-                    .map(|(i, n)| (i as u16, n.to_string(), class_color(i as u16)))
-                    .collect();
-                let ctx = rerun::AnnotationContext::new(classes.iter().map(|(i, n, c)| (*i, n.as_str(), c.0)));
-                rec.log(path.as_str(), &ctx).map_err(|e| self.err(e))?;
+                if self.logged_classes.get(&path) != Some(&m.class_names) {
+                    let ctx = rerun::AnnotationContext::new(
+                        m.class_names.iter().enumerate().map(|(i, n)| (i as u16, n.as_ref(), class_color(i as u16).0)),
+                    );
+                    rec.log(path.as_str(), &ctx).map_err(|e| self.err(e))?;
+                    self.logged_classes.insert(path.clone(), m.class_names.clone());
+                }
                 let (bytes, encoding, _) = encode::mask_raw(m);
                 pixel_bytes = bytes.len();
                 let datatype =
@@ -488,16 +572,19 @@ impl Sink for RrdSink {
                     logged.map_err(|e| self.err(e))?;
                 }
                 match &self.intrinsics {
-                    Some(c) => rec.log(
-                        world,
-                        &rerun::Pinhole::from_focal_length_and_resolution(
-                            [c.fx as f32, c.fy as f32],
-                            [c.width as f32, c.height as f32],
+                    Some(c) if self.logged_pinholes.get(&world) != Some(c) => {
+                        self.logged_pinholes.insert(world.clone(), c.clone());
+                        rec.log(
+                            world,
+                            &rerun::Pinhole::from_focal_length_and_resolution(
+                                [c.fx as f32, c.fy as f32],
+                                [c.width as f32, c.height as f32],
+                            )
+                            .with_principal_point([c.cx as f32, c.cy as f32])
+                            .with_image_plane_distance(0.3),
                         )
-                        .with_principal_point([c.cx as f32, c.cy as f32])
-                        .with_image_plane_distance(0.3),
-                    ),
-                    None => Ok(()),
+                    }
+                    _ => Ok(()),
                 }
             }
             Body::Trajectory(tr) => {
@@ -578,7 +665,10 @@ impl Sink for RrdSink {
             Target::Grpc(_) => rec.flush_with_timeout(std::time::Duration::from_secs(3)).map_err(|e| self.err(e))?,
         }
         drop(rec);
-        Ok(())
+        match self.file.take() {
+            Some(file) => file.finish().map_err(|e| self.err(e)),
+            None => Ok(()),
+        }
     }
 
     fn report(&self) -> SinkReport {
