@@ -12,9 +12,9 @@
 //! | keypoints | `/<node>/<port>` | `Points2D` coloured by octave |
 //! | tracks | `/<node>/<port>` | `Arrows2D` |
 //! | detections | `/<node>/<port>` | `Boxes2D` with class labels |
-//! | mask | `/<node>/<port>` | `SegmentationImage` (8-bit ids when they fit) + `AnnotationContext` (when the class names change) |
+//! | mask | `/<node>/<port>` | `SegmentationImage` (8-bit ids when they fit) + `AnnotationContext` (static, re-logged when the class names change) |
 //! | point_labels | `/<node>/<port>` | `Points2D` red = dynamic, green = static |
-//! | pose | `/world/<node>/<port>` | `Transform3D` (+ `Pinhole` when the intrinsics are first known or change); path so far at `…_path/<k>` (`LineStrips3D`, 100 poses per segment) |
+//! | pose | `/world/<node>/<port>` | `Transform3D` (+ a static `Pinhole` once the intrinsics are known, re-logged if they change); path so far at `…_path/<k>` (`LineStrips3D`, 100 poses per segment) |
 //! | trajectory | `/world/<node>/<port>` | `LineStrips3D` |
 //! | point_cloud | `/world/<node>/<port>` | `Points3D` |
 //! | octree_update | `/world/<node>/<port>` | `Boxes3D` |
@@ -78,9 +78,10 @@ pub struct RrdSink {
     /// The `.rrd` file's writer (file targets), to finish it and read its error.
     file: Option<std::sync::Arc<SharedFile>>,
     /// Per entity, what was last logged of what rarely changes (a mask's class names, a pose's
-    /// intrinsics): logged again only when it changes, as the viewer shows the latest at each
-    /// frame. Logged with every message, each became a chunk of its own at every cut (a
-    /// component set is its own chunk), a quarter of the file's chunks on the default graph.
+    /// intrinsics). It is logged static, again only when it changes: a viewer keeps static data
+    /// whatever older frames it drops to stay within its memory limit, and logged with every
+    /// message, each became a chunk of its own at every cut (a component set is its own
+    /// chunk), a quarter of the file's chunks on the default graph.
     logged_classes: HashMap<String, Vec<std::sync::Arc<str>>>,
     logged_pinholes: HashMap<String, CameraInfo>,
 }
@@ -516,7 +517,7 @@ impl Sink for RrdSink {
                     let ctx = rerun::AnnotationContext::new(
                         m.class_names.iter().enumerate().map(|(i, n)| (i as u16, n.as_ref(), class_color(i as u16).0)),
                     );
-                    rec.log(path.as_str(), &ctx).map_err(|e| self.err(e))?;
+                    rec.log_static(path.as_str(), &ctx).map_err(|e| self.err(e))?;
                     self.logged_classes.insert(path.clone(), m.class_names.clone());
                 }
                 let (bytes, encoding, _) = encode::mask_raw(m);
@@ -574,7 +575,7 @@ impl Sink for RrdSink {
                 match &self.intrinsics {
                     Some(c) if self.logged_pinholes.get(&world) != Some(c) => {
                         self.logged_pinholes.insert(world.clone(), c.clone());
-                        rec.log(
+                        rec.log_static(
                             world,
                             &rerun::Pinhole::from_focal_length_and_resolution(
                                 [c.fx as f32, c.fy as f32],
