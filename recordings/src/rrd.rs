@@ -207,11 +207,10 @@ impl Drop for SharedFile {
     /// A recording dropped without `close` (an error elsewhere ended the run) still gets its
     /// footer, as the SDK's file sink does.
     fn drop(&mut self) {
-        if self.lock().is_some() {
-            let _ = self.finish();
-        }
-        // After a write error: the file is given up (the error was reported), and the encoder
-        // unwrapped does not try its end-of-stream again on drop.
+        // Does nothing once finished or after a write error.
+        let _ = self.finish();
+        // After a write error the file is given up (the error was reported); unwrapped, the
+        // encoder does not try its end-of-stream again on drop.
         if let Some(encoder) = self.lock().take() {
             let _ = encoder.into_inner();
         }

@@ -98,8 +98,7 @@ impl McapSink {
         let ty = msg.body.port_type();
         let name = schemas::schema_name(ty, self.codec);
         let protobuf = schemas::is_protobuf(ty);
-        let path = self.path.clone();
-        let err = |e: mcap::McapError| SinkError::new("mcap", format!("{}: {}", path.display(), with_causes(&e)));
+        let err = |e: mcap::McapError| writer_error(&self.path, &e);
         let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
         let schema = match self.schemas.get(name) {
             Some(id) => *id,
@@ -122,9 +121,14 @@ impl McapSink {
     }
 }
 
-/// An MCAP error with what caused it: the writer's own message for an I/O failure names no
-/// cause ("I/O error from writing ..."), the `std::io::Error` under it does ("No space left on
-/// device").
+/// The MCAP writer's error for the file at `path`, with what caused it: the writer's own
+/// message for an I/O failure names no cause ("I/O error from writing ..."), the
+/// `std::io::Error` under it does ("No space left on device").
+fn writer_error(path: &std::path::Path, e: &mcap::McapError) -> SinkError {
+    SinkError::new("mcap", format!("{}: {}", path.display(), with_causes(e)))
+}
+
+/// An error's message followed by those of its sources not already in it.
 fn with_causes(e: &dyn std::error::Error) -> String {
     let mut text = e.to_string();
     let mut source = e.source();
@@ -153,9 +157,9 @@ impl Sink for McapSink {
             .chunk_size(Some(self.chunk_size))
             .profile("")
             .library(format!("dynaflow {}", info.version));
-        let mut writer = options.create(BufWriter::new(file)).map_err(|e| self.err(with_causes(&e)))?;
+        let mut writer = options.create(BufWriter::new(file)).map_err(|e| writer_error(&self.path, &e))?;
         let metadata = mcap::records::Metadata { name: "dynaflow".into(), metadata: info.to_strings() };
-        writer.write_metadata(&metadata).map_err(|e| self.err(with_causes(&e)))?;
+        writer.write_metadata(&metadata).map_err(|e| writer_error(&self.path, &e))?;
         self.writer = Some(writer);
         self.last_flush = Instant::now();
         Ok(())
@@ -180,8 +184,7 @@ impl Sink for McapSink {
             publish_time: ns,
         };
         let flush_due = self.last_flush.elapsed() >= self.flush_interval;
-        let path = self.path.clone();
-        let err = |e: mcap::McapError| SinkError::new("mcap", format!("{}: {}", path.display(), with_causes(&e)));
+        let err = |e: mcap::McapError| writer_error(&self.path, &e);
         let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
         writer.write_to_known_channel(&header, &data).map_err(err)?;
         if flush_due {
@@ -193,7 +196,7 @@ impl Sink for McapSink {
 
     fn close(&mut self) -> Result<(), SinkError> {
         let Some(mut writer) = self.writer.take() else { return Ok(()) };
-        writer.finish().map_err(|e| self.err(with_causes(&e)))?;
+        writer.finish().map_err(|e| writer_error(&self.path, &e))?;
         let mut inner = writer.into_inner();
         inner.flush().map_err(|e| self.err(e))?;
         inner.get_ref().sync_all().map_err(|e| self.err(e))
