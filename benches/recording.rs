@@ -6,6 +6,9 @@
 //! mask encodings before issue 15 (16-bit millimetre PNG, 8-bit PNG) against the raw samples
 //! the recorders store now, each with the MCAP chunk's zstd (level 1).
 //!
+//! It links the `dynaflow` library, so both runs use the CLI's allocator (jemalloc, as
+//! configured there).
+//!
 //! `cargo bench --bench recording` (add `-- FRAMES`, default 150).
 
 use std::time::Instant;
@@ -21,8 +24,6 @@ use image::ImageEncoder;
 const ROUNDS: usize = 3;
 
 fn main() {
-    // The allocator as `dynaflow run` sets it, for both the runs with and without recording.
-    dynaflow::tune_allocator();
     let frames: u64 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(150);
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let out = std::env::temp_dir().join(format!("dynaflow-bench-rec-{}", std::process::id()));
@@ -145,7 +146,7 @@ fn encodings(graph: &std::path::Path, rt: &tokio::runtime::Runtime) {
         }),
         timed("depth: 32FC1 + zstd-1", "MCAP now (bit-exact)", n, |i| zstd1(&encode::depth_f32_le(&depth[i]))),
         timed("depth: 16UC1 mm + zstd-1", "rrd now (LZ4 there)", n, |i| {
-            let mm: Vec<u8> = encode::depth_mm(&depth[i]).iter().flat_map(|v| v.to_le_bytes()).collect();
+            let mm = encode::depth_mm_le(&depth[i]);
             zstd1(&mm)
         }),
         timed("mask: 8-bit PNG", "before", n, |i| {

@@ -11,53 +11,31 @@ pub fn registry() -> Registry {
     r
 }
 
-/// Sets glibc's allocator for a long run of many threads: the mmap threshold pinned at its
-/// default (128 KiB), and free pages handed back to the OS once a second. The CLI calls it
-/// first thing; benches that compare runs call it too, so they run as the CLI does.
+/// The allocator of every program built on this library (the CLI, its tests and benches):
+/// jemalloc, configured by [`JEMALLOC_CONF`].
 ///
-/// glibc otherwise raises the threshold after each freed large block, so the recorders'
-/// per-frame image buffers (300 KB-1 MB, allocated and freed on several threads) come from the
-/// heap arenas instead, which fragment: a recorded run's resident memory then grew by about
-/// 100 KB per frame (measured: 233 MB at 1200 frames against 131 MB with the threshold pinned,
-/// rrd recording; docs/benchmarks.md). Smaller blocks still come from the arenas, and glibc
-/// returns an arena's free pages to the OS only from its top: the free pages between live
-/// blocks stay resident. A 10 000-frame recorded run held 50-60 MB of them at frame 5 000 (one
-/// `malloc_trim(0)` took its resident memory from 190-201 MB to 140 MB) and their share grew
-/// with the run; `malloc_trim` releases the arenas' whole free pages. With it once a second the
-/// median resident memory of that run rose 19 MB instead of 37, in no more time
-/// (docs/benchmarks.md, "Third pass").
-///
-/// Call it before any other thread starts; later calls do nothing.
-pub fn tune_allocator() {
-    static ONCE: std::sync::Once = std::sync::Once::new();
-    ONCE.call_once(tune_glibc);
-}
+/// A recorded run allocates and frees image-sized buffers (300 KB-1.2 MB a port a frame) on
+/// a dozen threads. glibc's malloc kept that in bounded memory only with its mmap threshold
+/// pinned (each such buffer a fresh, page-by-page zero-filled mapping: recording then cost
+/// 1.20x the run without it) and `malloc_trim` once a second (the free pages between live
+/// blocks of its arenas otherwise stayed resident and grew with the run). jemalloc hands
+/// back unused pages itself, from a background thread, and reuses size classes without that
+/// cost; measured in docs/benchmarks.md ("Fourth pass"). Not on MSVC, which jemalloc does
+/// not build for.
+#[cfg(not(target_env = "msvc"))]
+#[global_allocator]
+static GLOBAL: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 
-#[cfg(all(target_os = "linux", target_env = "gnu"))]
+/// jemalloc's options (read before `main`; `_RJEM_MALLOC_CONF` in the environment overrides
+/// them): purge from a background thread rather than on the threads that free, and hand
+/// dirty pages back after 100 ms instead of jemalloc's default 10 s. With the default, the
+/// pages freed over 10 s of a run (10 s of image buffers) stay resident: 280 MB peak at 1 000
+/// recorded frames, against 235 MB with 100 ms; purging at once (0 ms) on the freeing threads
+/// made the run 35 % slower.
+#[cfg(not(target_env = "msvc"))]
 #[allow(unsafe_code)]
-fn tune_glibc() {
-    unsafe extern "C" {
-        fn mallopt(param: std::os::raw::c_int, value: std::os::raw::c_int) -> std::os::raw::c_int;
-        fn malloc_trim(pad: usize) -> std::os::raw::c_int;
-    }
-    /// glibc's `M_MMAP_THRESHOLD` (malloc.h).
-    const M_MMAP_THRESHOLD: std::os::raw::c_int = -3;
-    // SAFETY: mallopt only sets an allocator parameter; it is called before any thread starts
-    // and takes no pointers.
-    unsafe {
-        mallopt(M_MMAP_THRESHOLD, 128 * 1024);
-    }
-    // The thread ends with the process. If it cannot start, memory is only less tidy.
-    let _ = std::thread::Builder::new().name("dynaflow-trim".into()).spawn(|| {
-        loop {
-            std::thread::sleep(std::time::Duration::from_secs(1));
-            // SAFETY: malloc_trim takes no pointers and is thread-safe (it locks each arena).
-            unsafe {
-                malloc_trim(0);
-            }
-        }
-    });
-}
-
-#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-fn tune_glibc() {}
+// SAFETY: jemalloc reads this symbol as a `const char *` to a NUL-terminated string, which
+// `Option<&c_char>` has the layout of; the string is static.
+#[unsafe(export_name = "_rjem_malloc_conf")]
+pub static JEMALLOC_CONF: Option<&'static std::ffi::c_char> =
+    Some(unsafe { &*c"background_thread:true,dirty_decay_ms:100".as_ptr() });

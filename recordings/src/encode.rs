@@ -109,11 +109,20 @@ pub fn depth_f32_le_into(depth: &DepthImage, out: &mut Vec<u8>) {
 /// Depth in whole millimetres (0 = no measurement, saturating at 65.535 m): what the viewer
 /// shows, half the bytes of `32FC1`.
 pub fn depth_mm(depth: &DepthImage) -> Vec<u16> {
-    depth
-        .data
-        .iter()
-        .map(|&d| if d.is_finite() && d > 0.0 { (d * 1000.0).round().clamp(0.0, 65535.0) as u16 } else { 0 })
-        .collect()
+    depth.data.iter().map(|&d| metres_to_mm(d)).collect()
+}
+
+/// [`depth_mm`] as little-endian bytes, built in one buffer (a frame's depth is 600 KB).
+pub fn depth_mm_le(depth: &DepthImage) -> Vec<u8> {
+    let mut out = Vec::with_capacity(depth.data.len() * 2);
+    for &d in &depth.data {
+        out.extend_from_slice(&metres_to_mm(d).to_le_bytes());
+    }
+    out
+}
+
+fn metres_to_mm(d: f32) -> u16 {
+    if d.is_finite() && d > 0.0 { (d * 1000.0).round().clamp(0.0, 65535.0) as u16 } else { 0 }
 }
 
 /// A class mask's raw samples: `mono8` when every id fits a byte, else `16UC1` little-endian;
@@ -231,7 +240,17 @@ mod tests {
 
     use dynaflow_engine::msg::{Body, Header, Image, Message, PixelFormat};
 
-    use super::{EncodeCache, Encoded};
+    use super::{EncodeCache, Encoded, depth_mm, depth_mm_le};
+
+    #[test]
+    fn depth_in_millimetres_rounds_saturates_and_zeroes_what_is_not_a_measurement() {
+        let data = vec![f32::NAN, -1.0, 0.0, 0.0004, 0.001_953_125, 1.25, 70.0, f32::INFINITY];
+        let depth = dynaflow_engine::msg::DepthImage { width: 4, height: 2, data };
+        let want: [u16; 8] = [0, 0, 0, 0, 2, 1250, 65535, 0];
+        assert_eq!(depth_mm(&depth), want);
+        let le: Vec<u8> = want.iter().flat_map(|v| v.to_le_bytes()).collect();
+        assert_eq!(depth_mm_le(&depth), le);
+    }
 
     #[test]
     fn the_same_pixels_on_two_ports_are_encoded_once_and_nothing_stays_pending() {

@@ -471,7 +471,7 @@ impl Sink for RrdSink {
             Body::Depth(d) => {
                 // Raw 16-bit millimetres (the viewer's depth, half the bytes of f32), compressed
                 // by the file sink; bit-exact depth is the MCAP recording's `32FC1`.
-                let mm: Vec<u8> = encode::depth_mm(d).iter().flat_map(|v| v.to_le_bytes()).collect();
+                let mm = encode::depth_mm_le(d);
                 pixel_bytes = mm.len();
                 rec.log(
                     path.as_str(),
