@@ -8,39 +8,96 @@
 //! ```
 
 use base64::Engine as _;
-use dynaflow_engine::msg::{Body, Message};
+use dynaflow_engine::msg::{Body, Keypoints, Message, PortType, Tracks};
+use serde::Serialize;
 use serde_json::{Value, json};
 
+/// The `dynaflow` object of a message, serialized as it is (no `serde_json::Value` tree for
+/// the per-frame keypoints and tracks: building one cost a map per point). Fields are in
+/// alphabetical order, the order a `Value` object writes them in, so the bytes are those of
+/// the `Value` tree this replaced (tested).
+#[derive(Serialize)]
+pub struct Payload<'a> {
+    data: Data,
+    digest: String,
+    frame_id: &'a str,
+    seq: u64,
+    stamp: f64,
+    #[serde(rename = "type")]
+    ty: PortType,
+}
+
+#[derive(Serialize)]
+#[serde(untagged)]
+enum Data {
+    Keypoints(KeypointsData),
+    Tracks(TracksData),
+    Other(Value),
+}
+
+/// Keypoints' numbers, `f32` widened to `f64` as a `Value` stores them.
+#[derive(Serialize)]
+struct KeypointsData {
+    angle: Vec<f64>,
+    descriptor_bytes: Option<usize>,
+    descriptors: Option<String>,
+    octave: Vec<u8>,
+    response: Vec<f64>,
+    size: Vec<f64>,
+    xy: Vec<[f64; 2]>,
+}
+
+#[derive(Serialize)]
+struct TracksData {
+    cur: Vec<[f64; 2]>,
+    error: Vec<f64>,
+    id: Vec<u64>,
+    prev: Vec<[f64; 2]>,
+    prev_seq: u64,
+}
+
 /// The `dynaflow` object of a message.
-pub fn payload(msg: &Message) -> Value {
-    json!({
-        "seq": msg.header.seq,
-        "stamp": msg.header.stamp,
-        "frame_id": &*msg.header.frame_id,
-        "type": msg.body.port_type(),
-        "digest": format!("{:016x}", msg.digest()),
-        "data": data(&msg.body),
-    })
+pub fn payload(msg: &Message) -> Payload<'_> {
+    Payload {
+        data: match &msg.body {
+            Body::Keypoints(k) => Data::Keypoints(keypoints(k)),
+            Body::Tracks(t) => Data::Tracks(tracks(t)),
+            body => Data::Other(data(body)),
+        },
+        digest: format!("{:016x}", msg.digest()),
+        frame_id: &msg.header.frame_id,
+        seq: msg.header.seq,
+        stamp: msg.header.stamp,
+        ty: msg.body.port_type(),
+    }
+}
+
+fn keypoints(k: &Keypoints) -> KeypointsData {
+    let wide = |f: fn(&dynaflow_engine::msg::Keypoint) -> f32| k.points.iter().map(|p| f64::from(f(p))).collect();
+    KeypointsData {
+        angle: wide(|p| p.angle),
+        descriptor_bytes: k.descriptors.as_ref().map(|d| d.bytes_per),
+        descriptors: k.descriptors.as_ref().map(|d| base64::engine::general_purpose::STANDARD.encode(&d.data)),
+        octave: k.points.iter().map(|p| p.octave).collect(),
+        response: wide(|p| p.response),
+        size: wide(|p| p.size),
+        xy: k.points.iter().map(|p| [f64::from(p.x), f64::from(p.y)]).collect(),
+    }
+}
+
+fn tracks(t: &Tracks) -> TracksData {
+    let wide = |v: [f32; 2]| [f64::from(v[0]), f64::from(v[1])];
+    TracksData {
+        cur: t.tracks.iter().map(|t| wide(t.cur)).collect(),
+        error: t.tracks.iter().map(|t| f64::from(t.error)).collect(),
+        id: t.tracks.iter().map(|t| t.id).collect(),
+        prev: t.tracks.iter().map(|t| wide(t.prev)).collect(),
+        prev_seq: t.prev_seq,
+    }
 }
 
 fn data(body: &Body) -> Value {
     match body {
-        Body::Keypoints(k) => json!({
-            "xy": k.points.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>(),
-            "octave": k.points.iter().map(|p| p.octave).collect::<Vec<_>>(),
-            "size": k.points.iter().map(|p| p.size).collect::<Vec<_>>(),
-            "angle": k.points.iter().map(|p| p.angle).collect::<Vec<_>>(),
-            "response": k.points.iter().map(|p| p.response).collect::<Vec<_>>(),
-            "descriptor_bytes": k.descriptors.as_ref().map(|d| d.bytes_per),
-            "descriptors": k.descriptors.as_ref().map(|d| base64::engine::general_purpose::STANDARD.encode(&d.data)),
-        }),
-        Body::Tracks(t) => json!({
-            "prev_seq": t.prev_seq,
-            "id": t.tracks.iter().map(|t| t.id).collect::<Vec<_>>(),
-            "prev": t.tracks.iter().map(|t| t.prev).collect::<Vec<_>>(),
-            "cur": t.tracks.iter().map(|t| t.cur).collect::<Vec<_>>(),
-            "error": t.tracks.iter().map(|t| t.error).collect::<Vec<_>>(),
-        }),
         Body::PointLabels(l) => json!({
             "index": l.labels.iter().map(|l| l.index).collect::<Vec<_>>(),
             "dynamic": l.labels.iter().map(|l| l.dynamic).collect::<Vec<_>>(),

@@ -169,7 +169,7 @@ impl Sink for McapSink {
         let channel_id = self.channel(node, port, msg)?;
         let data = match schemas::to_protobuf(msg, self.codec, &self.cache) {
             Some(pb) => pb,
-            None => schemas::to_json(msg).and_then(|json| serde_json::to_vec(&json).map_err(|e| e.to_string())),
+            None => schemas::to_json(msg),
         }
         .map_err(|e| self.err(format!("encoding {node}/{port}: {e}")))?;
         if let Some((n, b)) = self.bytes.get_mut(&channel_id) {

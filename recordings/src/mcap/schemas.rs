@@ -8,11 +8,12 @@
 
 use base64::Engine as _;
 use dynaflow_engine::msg::{Body, Message, PointCloud, PortType, SparseMap};
+use serde::Serialize;
 use serde_json::{Value, json};
 
 use super::proto;
 use crate::encode::{self, EncodeCache, ImageCodec};
-use crate::payload::payload;
+use crate::payload::{Payload, payload};
 
 /// Whether a port type's messages are protobuf-encoded (pixels), not JSON.
 pub fn is_protobuf(ty: PortType) -> bool {
@@ -126,7 +127,7 @@ pub fn to_protobuf(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Opt
 }
 
 /// Encode a non-image message as its Foxglove JSON object.
-pub fn to_json(msg: &Message) -> Result<Value, String> {
+pub fn to_json(msg: &Message) -> Result<Vec<u8>, String> {
     let ts = time(msg.header.stamp);
     let frame_id = &*msg.header.frame_id;
     let mut v = match &msg.body {
@@ -137,22 +138,17 @@ pub fn to_json(msg: &Message) -> Result<Value, String> {
             "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
             "P": [c.fx, 0.0, c.cx, 0.0, 0.0, c.fy, c.cy, 0.0, 0.0, 0.0, 1.0, 0.0],
         }),
-        Body::Keypoints(k) => json!({
-            "circles": [], "texts": [],
-            "points": [{
-                "timestamp": ts, "type": 1, "thickness": 3.0,
-                "points": k.points.iter().map(|p| json!({"x": px(p.x), "y": px(p.y)})).collect::<Vec<_>>(),
-                "outline_color": color(0.1, 0.9, 0.2, 1.0), "outline_colors": [], "fill_color": color(0.1, 0.9, 0.2, 1.0),
-            }],
-        }),
-        Body::Tracks(t) => json!({
-            "circles": [], "texts": [],
-            "points": [{
-                "timestamp": ts, "type": 4, "thickness": 1.0,
-                "points": t.tracks.iter().flat_map(|t| [json!({"x": px(t.prev[0]), "y": px(t.prev[1])}), json!({"x": px(t.cur[0]), "y": px(t.cur[1])})]).collect::<Vec<_>>(),
-                "outline_color": color(1.0, 0.8, 0.0, 1.0), "outline_colors": [], "fill_color": color(0.0, 0.0, 0.0, 0.0),
-            }],
-        }),
+        Body::Keypoints(k) => {
+            let points = k.points.iter().map(|p| Xy { x: px(p.x), y: px(p.y) }).collect();
+            let style = (1, 3.0, color(0.1, 0.9, 0.2, 1.0), color(0.1, 0.9, 0.2, 1.0));
+            return points_annotation(msg, &ts, style, points);
+        }
+        Body::Tracks(t) => {
+            let xy = |v: [f32; 2]| Xy { x: px(v[0]), y: px(v[1]) };
+            let points = t.tracks.iter().flat_map(|t| [xy(t.prev), xy(t.cur)]).collect();
+            let style = (4, 1.0, color(1.0, 0.8, 0.0, 1.0), color(0.0, 0.0, 0.0, 0.0));
+            return points_annotation(msg, &ts, style, points);
+        }
         Body::Detections(d) => json!({
             "circles": [],
             "points": d.detections.iter().map(|det| {
@@ -201,9 +197,49 @@ pub fn to_json(msg: &Message) -> Result<Value, String> {
         _ => json!({"timestamp": ts}),
     };
     if let Some(obj) = v.as_object_mut() {
-        obj.insert("dynaflow".into(), payload(msg));
+        obj.insert("dynaflow".into(), serde_json::to_value(payload(msg)).map_err(|e| e.to_string())?);
     }
-    Ok(v)
+    serde_json::to_vec(&v).map_err(|e| e.to_string())
+}
+
+/// `foxglove.ImageAnnotations` with one `PointsAnnotation`, serialized as it is: keypoints and
+/// tracks are hundreds of points a frame, and a `Value` tree cost a map per point. Fields are
+/// in alphabetical order, as a `Value` object writes them, so the bytes are unchanged.
+#[derive(Serialize)]
+struct ImageAnnotations<'a> {
+    circles: [Value; 0],
+    dynaflow: Payload<'a>,
+    points: [PointsAnnotation<'a>; 1],
+    texts: [Value; 0],
+}
+
+#[derive(Serialize)]
+struct PointsAnnotation<'a> {
+    fill_color: Value,
+    outline_color: Value,
+    outline_colors: [Value; 0],
+    points: Vec<Xy>,
+    thickness: f64,
+    timestamp: &'a Value,
+    #[serde(rename = "type")]
+    ty: u8,
+}
+
+#[derive(Serialize)]
+struct Xy {
+    x: f64,
+    y: f64,
+}
+
+/// `(type, thickness, outline colour, fill colour)` of a points annotation.
+type PointsStyle = (u8, f64, Value, Value);
+
+fn points_annotation(msg: &Message, ts: &Value, style: PointsStyle, points: Vec<Xy>) -> Result<Vec<u8>, String> {
+    let (ty, thickness, outline_color, fill_color) = style;
+    let annotation =
+        PointsAnnotation { fill_color, outline_color, outline_colors: [], points, thickness, timestamp: ts, ty };
+    let out = ImageAnnotations { circles: [], dynaflow: payload(msg), points: [annotation], texts: [] };
+    serde_json::to_vec(&out).map_err(|e| e.to_string())
 }
 
 /// A point cloud as `foxglove.PointCloud` (x, y, z float32, optional RGBA bytes).
@@ -239,5 +275,72 @@ pub fn map_cloud(m: &SparseMap) -> PointCloud {
     PointCloud {
         points: m.points.iter().map(|p| [p.position[0] as f32, p.position[1] as f32, p.position[2] as f32]).collect(),
         colors: None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use dynaflow_engine::msg::{Body, Descriptors, Header, Keypoint, Keypoints, Message, Track, Tracks};
+    use serde_json::Value;
+
+    use super::to_json;
+
+    fn message(body: Body) -> Message {
+        Message::new(Header { seq: 7, stamp: 1.25, frame_id: Arc::from("camera") }, body)
+    }
+
+    /// Keypoints and tracks are serialized without a `Value` tree; their bytes must be what
+    /// the tree wrote (keys in alphabetical order, `f32` widened to `f64`), and the payload
+    /// must give back every `f32` exactly.
+    #[test]
+    fn keypoints_and_tracks_json_is_the_value_trees_and_restores_every_float() {
+        let kp = |i: u8| Keypoint {
+            x: 0.1 + f32::from(i) * 97.3,
+            y: 1.0 / 3.0 + f32::from(i),
+            size: 31.0,
+            angle: -1.0 + f32::from(i) * 1e-3,
+            response: 1e-7 * f32::from(i + 1),
+            octave: i % 8,
+        };
+        let points: Vec<Keypoint> = (0..9).map(kp).collect();
+        let descriptors = Some(Descriptors { bytes_per: 32, data: (0..9 * 32).map(|v| v as u8).collect() });
+        let keypoints = message(Body::Keypoints(Keypoints { points: points.clone(), descriptors }));
+        let tracks = message(Body::Tracks(Tracks {
+            prev_seq: 6,
+            tracks: (0..5u8)
+                .map(|i| Track {
+                    id: u64::from(i) * 11,
+                    prev: [kp(i).x, kp(i).y],
+                    cur: [kp(i + 1).x, kp(i).y],
+                    error: 0.3,
+                })
+                .collect(),
+        }));
+        for msg in [&keypoints, &tracks] {
+            let bytes = to_json(msg).unwrap();
+            let tree: Value = serde_json::from_slice(&bytes).unwrap();
+            assert_eq!(serde_json::to_vec(&tree).unwrap(), bytes, "{}", String::from_utf8_lossy(&bytes));
+            assert_eq!(tree["dynaflow"]["seq"], 7);
+            assert_eq!(tree["points"][0]["timestamp"]["nsec"], 250_000_000);
+        }
+        let tree: Value = serde_json::from_slice(&to_json(&keypoints).unwrap()).unwrap();
+        let data = &tree["dynaflow"]["data"];
+        for (i, p) in points.iter().enumerate() {
+            let f = |v: &Value| v.as_f64().unwrap() as f32;
+            assert_eq!(f(&data["xy"][i][0]).to_bits(), p.x.to_bits());
+            assert_eq!(f(&data["xy"][i][1]).to_bits(), p.y.to_bits());
+            assert_eq!(f(&data["response"][i]).to_bits(), p.response.to_bits());
+            assert_eq!(f(&data["angle"][i]).to_bits(), p.angle.to_bits());
+            assert_eq!(data["octave"][i], p.octave);
+            // The annotation's points are rounded to a hundredth of a pixel.
+            assert!((tree["points"][0]["points"][i]["x"].as_f64().unwrap() - f64::from(p.x)).abs() <= 0.005);
+        }
+        assert_eq!(tree["points"][0]["points"].as_array().unwrap().len(), 9);
+        let tree: Value = serde_json::from_slice(&to_json(&tracks).unwrap()).unwrap();
+        assert_eq!(tree["points"][0]["points"].as_array().unwrap().len(), 10);
+        assert_eq!(tree["dynaflow"]["data"]["prev_seq"], 6);
+        assert_eq!(tree["dynaflow"]["data"]["id"][4], 44);
     }
 }
