@@ -349,6 +349,16 @@ fn log_trail_segment(
     rec.log(format!("{world}_path/{k}"), &rerun::LineStrips3D::new([trail_segment(trail, k)]))
 }
 
+/// Whether `value` differs from what `last` holds for `key` (or is its first), recording it:
+/// what is logged static is logged again only when it changes.
+fn changed<T: PartialEq + Clone>(last: &mut HashMap<String, T>, key: &str, value: &T) -> bool {
+    if last.get(key) == Some(value) {
+        return false;
+    }
+    last.insert(key.to_owned(), value.clone());
+    true
+}
+
 fn octave_color(octave: u8) -> rerun::Color {
     const PALETTE: [[u8; 3]; 8] = [
         [230, 25, 75],
@@ -512,12 +522,11 @@ impl Sink for RrdSink {
                 )
             }
             Body::Mask(m) => {
-                if self.logged_classes.get(&path) != Some(&m.class_names) {
+                if changed(&mut self.logged_classes, &path, &m.class_names) {
                     let ctx = rerun::AnnotationContext::new(
                         m.class_names.iter().enumerate().map(|(i, n)| (i as u16, n.as_ref(), class_color(i as u16).0)),
                     );
                     rec.log_static(path.as_str(), &ctx).map_err(|e| self.err(e))?;
-                    self.logged_classes.insert(path.clone(), m.class_names.clone());
                 }
                 let (bytes, encoding, _) = encode::mask_raw(m);
                 pixel_bytes = bytes.len();
@@ -572,18 +581,15 @@ impl Sink for RrdSink {
                     logged.map_err(|e| self.err(e))?;
                 }
                 match &self.intrinsics {
-                    Some(c) if self.logged_pinholes.get(&world) != Some(c) => {
-                        self.logged_pinholes.insert(world.clone(), c.clone());
-                        rec.log_static(
-                            world,
-                            &rerun::Pinhole::from_focal_length_and_resolution(
-                                [c.fx as f32, c.fy as f32],
-                                [c.width as f32, c.height as f32],
-                            )
-                            .with_principal_point([c.cx as f32, c.cy as f32])
-                            .with_image_plane_distance(0.3),
+                    Some(c) if changed(&mut self.logged_pinholes, &world, c) => rec.log_static(
+                        world,
+                        &rerun::Pinhole::from_focal_length_and_resolution(
+                            [c.fx as f32, c.fy as f32],
+                            [c.width as f32, c.height as f32],
                         )
-                    }
+                        .with_principal_point([c.cx as f32, c.cy as f32])
+                        .with_image_plane_distance(0.3),
+                    ),
                     _ => Ok(()),
                 }
             }
@@ -686,7 +692,7 @@ impl Sink for RrdSink {
 
 #[cfg(test)]
 mod tests {
-    use std::collections::BTreeMap;
+    use std::collections::{BTreeMap, HashMap};
     use std::sync::Arc;
 
     use dynaflow_engine::msg::{Body, DepthImage, Header, Image, Message, PixelFormat};
@@ -694,6 +700,17 @@ mod tests {
 
     use super::RrdSink;
     use crate::{EncodeCache, McapSink};
+
+    #[test]
+    fn what_rarely_changes_is_logged_again_only_when_it_changes_per_entity() {
+        let mut last = HashMap::new();
+        assert!(super::changed(&mut last, "a", &1));
+        assert!(!super::changed(&mut last, "a", &1));
+        assert!(super::changed(&mut last, "b", &1));
+        assert!(super::changed(&mut last, "a", &2));
+        assert!(!super::changed(&mut last, "a", &2));
+        assert!(!super::changed(&mut last, "b", &1));
+    }
 
     #[test]
     fn path_segments_cover_the_path_and_join_end_to_start() {
