@@ -20,14 +20,14 @@
 //! | octree_update | `/world/<node>/<port>` | `Boxes3D` |
 //! | scalars | `/metrics/<node>/<port>` | `Scalars`, one series per name (`SeriesLines` names) |
 //!
-//! Long runs in bounded memory. The SDK keeps a row of its RRD footer manifest in memory for
-//! every chunk it writes, until the file closes (a few hundred bytes to kilobytes each, one
-//! column per timeline and component: 132 on the default graph), so the file recorder makes
-//! few chunks and narrow rows: every entity's rows are cut once per [`CUT_EVERY_FRAMES`] frames
-//! or at 4 MiB, one timeline (no `log_time`, no second clock), one entity per scalar port, pose
-//! paths in segments. What waits to be written is bounded in bytes at every stage: rows per
-//! entity in the batcher and the batcher's in-flight budget; [`RrdFile`] encodes and writes each
-//! chunk as it comes, with no queue of its own.
+//! Long runs in bounded memory. The file's footer manifest has a row per chunk, held until the
+//! file closes; [`file`] keeps it per entity (a row carries that entity's components only,
+//! about 0.2 KB, not the SDK's dense ~2 KB), and the file recorder makes few chunks: every
+//! entity's rows are cut once per [`CUT_EVERY_FRAMES`] frames or at 4 MiB, one timeline (no
+//! `log_time`, no second clock), one entity per scalar port, pose paths in segments. What
+//! waits to be written is bounded in bytes at every stage: rows per entity in the batcher and
+//! the batcher's in-flight budget; the file writer encodes and writes each chunk as it comes,
+//! with no queue of its own.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -39,6 +39,9 @@ use rerun::blueprint::{
 };
 
 use crate::encode::{self, EncodeCache, ImageCodec};
+
+mod file;
+use file::{RrdFile, SharedFile};
 
 /// Where a [`RrdSink`] sends its stream.
 #[derive(Clone, Debug)]
@@ -96,8 +99,7 @@ const LIVE_BATCHING: rerun::log::ChunkBatcherConfig = rerun::log::ChunkBatcherCo
 };
 
 /// How the file recorder batches rows into chunks. Two costs pull apart: every chunk costs a
-/// manifest row in memory until the file closes (about 1 KB on the default graph, see the
-/// module doc), and every chunk passes through the SDK as several transient copies of its size
+/// manifest row in memory until the file closes (a few hundred bytes, see [`file`]), and every chunk passes through the SDK as several transient copies of its size
 /// (concatenated rows, Arrow IPC, LZ4 output, the framed message: heaptrack at the peak of a
 /// 600-frame run held about 5x the chunk size there). So an entity's rows are cut at 4 MiB
 /// (about 6 frames of 640x480 depth) or by the recorder every [`CUT_EVERY_FRAMES`] frames, not
@@ -120,116 +122,6 @@ fn with_env(config: rerun::log::ChunkBatcherConfig) -> rerun::log::ChunkBatcherC
         tracing::warn!("ignoring the rerun batching environment: {e}");
         config
     })
-}
-
-/// The `.rrd` file writer: each chunk the batcher hands over is encoded (Arrow IPC, LZ4,
-/// protobuf framing) and written on the SDK's forwarding thread, there and then. The SDK's own
-/// `FileSink` queues up to 1024 messages for a writer thread of its own, whatever their size
-/// (image chunks are megabytes), so what waits between the batcher and the disk varied with how
-/// far the writer lagged; here nothing waits: a slow disk blocks the forwarding thread, which
-/// fills the batcher's bounded channel, which blocks the recorder, and the engine's recorder
-/// queue stands between it and the graph. The first write error (a full disk) is kept, stops
-/// the writing, and fails the recorder with the file's name.
-struct RrdFile {
-    state: std::sync::Arc<SharedFile>,
-}
-
-type RrdEncoder = rerun::external::re_log_encoding::Encoder<std::io::BufWriter<std::fs::File>>;
-
-/// The encoder, shared by the sink the SDK drives and the recorder that finishes the file.
-struct SharedFile {
-    /// `None` once the file is finished.
-    encoder: std::sync::Mutex<Option<RrdEncoder>>,
-    /// The first write error, readable without waiting for a chunk being encoded.
-    failed: std::sync::OnceLock<String>,
-}
-
-impl SharedFile {
-    fn create(path: &std::path::Path) -> Result<Self, String> {
-        use rerun::external::re_log_encoding::{CrateVersion, Encoder, EncodingOptions};
-        let file = std::fs::File::create(path).map_err(|e| e.to_string())?;
-        // Compressed chunks and a footer with the manifest of every chunk, as `FileSink` writes.
-        let mut encoder = Encoder::new_eager(
-            CrateVersion::LOCAL,
-            EncodingOptions::PROTOBUF_COMPRESSED,
-            std::io::BufWriter::with_capacity(1 << 20, file),
-        )
-        .map_err(|e| e.to_string())?;
-        // The stream header reaches the file now, so a file that cannot be written (a full
-        // disk) fails the run before it starts, as the other recorders do.
-        if let Err(e) = encoder.flush_blocking() {
-            // Unwrapped, the encoder does not try (and warn about) its end-of-stream on drop.
-            let _ = encoder.into_inner();
-            return Err(e.to_string());
-        }
-        Ok(Self { encoder: std::sync::Mutex::new(Some(encoder)), failed: std::sync::OnceLock::new() })
-    }
-
-    fn lock(&self) -> std::sync::MutexGuard<'_, Option<RrdEncoder>> {
-        // A panic while encoding leaves nothing half-mutated that matters here: keep writing.
-        self.encoder.lock().unwrap_or_else(std::sync::PoisonError::into_inner)
-    }
-
-    /// Runs `f` on the encoder unless an earlier write failed or the file is finished; keeps
-    /// the first error, after which nothing more is written.
-    fn write(
-        &self,
-        f: impl FnOnce(&mut RrdEncoder) -> Result<(), rerun::external::re_log_encoding::EncodeError>,
-    ) -> Result<(), String> {
-        let mut encoder = self.lock();
-        if let Some(e) = self.failed() {
-            return Err(e.to_owned());
-        }
-        let Some(encoder) = encoder.as_mut() else { return Err("the file is already finished".into()) };
-        f(encoder).map_err(|e| {
-            let e = e.to_string();
-            let _ = self.failed.set(e.clone());
-            e
-        })
-    }
-
-    /// Writes the footer and the end-of-stream marker, flushes, and closes the file.
-    fn finish(&self) -> Result<(), String> {
-        self.write(|e| {
-            e.finish()?;
-            e.flush_blocking()
-        })?;
-        *self.lock() = None;
-        Ok(())
-    }
-
-    fn failed(&self) -> Option<&str> {
-        self.failed.get().map(String::as_str)
-    }
-}
-
-impl Drop for SharedFile {
-    /// A recording dropped without `close` (an error elsewhere ended the run) still gets its
-    /// footer, as the SDK's file sink does.
-    fn drop(&mut self) {
-        // Does nothing once finished or after a write error.
-        let _ = self.finish();
-        // After a write error the file is given up (the error was reported); unwrapped, the
-        // encoder does not try its end-of-stream again on drop.
-        if let Some(encoder) = self.lock().take() {
-            let _ = encoder.into_inner();
-        }
-    }
-}
-
-impl rerun::sink::LogSink for RrdFile {
-    fn send(&self, msg: rerun::log::LogMsg) {
-        // An error is kept and reported by the recorder.
-        let _ = self.state.write(|e| e.append(&msg).map(|_| ()));
-    }
-
-    fn flush_blocking(&self, _timeout: std::time::Duration) -> Result<(), rerun::sink::SinkFlushError> {
-        self.state.write(RrdEncoder::flush_blocking).map_err(rerun::sink::SinkFlushError::failed)
-    }
-
-    fn defers_finalization_to_shutdown(&self) -> bool {
-        true
-    }
 }
 
 /// A pose stream's path is drawn as segments of this many poses, each its own entity
