@@ -1,8 +1,8 @@
 //! The rerun recorder: every recorded port becomes entity `/<node>/<port>` logged as its
 //! natural archetype, on the `frame` (sequence number) timeline, with provenance as recording
 //! properties and a default blueprint. (Each message's sensor time is its MCAP `log_time` and
-//! the timestamp column of the trajectory files; a second timeline here would double the
-//! per-chunk manifest the SDK keeps in memory, see below.)
+//! the timestamp column of the trajectory files; a second timeline here would add a column per
+//! component to the footer manifest kept in memory, see below.)
 //!
 //! | port type | entity | archetype |
 //! |---|---|---|
