@@ -7,6 +7,8 @@
 //! `/tmp/dynaflow-peers`, with `opencv-python-headless`).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
+#[path = "../tests/common/mod.rs"]
+mod common;
 #[path = "../tests/common/frontend.rs"]
 mod frontend;
 
@@ -133,7 +135,7 @@ fn main() {
     });
 
     println!("front-end, single thread, median of {reps} calls; peer: OpenCV (cv2) on the same inputs");
-    let cv = frontend::cv2_python().map(|py| {
+    let cv = frontend::cv2_python("bench frontend: OpenCV side by side").map(|py| {
         let job = json!({
             "reps": reps,
             "orb": { "images": ch7, "ours": [

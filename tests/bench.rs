@@ -29,8 +29,13 @@ fn every_seed_graph_variant_runs_and_the_tables_compare_them_with_the_baseline()
     for r in &rows {
         assert_eq!(r[3], "ok", "{r:?}");
         assert_eq!(r[4], "6", "{r:?}");
-        assert!(r[5].parse::<f64>().is_ok(), "ATE of {r:?}");
+        // A number, never NaN or infinite (a run whose ATE is not finite is a failed row).
+        assert!(r[5].parse::<f64>().is_ok_and(|a| a.is_finite() && a >= 0.0), "ATE of {r:?}");
+        // The oracle variants (ground-truth masks or boxes), and only they, are marked.
+        assert_eq!(r[14], (r[1].starts_with("oracle") || r[1] == "masked").to_string(), "{r:?}");
     }
+    let md = std::fs::read_to_string(dir.path().join("bench.md")).unwrap();
+    assert!(md.contains("| mg_slam | oracle (oracle) | synthetic |"), "{md}");
     // The improvement over orb_baseline is computed for every other row on the same sequence.
     let seed: Vec<&Vec<String>> = rows.iter().filter(|r| r[0] != "orb_baseline").collect();
     assert!(seed.iter().all(|r| r[12].parse::<f64>().is_ok()), "{seed:?}");

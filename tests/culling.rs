@@ -17,28 +17,86 @@ fn run(variant: &str, out: &std::path::Path, record: &str) -> serde_json::Value 
     serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
 }
 
+/// The variants of graphs/culling.yaml, as the graph file lists them.
+fn variants() -> Vec<String> {
+    let text = std::fs::read_to_string(common::repo().join("graphs/culling.yaml")).unwrap();
+    let doc = dynaflow_engine::yaml::parse(&text).unwrap();
+    dynaflow_engine::spec::parse_graph(&doc).0.variants.into_iter().map(|v| v.name).collect()
+}
+
+/// Per frame, the `dynamic` flags of a recorded label topic.
+fn flags(rec: &dynaflow_recordings::diff::Recording, topic: &str) -> Vec<Vec<bool>> {
+    let t = rec.topics.get(topic).unwrap_or_else(|| panic!("no {topic}"));
+    t.frames.values().map(|f| f["data"]["dynamic"].as_array().unwrap().iter().map(|d| d == true).collect()).collect()
+}
+
+/// Per frame, one number of a recorded counts topic.
+fn count(rec: &dynaflow_recordings::diff::Recording, topic: &str, name: &str) -> Vec<f64> {
+    let t = rec.topics.get(topic).unwrap_or_else(|| panic!("no {topic}"));
+    t.frames.values().map(|f| f["data"][name].as_f64().unwrap_or_else(|| panic!("{topic}: {f}"))).collect()
+}
+
 #[test]
-fn every_rule_runs_and_the_same_seed_gives_the_same_labels() {
+fn every_variant_runs_reproducibly_and_does_what_it_is_for() {
     let dir = common::TempDir::new("culling");
-    for variant in
-        ["epipolar_fixed", "epipolar_adaptive", "mask", "semantic_prior", "flow_consistency", "depth_consistency"]
-    {
-        let a = run(variant, &dir.path().join("a"), "none");
+    let all = variants();
+    assert!(all.len() >= 9, "{all:?}");
+    let mut mask_labels = None;
+    let mut pspnet = None;
+    for variant in &all {
+        let a = run(variant, &dir.path().join("a"), "mcap");
         let b = run(variant, &dir.path().join("b"), "none");
         let labels = &a["digests"]["cull/labels"];
         assert_eq!(labels["count"], 6, "{variant}: one label set per frame: {labels}");
         assert_eq!(labels, &b["digests"]["cull/labels"], "{variant}: labels differ between two runs");
         assert_eq!(a["digests"]["fundamental/model"], b["digests"]["fundamental/model"]);
         assert_eq!(a["digests"]["homography/model"], b["digests"]["homography/model"]);
-        if variant == "pspnet" {
-            // The screening sees only what the flow rule kept, and removes more.
-            assert_eq!(a["digests"]["screen/counts"], b["digests"]["screen/counts"]);
-            assert_eq!(a["digests"]["screen/counts"]["count"], 6);
+        let rec = dynaflow_recordings::diff::read_mcap(&dir.path().join(format!("a/culling-{variant}.mcap"))).unwrap();
+        let cull = flags(&rec, "/cull/labels");
+        assert_eq!(cull.len(), 6, "{variant}");
+        // LK needs a previous frame: from the second frame on, every rule labels some points
+        // dynamic (the walking people are in view) and keeps most static.
+        for (k, f) in cull.iter().enumerate().skip(1) {
+            let d = f.iter().filter(|d| **d).count();
+            assert!(d > 0 && 2 * d < f.len(), "{variant} frame {k}: {d} of {} dynamic", f.len());
         }
-        if variant == "mask_or_epipolar" {
-            assert_eq!(a["digests"]["combined/labels"], b["digests"]["combined/labels"]);
-            assert_eq!(a["digests"]["combined/labels"]["count"], 6);
+        match variant.as_str() {
+            "pspnet" => {
+                // The screening sees only what the flow rule kept.
+                assert_eq!(a["digests"]["screen/counts"], b["digests"]["screen/counts"]);
+                let kept = count(&rec, "/cull/counts", "static");
+                let screened = count(&rec, "/screen/counts", "total");
+                assert_eq!(screened, kept, "{variant}: the screening got other tracks than the flow rule kept");
+                pspnet = Some((cull.clone(), count(&rec, "/screen/counts", "dynamic")));
+            }
+            "mask" => mask_labels = Some(cull.clone()),
+            "mask_or_epipolar" => {
+                assert_eq!(a["digests"]["combined/labels"], b["digests"]["combined/labels"]);
+                let (geometric, combined) = (flags(&rec, "/geometric/labels"), flags(&rec, "/combined/labels"));
+                assert_eq!(combined.len(), 6);
+                let mut added = 0;
+                for ((m, g), c) in cull.iter().zip(&geometric).zip(&combined) {
+                    assert_eq!(c.len(), m.len());
+                    for ((m, g), c) in m.iter().zip(g).zip(c) {
+                        assert_eq!(*c, *m || *g, "{variant}: combined is not mask OR epipolar");
+                        added += usize::from(*g && !*m);
+                    }
+                }
+                assert!(added > 0, "the epipolar rule added nothing to the mask's dynamic points");
+            }
+            _ => {}
         }
+    }
+    // The chain removes what the flow rule removed plus, of the rest, what the mask rule
+    // (the `mask` variant, on the same tracks) removes: per frame, the screening's dynamic
+    // count is the number of tracks the mask marks and the flow rule kept.
+    let ((flow, screened), mask) = (pspnet.unwrap(), mask_labels.unwrap());
+    for (k, ((f, m), s)) in flow.iter().zip(&mask).zip(&screened).enumerate() {
+        let expected = f.iter().zip(m).filter(|(f, m)| !**f && **m).count();
+        assert_eq!(
+            *s as usize, expected,
+            "frame {k}: the screening removed {s}, the mask rule on what flow kept {expected}"
+        );
     }
 }
 

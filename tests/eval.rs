@@ -85,7 +85,7 @@ fn close(ours: &Stats, theirs: &serde_json::Value, what: &str) {
 
 #[test]
 fn eval_equals_evo_on_real_and_generated_pairs() {
-    let Some(python) = frontend::python_with("evo") else { return };
+    let Some(python) = frontend::python_with("evo", "evo", "eval: ATE/RPE vs evo") else { return };
     let dir = common::TempDir::new("eval");
     let fixtures = common::repo().join("tests/fixtures/slambook2_trajectories");
     let gt = ground_truth(600, 30.0);
@@ -211,4 +211,58 @@ fn eval_plot_is_a_png_of_both_panels_and_a_bad_path_is_an_error() {
         .unwrap();
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/dir/ate.png"));
+}
+
+#[test]
+fn the_ate_a_run_prints_on_a_tum_folder_is_evos() {
+    // A TUM folder whose motion capture runs at 100 Hz on its own clock (3.3 ms after the
+    // camera's), as the real sequences' do: the run must pair each frame with the pose evo
+    // pairs it with (nearest within 10 ms), not with one interpolated at the frame time.
+    let Some(python) = frontend::python_with("evo", "evo", "eval: a run's printed ATE vs evo_ape on the folder") else {
+        return;
+    };
+    use dynaflow_operators::synth::Motion;
+    let dir = common::TempDir::new("eval-run-tum");
+    let seq = dir.path().join("rgbd_dataset_freiburg3_synthetic");
+    let o = common::bin()
+        .args(["synth", "--motion", "xyz", "--people", "2", "--frames", "40", "--out"])
+        .arg(&seq)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let rgb = std::fs::read_to_string(seq.join("rgb.txt")).unwrap();
+    let first: f64 =
+        rgb.lines().find(|l| !l.starts_with('#')).unwrap().split_whitespace().next().unwrap().parse().unwrap();
+    let gt: Vec<(f64, Isometry3<f64>)> =
+        (0..150).map(|i| first - 0.1 + 0.0033 + i as f64 * 0.01).map(|t| (t, Motion::Xyz.pose(t - first))).collect();
+    write_tum(&seq.join("groundtruth.txt"), &gt);
+    let out = dir.path().join("out");
+    let o = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--out"])
+        .arg(&out)
+        .arg("--input")
+        .arg(&seq)
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("orb_baseline.summary.json")).unwrap()).unwrap();
+    let printed = summary["ate"]["rmse"].as_f64().unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(stdout.contains(&format!("rmse {printed:.4} m")), "{stdout}");
+    let job = serde_json::json!([{
+        "gt": seq.join("groundtruth.txt"),
+        "est": out.join("orb_baseline.track.trajectory.txt"),
+        "max_diff": 0.01, "delta": 1, "unit": "frames"
+    }]);
+    let job_path = dir.path().join("job.json");
+    std::fs::write(&job_path, job.to_string()).unwrap();
+    let o = Command::new(&python).arg(common::repo().join("tests/peers/evo_eval.py")).arg(&job_path).output().unwrap();
+    assert!(o.status.success(), "evo: {}", String::from_utf8_lossy(&o.stderr));
+    let evo: Vec<serde_json::Value> = serde_json::from_slice(&o.stdout).unwrap();
+    let theirs = evo[0]["ate_se3"]["rmse"].as_f64().unwrap();
+    eprintln!("run's ATE {printed:.9} m, evo_ape on the folder {theirs:.9} m over {} poses", evo[0]["matched"]);
+    assert_eq!(summary["ate"]["pairs"].as_u64(), evo[0]["matched"].as_u64());
+    assert!((printed - theirs).abs() <= 1e-6 * theirs.max(1e-3), "run {printed}, evo {theirs}");
 }

@@ -209,7 +209,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 #[test]
 fn against_opencv_on_the_real_pairs() {
-    let Some(python) = frontend::cv2_python() else { return };
+    let Some(python) = frontend::cv2_python("frontend: ORB, matcher, LK vs OpenCV") else { return };
     let dir = common::TempDir::new("frontend-cv2");
     let ch7 = frontend::ch7();
     let (a7, b7) = (frontend::load_gray(&ch7[0]), frontend::load_gray(&ch7[1]));
@@ -320,7 +320,7 @@ fn find_array<'a>(v: &'a serde_json::Value, key: &str) -> Option<&'a Vec<serde_j
 #[test]
 fn fundamental_ransac_agrees_with_opencv() {
     use dynaflow_vision::geometry::{RansacConfig, SplitMix64, fit_fundamental};
-    let Some(python) = frontend::cv2_python() else { return };
+    let Some(python) = frontend::cv2_python("frontend: F-RANSAC vs OpenCV") else { return };
     let dir = common::TempDir::new("fundamental-cv2");
     let cases = frontend::fundamental_cases();
     let job = json!({
@@ -366,7 +366,7 @@ fn fundamental_ransac_agrees_with_opencv() {
 #[test]
 fn pnp_ransac_agrees_with_opencv_on_the_real_rgbd_pair() {
     use dynaflow_vision::geometry::{SplitMix64, pnp_ransac};
-    let Some(python) = frontend::cv2_python() else { return };
+    let Some(python) = frontend::cv2_python("frontend: PnP RANSAC vs OpenCV") else { return };
     let dir = common::TempDir::new("pnp-cv2");
     let (world, pixels, cam) = frontend::ch7_pnp();
     assert!(world.len() >= 100, "{} correspondences", world.len());

@@ -407,3 +407,45 @@ fn diff_reader_survives_every_flipped_bit() {
     }
     assert!(errors > 0);
 }
+
+// --- issue 28, point 9: quiet wrong input ----------------------------------------------
+
+#[test]
+fn a_mask_of_another_size_than_the_image_is_an_error_naming_both() {
+    // ORB's mask and the tracker's mask from a 320x240 source, the image and depth 640x480.
+    for (consumer, wiring) in [
+        ("orb", "orb: { op: orb_extract, in: { image: camera.rgb, mask: small.gt_mask } }"),
+        (
+            "track",
+            "orb: { op: orb_extract, in: { image: camera.rgb } }\n  track: { op: pnp_track, in: { keypoints: orb.keypoints, depth: camera.depth, camera_info: camera.camera_info, mask: small.gt_mask } }",
+        ),
+    ] {
+        let text = format!(
+            "name: t\noracle: true\nnodes:\n  camera: {{ op: synth, params: {{ frames: 2 }} }}\n  small: {{ op: synth, params: {{ frames: 2, width: 320, height: 240 }} }}\n  {wiring}\n"
+        );
+        let g = common::graph(&text);
+        let (report, _) = run(&g);
+        assert_eq!(report.status, RunStatus::Failed, "{consumer}: {report:?}");
+        let failure = report.failures.iter().map(|f| format!("{}: {}", f.node, f.error)).collect::<Vec<_>>().join("\n");
+        assert!(failure.contains("320x240") && failure.contains("640x480"), "{consumer}: {failure}");
+    }
+}
+
+#[test]
+fn box_to_mask_gives_each_listed_class_its_own_id() {
+    // Boxes from the ground-truth masks are all `person`; listed second, person is class 2.
+    let g = common::graph(
+        "name: t\noracle: true\nnodes:\n  camera: { op: synth, params: { frames: 3 } }\n  boxes: { op: oracle_boxes, in: { mask: camera.gt_mask } }\n  people: { op: box_to_mask, in: { detections: boxes.detections, depth: camera.depth }, params: { classes: \"chair, person\" } }\n",
+    );
+    let (report, sink) = run(&g);
+    assert_eq!(report.status, RunStatus::Completed, "{report:?}");
+    let masks = sink.port("people", "mask");
+    assert_eq!(masks.len(), 3);
+    for m in &masks {
+        let Body::Mask(mask) = &m.body else { panic!("{m:?}") };
+        let names: Vec<&str> = mask.class_names.iter().map(|n| &**n).collect();
+        assert_eq!(names, ["static", "chair", "person"]);
+        assert!(mask.classes.contains(&2), "no person pixel");
+        assert!(mask.classes.iter().all(|&c| c == 0 || c == 2), "a pixel of a class no box had");
+    }
+}

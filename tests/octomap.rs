@@ -3,6 +3,8 @@
 //! liboctomap's `insertPointCloud`; OctoMap's tools read our files; people excluded by their
 //! masks leave no ghost voxels in their swept volume.
 #![allow(clippy::unwrap_used, clippy::panic)]
+// `common` and the OctoMap crate's test helpers (`peer`) both include the shared `peers.rs`.
+#![allow(clippy::duplicate_mod)]
 
 mod common;
 #[path = "../octomap/tests/common/mod.rs"]
@@ -120,7 +122,11 @@ fn compare_octrees(a: &Path, b: &Path) -> String {
 #[test]
 fn our_tree_equals_octomaps_on_real_and_synthetic_depth() {
     let dir = common::TempDir::new("octomap-peer");
-    let Some(exe) = peer::octomap_peer(dir.path()) else { return };
+    let Some(exe) =
+        peer::octomap_peer(dir.path(), "octomap::our_tree_equals_octomaps_on_real_and_synthetic_depth: vs liboctomap")
+    else {
+        return;
+    };
     for (name, scans) in [("icl_nuim", icl_scans()), ("synthetic_walking", synthetic_scans(12))] {
         let report = peer::run_peer(&exe, &scans, 0.05, dir.path(), name);
         let t = ours(&scans);
@@ -160,9 +166,10 @@ fn octomap_tools_read_the_files_a_run_writes() {
     let (ot, bt) = (dir.path().join("octomap.map.ot"), dir.path().join("octomap.map.bt"));
     let tree = read(&ot).unwrap();
     assert!(tree.semantic() && !tree.occupied_leaves().is_empty());
-    if Command::new("convert_octree").arg("--help").output().is_err() {
-        assert!(std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(), "octomap-tools required");
-        eprintln!("note: no octomap-tools; skipping convert_octree");
+    let tools = || {
+        Command::new("convert_octree").arg("--help").output().map(|_| ()).map_err(|e| format!("convert_octree: {e}"))
+    };
+    if !peer::peers::peer_runs("octomap", "octomap: convert_octree reads a run's files", tools) {
         return;
     }
     for (input, output) in [(&bt, dir.path().join("from_bt.ot")), (&ot, dir.path().join("from_ot.bt"))] {

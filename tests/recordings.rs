@@ -23,10 +23,10 @@ fn run_default(dir: &Path, extra: &[&str]) -> std::process::Output {
     out
 }
 
-/// A peer tool, or `None` (with a note) when it is not installed and not required.
-fn peer(tool: &str) -> Option<PathBuf> {
-    let venv = std::env::var_os("DYNAFLOW_PEERS").map_or_else(|| PathBuf::from("/tmp/dynaflow-peers"), PathBuf::from);
-    let candidate = venv.join("bin").join(tool);
+/// A peer tool for `comparison`, or `None` when that comparison is skipped
+/// ([`common::peers::peer_runs`]).
+fn peer(tool: &str, comparison: &str) -> Option<PathBuf> {
+    let candidate = common::peers::venv().join("bin").join(tool);
     // A Python counts only with the `mcap` reader and `protobuf` installed (a user's `python` usually
     // lacks it; the test then skips instead of failing).
     let probe: &[&str] = if tool == "python" { &["-c", "import mcap, google.protobuf"] } else { &["--version"] };
@@ -38,12 +38,13 @@ fn peer(tool: &str) -> Option<PathBuf> {
             .ok()
             .is_some_and(|o| o.status.success())
     };
-    let found = [candidate, PathBuf::from(tool)].into_iter().find(|exe| works(exe));
-    if found.is_none() {
-        assert!(std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(), "peer `{tool}` required but not installed");
-        eprintln!("note: `{tool}` not installed; skipping the peer check (CI runs it)");
-    }
-    found
+    let name = if tool == "python" { "mcap" } else { tool };
+    let mut found = None;
+    let runs = common::peers::peer_runs(name, comparison, || {
+        found = [candidate, PathBuf::from(tool)].into_iter().find(|exe| works(exe));
+        found.as_ref().map(|_| ()).ok_or_else(|| format!("no `{tool}` that runs"))
+    });
+    found.filter(|_| runs)
 }
 
 fn rerun_rrd(rerun: &Path, args: &[&str], file: &Path) -> std::process::Output {
@@ -61,12 +62,12 @@ fn rerun_rrd(rerun: &Path, args: &[&str], file: &Path) -> std::process::Output {
 /// Check `rrd` with `rerun rrd verify` and read `mcap` end to end with the Python reader (CRCs
 /// validated), when the peers are installed; returns the reader's output.
 fn peers_accept(rrd: &Path, mcap: &Path) -> Option<String> {
-    if let Some(rerun) = peer("rerun") {
+    if let Some(rerun) = peer("rerun", "recordings::peers_accept: rerun rrd") {
         let out = rerun_rrd(&rerun, &["verify"], rrd);
         let log = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
         assert!(out.status.success(), "rerun rrd verify {}: {log}", rrd.display());
     }
-    let python = peer("python")?;
+    let python = peer("python", "recordings::peers_accept: mcap reader")?;
     let out = Command::new(python).arg(common::repo().join("tests/peers/check_mcap.py")).arg(mcap).output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
@@ -161,7 +162,7 @@ fn sigkill_midway_leaves_readable_prefixes() {
         assert_eq!(frames, (0..frames.len() as u64).collect::<Vec<_>>(), "{name} has holes");
         assert!(topic.frames.values().all(|p| p["digest"].as_str().is_some_and(|d| d.len() == 16)));
     }
-    if let Some(python) = peer("python") {
+    if let Some(python) = peer("python", "recordings::sigkill_midway_leaves_readable_prefixes: mcap reader") {
         let out = Command::new(python)
             .arg(common::repo().join("tests/peers/check_mcap.py"))
             .arg("--truncated")
@@ -175,7 +176,7 @@ fn sigkill_midway_leaves_readable_prefixes() {
             String::from_utf8_lossy(&out.stderr)
         );
     }
-    if let Some(rerun) = peer("rerun") {
+    if let Some(rerun) = peer("rerun", "recordings::sigkill_midway_leaves_readable_prefixes: rerun rrd") {
         // The prefix of a killed run has no footer; everything before the cut verifies.
         let killed = dir.path().join("kill.rrd");
         let out = rerun_rrd(&rerun, &["verify", "--check-footers", "false"], &killed);
@@ -324,7 +325,7 @@ fn default_synthetic_scene_recording_verifies() {
     }
     // The rerun file, read back by the rerun CLI: a row per message on each port's entity, one
     // metrics entity per scalar port (its names are series), a pose path in segments.
-    if let Some(rerun) = peer("rerun") {
+    if let Some(rerun) = peer("rerun", "recordings::default_synthetic_scene_recording_verifies: rerun rrd") {
         let rows = rows_per_entity(&rerun, &dir.path().join("default.rrd"));
         for entity in ["/camera/depth", "/camera/rgb", "/orb/keypoints"] {
             assert_eq!(rows.get(entity), Some(&30), "{entity}: {rows:?}");
@@ -581,7 +582,11 @@ fn totals(ports: &serde_json::Value) -> (u64, u64) {
 
 #[test]
 fn live_stream_reaches_a_headless_receiver_with_what_the_file_has() {
-    let Some(rerun) = peer("rerun") else { return };
+    let Some(rerun) =
+        peer("rerun", "recordings::live_stream_reaches_a_headless_receiver_with_what_the_file_has: rerun rrd")
+    else {
+        return;
+    };
     let dir = common::TempDir::new("live");
     let mut receiver = Receiver::start(&rerun, dir.path());
     let out = common::bin()
@@ -610,7 +615,11 @@ fn live_stream_reaches_a_headless_receiver_with_what_the_file_has() {
 
 #[test]
 fn live_stream_survives_a_killed_receiver_and_counts_what_it_dropped() {
-    let Some(rerun) = peer("rerun") else { return };
+    let Some(rerun) =
+        peer("rerun", "recordings::live_stream_survives_a_killed_receiver_and_counts_what_it_dropped: rerun rrd")
+    else {
+        return;
+    };
     let dir = common::TempDir::new("livekill");
     let mut receiver = Receiver::start(&rerun, dir.path());
     let run = common::bin()

@@ -289,3 +289,101 @@ fn mutated_valid_graph_never_panics() {
         assert_sane(&text);
     }
 }
+
+#[test]
+fn a_variant_that_decides_with_ground_truth_must_declare_it() {
+    // The direct route, through an oracle operator and through a statistics node; the
+    // declared variant, the base graph (ground truth only in statistics) and the disabled
+    // oracle node pass.
+    check(
+        "undeclared_oracle.yaml",
+        &[
+            (
+                10,
+                49,
+                "undeclared-oracle",
+                "variant `gt_masks` decides with ground truth but does not declare `oracle: true`: cull/mask <- camera.gt_mask",
+            ),
+            // The oracle node's input is written in the base graph; the variant enables it.
+            (
+                5,
+                42,
+                "undeclared-oracle",
+                "variant `gt_boxes` decides with ground truth but does not declare `oracle: true`: boxes/mask <- camera.gt_mask",
+            ),
+            (13, 31, "undeclared-oracle", "cull/detections <- boxes.detections (from camera.gt_mask)"),
+            (18, 30, "undeclared-oracle", "cull/key_frame <- stats.stats (from camera.gt_mask)"),
+        ],
+    );
+}
+
+#[test]
+fn oracles_are_marked_in_the_resolved_graph_and_unused_declarations_warned() {
+    let text = std::fs::read_to_string(common::repo().join("tests/graphs/invalid/undeclared_oracle.yaml")).unwrap();
+    let load = |variant: Option<&str>| {
+        let req = LoadRequest { variant: variant.map(str::to_owned), ..LoadRequest::default() };
+        load_str("undeclared_oracle.yaml", &text, None, &dynaflow::registry(), &req)
+    };
+    let base = load(None);
+    assert_eq!(base.graph.as_ref().map(|g| g.oracle.clone()), Some(None), "{:?}", base.diagnostics);
+    let declared = load(Some("declared"));
+    assert_eq!(declared.graph.unwrap().oracle, Some(vec!["cull/mask <- camera.gt_mask".to_owned()]));
+    // `oracle: true` where nothing decides with ground truth: a warning, and the mark stays.
+    let text = "name: t\noracle: true\nnodes:\n  camera: { op: synth, params: { frames: 4 } }\n  flow: { op: lk_flow, in: { image: camera.rgb } }\n";
+    let loaded = load_str("t.yaml", text, None, &dynaflow::registry(), &LoadRequest::default());
+    let warning = loaded.diagnostics.iter().find(|d| d.code == "unused-oracle").unwrap();
+    assert_eq!(warning.severity, Severity::Warning);
+    assert_eq!(line_col(text, warning.span.unwrap().offset), (2, 1));
+    assert_eq!(loaded.graph.unwrap().oracle, Some(vec![]));
+}
+
+#[test]
+fn every_shipped_graph_declares_its_oracles() {
+    // Each shipped graph and variant validates (an undeclared oracle is an error), and the
+    // ones that decide with ground truth are exactly those documented as oracles.
+    let mut oracles = Vec::new();
+    for entry in std::fs::read_dir(common::repo().join("graphs")).unwrap() {
+        let path = entry.unwrap().path();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let file = path.file_name().unwrap().to_string_lossy().into_owned();
+        let spec_variants: Vec<String> = {
+            let doc = dynaflow_engine::yaml::parse(&text).unwrap();
+            dynaflow_engine::spec::parse_graph(&doc).0.variants.into_iter().map(|v| v.name).collect()
+        };
+        for variant in std::iter::once(None).chain(spec_variants.into_iter().map(Some)) {
+            let req = LoadRequest { variant: variant.clone(), ..LoadRequest::default() };
+            let loaded = load_str(&file, &text, None, &dynaflow::registry(), &req);
+            let g = loaded.graph.unwrap_or_else(|| panic!("{file} {variant:?}: {:?}", loaded.diagnostics));
+            assert!(
+                !loaded.diagnostics.iter().any(|d| d.code == "unused-oracle"),
+                "{file} {variant:?} declares an oracle it is not"
+            );
+            if g.oracle.is_some() {
+                oracles.push(format!("{} {}", g.name, variant.as_deref().unwrap_or("base")));
+            }
+        }
+    }
+    oracles.sort();
+    let expected = [
+        "culling depth_consistency",
+        "culling epipolar_adaptive",
+        "culling mask",
+        "culling mask_or_epipolar",
+        "culling pspnet",
+        "culling semantic_prior",
+        "default masked",
+        "mg_slam oracle",
+        "mg_slam oracle_S",
+        "octomap base",
+        "octomap by_class",
+        "octomap ghosts",
+        "orb_baseline masked",
+        "pspnet_slam oracle",
+        "yg_slam oracle",
+        "yg_slam oracle_detector_m",
+        "yoec_dslam oracle",
+        "yoec_dslam oracle_masks",
+        "ysag oracle",
+    ];
+    assert_eq!(oracles, expected);
+}

@@ -164,7 +164,8 @@ pub fn load_str(
                 }
                 let extra = match spec::apply_variant(&base_spec, &variant.name) {
                     Ok((s, mut d)) => {
-                        d.extend(spec::validate(&s, registry, &cx).1);
+                        let vcx = spec::ResolveContext { variant: Some(variant.name.clone()), ..cx.clone() };
+                        d.extend(spec::validate(&s, registry, &vcx).1);
                         d
                     }
                     Err(d) => d,

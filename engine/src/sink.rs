@@ -34,6 +34,8 @@ pub struct RunInfo {
     pub graph: String,
     /// Variant, if any.
     pub variant: Option<String>,
+    /// `Some` for an oracle run (decisions that read ground truth: `node/port <- producer.port`).
+    pub oracle: Option<Vec<String>>,
     /// Effective seed.
     pub seed: u64,
     /// The graph file text.
@@ -56,6 +58,7 @@ impl RunInfo {
         Self {
             graph: graph.name.clone(),
             variant: graph.variant.clone(),
+            oracle: graph.oracle.clone(),
             seed: graph.seed,
             graph_yaml: graph.source_text.to_string(),
             params: graph
@@ -81,6 +84,11 @@ impl RunInfo {
         BTreeMap::from([
             ("graph".to_owned(), self.graph.clone()),
             ("variant".to_owned(), self.variant.clone().unwrap_or_default()),
+            // `true` with the decisions that read ground truth, else `false`.
+            (
+                "oracle".to_owned(),
+                self.oracle.as_ref().map_or_else(|| "false".to_owned(), |u| format!("true: {}", u.join("; "))),
+            ),
             ("seed".to_owned(), self.seed.to_string()),
             ("graph_yaml".to_owned(), self.graph_yaml.clone()),
             ("params".to_owned(), serde_json::to_string(&self.params).unwrap_or_default()),

@@ -1,6 +1,6 @@
 //! Every kernel, through the planner, against `dynaflow-infer`'s reference executor on odd
 //! shapes: small ONNX graphs built here, run by both. On whatever adapter there is (Mesa's
-//! lavapipe in CI, which sets `DYNAFLOW_REQUIRE_GPU`).
+//! lavapipe under `scripts/test.sh`, which requires it).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 mod common;
@@ -117,7 +117,11 @@ fn convolutions_equal_the_reference_on_odd_shapes() {
         ([1, 3, 37, 41], [29, 3, 3], [2, 2], [1, 1, 1, 1], [1, 1], 1),
     ];
     for (k, (input, kernel, stride, pads, dilation, group)) in cases.into_iter().enumerate() {
-        let Some(gpu) = gpu() else { return };
+        let Some(gpu) =
+            gpu("gpu::kernels::convolutions_equal_the_reference_on_odd_shapes: GPU kernels vs the reference executor")
+        else {
+            return;
+        };
         let cg = input[1] / group;
         let seed = 10 * k as u64;
         let model = graph(
@@ -166,7 +170,10 @@ fn activations_fuse_into_convolutions() {
     let relu = graph(vec![conv("c"), node("Relu", &["c"], "y", &[])], weights(), &["y"]);
     let kept = graph(vec![conv("c"), node("Sigmoid", &["c"], "y", &[])], weights(), &["c", "y"]);
     for (name, model, fused, dispatches) in [("silu", silu, 1, 1), ("relu", relu, 1, 1), ("kept", kept, 0, 2)] {
-        let Some(gpu) = gpu() else { return };
+        let Some(gpu) = gpu("gpu::kernels::activations_fuse_into_convolutions: GPU kernels vs the reference executor")
+        else {
+            return;
+        };
         let (d, stats) = compare(gpu, &model, &x);
         eprintln!("{name}: max |gpu - cpu| = {d:e}, {stats:?}");
         assert!(d <= 1e-5, "{name}: {d}");
@@ -176,7 +183,11 @@ fn activations_fuse_into_convolutions() {
 
 #[test]
 fn concat_inputs_are_written_in_place_and_copied_when_they_must_be() {
-    let Some(gpu) = gpu() else { return };
+    let Some(gpu) = gpu(
+        "gpu::kernels::concat_inputs_are_written_in_place_and_copied_when_they_must_be: GPU kernels vs the reference executor",
+    ) else {
+        return;
+    };
     let conv = |w: &str, out: &str| node("Conv", &["x", w, ""], out, &[("kernel_shape", ints(&[1, 1]))]);
     // Two convolutions write straight into the concatenation; the graph input `x` is copied;
     // `a` is also read by the Add, which reads it inside the concatenation's buffer.
@@ -332,7 +343,11 @@ fn element_wise_shape_and_pooling_kernels_equal_the_reference() {
         ),
     ];
     for (name, model, inputs) in cases {
-        let Some(gpu) = gpu() else { return };
+        let Some(gpu) = gpu(
+            "gpu::kernels::element_wise_shape_and_pooling_kernels_equal_the_reference: GPU kernels vs the reference executor",
+        ) else {
+            return;
+        };
         let (d, stats) = compare(gpu, &model, &inputs);
         eprintln!("{name}: max |gpu - cpu| = {d:e} ({} dispatches)", stats.dispatches);
         assert!(d <= 1e-6, "{name}: {d}");
@@ -347,7 +362,10 @@ fn shapes_the_plan_cannot_take_are_errors() {
     let big =
         ConvShape { input: [1, 1, 2, 2], kernel: [1, 5, 5], stride: [1, 1], pads: [0; 4], dilation: [1, 1], group: 1 };
     assert!(big.output().is_err());
-    let Some(g) = gpu() else { return };
+    let Some(g) = gpu("gpu::kernels::shapes_the_plan_cannot_take_are_errors: GPU kernels vs the reference executor")
+    else {
+        return;
+    };
     // A 5x5 kernel on a 2x2 input: the plan fails at load with the node named.
     let conv = graph(
         vec![node("Conv", &["x", "w"], "y", &[("kernel_shape", ints(&[5, 5]))])],
@@ -357,18 +375,27 @@ fn shapes_the_plan_cannot_take_are_errors() {
     let e = GpuModel::with_inputs(g, &conv, &[("x", vec![1, 1, 2, 2])]).unwrap_err().to_string();
     assert!(e.contains("Conv_y") && e.contains("larger"), "{e}");
     // Add with broadcasting is not on the GPU: named.
-    let Some(g) = gpu() else { return };
+    let Some(g) = gpu("gpu::kernels::shapes_the_plan_cannot_take_are_errors: GPU kernels vs the reference executor")
+    else {
+        return;
+    };
     let add = graph(vec![node("Add", &["a", "b"], "y", &[])], vec![], &["y"]);
     let e = GpuModel::with_inputs(g, &add, &[("a", vec![2, 3]), ("b", vec![1, 3])]).unwrap_err().to_string();
     assert!(e.contains("broadcasting"), "{e}");
     // A run with another input shape than planned.
-    let Some(g) = gpu() else { return };
+    let Some(g) = gpu("gpu::kernels::shapes_the_plan_cannot_take_are_errors: GPU kernels vs the reference executor")
+    else {
+        return;
+    };
     let sig = graph(vec![node("Sigmoid", &["x"], "y", &[])], vec![], &["y"]);
     let m = GpuModel::with_inputs(g, &sig, &[("x", vec![4])]).unwrap();
     let e = m.run(&[("x", Tensor::F32 { shape: vec![5], data: vec![0.0; 5] })]).unwrap_err().to_string();
     assert!(e.contains("planned for"), "{e}");
     // An op with no kernel.
-    let Some(g) = gpu() else { return };
+    let Some(g) = gpu("gpu::kernels::shapes_the_plan_cannot_take_are_errors: GPU kernels vs the reference executor")
+    else {
+        return;
+    };
     let lrn = graph(vec![node("LRN", &["x"], "y", &[])], vec![], &["y"]);
     let e = GpuModel::with_inputs(g, &lrn, &[("x", vec![1, 2, 3, 3])]).unwrap_err().to_string();
     assert!(e.contains("LRN") && e.contains("LRN_y"), "{e}");

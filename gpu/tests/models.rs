@@ -17,7 +17,11 @@ fn repo() -> PathBuf {
 
 #[test]
 fn yolox_nano_on_the_gpu_equals_the_reference_on_real_images() {
-    let Some(gpu) = gpu() else { return };
+    let Some(gpu) = gpu(
+        "gpu::models::yolox_nano_on_the_gpu_equals_the_reference_on_real_images: GPU kernels vs the reference executor",
+    ) else {
+        return;
+    };
     let model = load(&repo().join("models/yolox_nano/yolox_nano.onnx")).unwrap();
     let on_gpu = GpuModel::new(gpu, &model).unwrap();
     eprintln!("adapter: {}, plan: {:?}", on_gpu.adapter(), on_gpu.stats());
@@ -43,7 +47,11 @@ fn yolox_nano_on_the_gpu_equals_the_reference_on_real_images() {
 
 #[test]
 fn fastestdet_on_the_gpu_equals_the_reference_on_real_images() {
-    let Some(gpu) = gpu() else { return };
+    let Some(gpu) = gpu(
+        "gpu::models::fastestdet_on_the_gpu_equals_the_reference_on_real_images: GPU kernels vs the reference executor",
+    ) else {
+        return;
+    };
     let model = load(&repo().join("models/fastestdet/FastestDet.onnx")).unwrap();
     assert_eq!(GpuModel::unsupported(&model), None);
     let name = model.inputs[0].name.clone();

@@ -54,7 +54,10 @@ fn room_scans() -> Vec<Scan> {
 fn our_files_equal_octomaps_for_the_same_scans() {
     let dir = std::env::temp_dir().join(format!("dynaflow-octo-peer-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
-    let Some(peer) = octomap_peer(&dir) else { return };
+    let Some(peer) = octomap_peer(&dir, "octomap::peer::our_files_equal_octomaps_for_the_same_scans: vs liboctomap")
+    else {
+        return;
+    };
     let scans = room_scans();
     let report = run_peer(&peer, &scans, 0.05, &dir, "peer");
     let mut tree = OcTree::new(Params::default(), false).unwrap();

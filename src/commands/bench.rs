@@ -76,6 +76,8 @@ impl Job {
 struct Row {
     ok: bool,
     error: String,
+    /// The run decided with ground truth (its summary's `oracle`): a bound, not a result.
+    oracle: bool,
     frames: u64,
     wall_s: f64,
     ate: Option<[f64; 4]>,
@@ -176,6 +178,7 @@ fn run_one(exe: &Path, job: &Job, args: &BenchArgs) -> Row {
         }
         return row;
     };
+    row.oracle = !s["oracle"].is_null();
     row.frames = s["frames"].as_u64().unwrap_or(0);
     row.wall_s = s["wall_s"].as_f64().unwrap_or(f64::NAN);
     row.ms_per_frame = 1e3 * row.wall_s / row.frames.max(1) as f64;
@@ -184,6 +187,11 @@ fn run_one(exe: &Path, job: &Job, args: &BenchArgs) -> Row {
         (a["rmse"].as_f64(), a["mean"].as_f64(), a["median"].as_f64(), a["std"].as_f64())
     {
         row.ate = Some([r, m, md, sd]);
+        if !r.is_finite() && row.ok {
+            // A tracker that reports no finite error has not been evaluated: never a number.
+            row.ok = false;
+            row.error = format!("ATE rmse is {r}");
+        }
     }
     let node = a["node"].as_str().unwrap_or("track").to_string();
     if let Some(nodes) = s["nodes"].as_array() {
@@ -299,10 +307,10 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
         .filter_map(|(j, r)| r.ate.map(|a| (j.sequence(), a[0])))
         .collect();
     let mut md = String::from(
-        "| graph | variant | sequence | ATE rmse (cm) | mean | median | std | RPE t (cm) | RPE r (deg) | ms/frame | vs orb_baseline |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "Variants marked (oracle) decide with ground truth (masks, boxes or poses from the generator or the dataset): they bound what a rule can do, they are not results.\n\n| graph | variant | sequence | ATE rmse (cm) | mean | median | std | RPE t (cm) | RPE r (deg) | ms/frame | vs orb_baseline |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut csv = String::from(
-        "graph,variant,sequence,status,frames,ate_rmse_m,ate_mean_m,ate_median_m,ate_std_m,rpe_t_m,rpe_r_deg,ms_per_frame,improvement_pct,error\n",
+        "graph,variant,sequence,status,frames,ate_rmse_m,ate_mean_m,ate_median_m,ate_std_m,rpe_t_m,rpe_r_deg,ms_per_frame,improvement_pct,error,oracle\n",
     );
     for (j, r) in jobs.iter().zip(rows) {
         let improvement = match (r.ate, baseline.get(&j.sequence())) {
@@ -312,12 +320,13 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
             _ => None,
         };
         let ate = r.ate.map(|a| a.map(Some)).unwrap_or([None; 4]);
+        let variant = if r.oracle { format!("{} (oracle)", j.variant_name()) } else { j.variant_name().to_owned() };
         let rpe = r.rpe.map(|a| a.map(Some)).unwrap_or([None; 2]);
         if r.ok {
             md.push_str(&format!(
                 "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} |\n",
                 j.name,
-                j.variant_name(),
+                variant,
                 j.sequence(),
                 fmt_cm(ate[0]),
                 fmt_cm(ate[1]),
@@ -332,14 +341,14 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
             md.push_str(&format!(
                 "| {} | {} | {} | **failed**: {} | | | | | | | |\n",
                 j.name,
-                j.variant_name(),
+                variant,
                 j.sequence(),
                 r.error.replace('|', "/")
             ));
         }
         let f = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v:.6}"));
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{:.3},{},\"{}\"\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{:.3},{},\"{}\",{}\n",
             j.name,
             j.variant_name(),
             j.sequence(),
@@ -354,6 +363,7 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
             r.ms_per_frame,
             improvement.map_or_else(String::new, |v| format!("{v:.1}")),
             r.error.replace('"', "'"),
+            r.oracle,
         ));
     }
     (md, csv)
@@ -365,14 +375,16 @@ fn plots(jobs: &[Job], rows: &[Row], out: &Path) -> Result<(), String> {
         let Some((gt, est)) = &r.trajectory else { continue };
         let read = |p: &Path| dynaflow_operators::decode::read_trajectory(p).map_err(|e| e.to_string());
         let e = evaluate(&read(gt)?, &read(est)?, 0.01, Align::Se3, 1).map_err(|e| e.to_string())?;
-        let title = format!("{} {} {}: ATE {:.2} cm", j.name, j.variant_name(), j.sequence(), 100.0 * e.ate.rmse);
+        let oracle = if r.oracle { " (oracle)" } else { "" };
+        let title =
+            format!("{} {}{oracle} {}: ATE {:.2} cm", j.name, j.variant_name(), j.sequence(), 100.0 * e.ate.rmse);
         crate::plot::evaluation(&e, &title, &j.dir.join("trajectory.png"))?;
     }
     let runs: Vec<(String, &Row)> = jobs
         .iter()
         .zip(rows)
         .filter(|(_, r)| r.ok)
-        .map(|(j, r)| (format!("{} {}", j.name, j.variant_name()), r))
+        .map(|(j, r)| (format!("{} {}{}", j.name, j.variant_name(), if r.oracle { " (oracle)" } else { "" }), r))
         .collect();
     let mut ate: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     for (label, r) in &runs {

@@ -138,6 +138,15 @@ pub fn run(args: &RunArgs) -> u8 {
         }
     };
     say!("{}", report.table());
+    let oracle = if let Some(uses) = &report.oracle {
+        say!(
+            "(oracle) this run decides with ground truth ({}): its results are a bound, not a system's",
+            uses.join("; ")
+        );
+        " (oracle)"
+    } else {
+        ""
+    };
     let mut summary = serde_json::to_value(&report).unwrap_or_default();
     // Trackers with ground truth report their ATE: print each (the first in graph order is
     // the reference the others are compared with, as a baseline is), lift the first to the
@@ -152,7 +161,7 @@ pub fn run(args: &RunArgs) -> u8 {
             _ => String::new(),
         };
         say!(
-            "ATE of `{}` ({} poses, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m{versus}",
+            "ATE of `{}`{oracle} ({} poses, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m{versus}",
             n.node,
             ate.get("pairs").and_then(serde_json::Value::as_u64).unwrap_or(0),
             ate.get("align").and_then(serde_json::Value::as_str).unwrap_or("se3"),

@@ -139,28 +139,23 @@ pub fn ch7_pnp() -> (Vec<nalgebra::Point3<f64>>, Vec<[f64; 2]>, dynaflow_vision:
     (world, pixels, cam)
 }
 
-/// The Python of the peers venv (or `python3`) that can `import modules`. Without one the
-/// caller skips, unless `DYNAFLOW_REQUIRE_PEERS` is set (CI), where a missing peer is a
-/// failure.
-pub fn python_with(modules: &str) -> Option<PathBuf> {
-    let venv = std::env::var_os("DYNAFLOW_PEERS").map_or_else(|| PathBuf::from("/tmp/dynaflow-peers"), PathBuf::from);
+/// The Python of the peers venv (or `python3`) that can `import modules`, for `comparison`
+/// against `peer`; `None` when that comparison is skipped ([`crate::common::peers::peer_runs`]).
+pub fn python_with(peer: &str, modules: &str, comparison: &str) -> Option<PathBuf> {
     let import = format!("import {modules}");
-    let found = [venv.join("bin/python"), PathBuf::from("python3")]
-        .into_iter()
-        .find(|p| Command::new(p).args(["-c", &import]).output().is_ok_and(|o| o.status.success()));
-    if found.is_none() {
-        assert!(
-            std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(),
-            "Python peer `{modules}` required but not installed"
-        );
-        eprintln!("note: no Python with `{modules}`; skipping the comparison (CI runs it)");
-    }
-    found
+    let mut found = None;
+    let runs = crate::common::peers::peer_runs(peer, comparison, || {
+        found = [crate::common::peers::venv().join("bin/python"), PathBuf::from("python3")]
+            .into_iter()
+            .find(|p| Command::new(p).args(["-c", &import]).output().is_ok_and(|o| o.status.success()));
+        found.as_ref().map(|_| ()).ok_or_else(|| format!("no Python that can `{import}`"))
+    });
+    found.filter(|_| runs)
 }
 
-/// The Python with OpenCV.
-pub fn cv2_python() -> Option<PathBuf> {
-    python_with("cv2, numpy")
+/// The Python with OpenCV, for `comparison`.
+pub fn cv2_python(comparison: &str) -> Option<PathBuf> {
+    python_with("opencv", "cv2, numpy", comparison)
 }
 
 /// Run the OpenCV side on `job` (written to `dir`).

@@ -4,6 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU32, Ordering};
 
+pub mod peers;
+
 use dynaflow_engine::spec::ResolvedGraph;
 use dynaflow_engine::{LoadRequest, load_str};
 

@@ -15,7 +15,7 @@ use rand_chacha::ChaCha8Rng;
 
 pub use params::Params;
 pub use registry::Registry;
-pub use spec::{Default, Instance, OpKind, OpSpec, ParamSpec, ParamType, PortSpec};
+pub use spec::{Default, InputRole, Instance, OpKind, OpSpec, ParamSpec, ParamType, PortSpec};
 
 use crate::msg::{Body, Header, Message};
 

@@ -13,6 +13,20 @@ pub enum OpKind {
     Transform,
 }
 
+/// What an input's data is used for: validation follows ground truth through the graph by
+/// these roles, and a graph whose *decisions* read ground truth must say `oracle: true`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum InputRole {
+    /// The data shapes the node's outputs (the default).
+    Decision,
+    /// The node only describes the data (counts, fractions): its outputs carry whatever
+    /// ground truth the input carries, but the node itself decides nothing.
+    Statistics,
+    /// The data only reaches the run's evaluation (the summary's ATE), never an output.
+    Evaluation,
+}
+
 /// A port declaration.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct PortSpec {
@@ -24,26 +38,46 @@ pub struct PortSpec {
     pub required: bool,
     /// Outputs only: the output has the type of what is wired into this input (`ty` is `Any`).
     pub same_as: Option<&'static str>,
+    /// Inputs only: what the data is used for.
+    pub role: InputRole,
+    /// Outputs only: the port emits ground truth (a generator's exact poses and masks, a
+    /// dataset's motion capture), so whatever decides with it is an oracle.
+    pub ground_truth: bool,
     /// One line for docs.
     pub doc: &'static str,
 }
 
 impl PortSpec {
+    const fn new(name: &'static str, ty: PortType, required: bool, doc: &'static str) -> Self {
+        Self { name, ty, required, same_as: None, role: InputRole::Decision, ground_truth: false, doc }
+    }
     /// A required input.
     pub const fn input(name: &'static str, ty: PortType, doc: &'static str) -> Self {
-        Self { name, ty, required: true, same_as: None, doc }
+        Self::new(name, ty, true, doc)
     }
     /// An optional input.
     pub const fn optional(name: &'static str, ty: PortType, doc: &'static str) -> Self {
-        Self { name, ty, required: false, same_as: None, doc }
+        Self::new(name, ty, false, doc)
+    }
+    /// An optional input that only reaches the run's evaluation, never an output.
+    pub const fn evaluation(name: &'static str, ty: PortType, doc: &'static str) -> Self {
+        Self { role: InputRole::Evaluation, ..Self::new(name, ty, false, doc) }
+    }
+    /// This input with `role` (e.g. a statistics operator's input).
+    pub const fn with_role(self, role: InputRole) -> Self {
+        Self { role, ..self }
     }
     /// An output.
     pub const fn output(name: &'static str, ty: PortType, doc: &'static str) -> Self {
-        Self { name, ty, required: false, same_as: None, doc }
+        Self::new(name, ty, false, doc)
+    }
+    /// An output that emits ground truth.
+    pub const fn ground_truth(name: &'static str, ty: PortType, doc: &'static str) -> Self {
+        Self { ground_truth: true, ..Self::new(name, ty, false, doc) }
     }
     /// An output whose type follows the input `input`.
     pub const fn output_like(name: &'static str, input: &'static str, doc: &'static str) -> Self {
-        Self { name, ty: PortType::Any, required: false, same_as: Some(input), doc }
+        Self { same_as: Some(input), ..Self::new(name, PortType::Any, false, doc) }
     }
 }
 

@@ -177,6 +177,9 @@ pub struct RunReport {
     pub graph: String,
     /// Variant.
     pub variant: Option<String>,
+    /// `Some` for an oracle run: the decisions that read ground truth. Its results measure a
+    /// bound, not a system.
+    pub oracle: Option<Vec<String>>,
     /// Seed.
     pub seed: u64,
     /// Paced at sensor rate?

@@ -302,6 +302,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     Ok(RunReport {
         graph: graph.name.clone(),
         variant: graph.variant.clone(),
+        oracle: graph.oracle.clone(),
         seed: graph.seed,
         realtime: options.realtime,
         status,

@@ -13,6 +13,7 @@
 //! name: example            # required
 //! description: optional text
 //! seed: 7                  # graph seed; every node's RNG derives from it and the node id
+//! oracle: false            # true when a decision reads ground truth (validation checks it)
 //! nodes:                   # node id -> node; ids match [A-Za-z_][A-Za-z0-9_-]*
 //!   camera:
 //!     op: test_pattern     # operator name (`dynaflow ops` lists them)
@@ -31,9 +32,11 @@
 //!     disabled: false
 //! variants:                # named patches for ablations
 //!   no_blur: { blur: { disabled: true } }
+//!   gt_masks: { oracle: true, cull: { in: { mask: camera.gt_mask } } }
 //!   faster:  { camera: { params: { frames: 10 } } }
 //! ```
 
+mod oracle;
 mod parse;
 mod resolved;
 pub(crate) mod validate;
@@ -55,6 +58,9 @@ pub struct GraphSpec {
     pub description: Option<String>,
     /// `seed:` (default 0).
     pub seed: u64,
+    /// `oracle:` as written: the graph's decisions read ground truth (a variant's own
+    /// `oracle:` replaces it when the variant is applied).
+    pub oracle: Option<(bool, Span)>,
     /// `nodes:` in file order.
     pub nodes: Vec<NodeSpec>,
     /// `variants:` in file order.
@@ -175,6 +181,8 @@ pub struct VariantSpec {
     pub name: String,
     /// Where the name is written.
     pub span: Span,
+    /// `oracle: true|false` inside the variant: whether its decisions read ground truth.
+    pub oracle: Option<(bool, Span)>,
     /// One patch per node.
     pub patches: Vec<NodePatch>,
 }

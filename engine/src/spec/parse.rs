@@ -8,7 +8,7 @@ use super::{
 use crate::diag::{Diagnostic, did_you_mean};
 use crate::yaml::{Key, Span, Yaml, YamlKind};
 
-const TOP_KEYS: &[&str] = &["name", "description", "seed", "nodes", "variants"];
+const TOP_KEYS: &[&str] = &["name", "description", "seed", "oracle", "nodes", "variants"];
 const NODE_KEYS: &[&str] = &["op", "params", "in", "record", "disabled"];
 const PATCH_KEYS: &[&str] = &["params", "in", "record", "disabled"];
 const INPUT_KEYS: &[&str] = &["from", "join", "delay", "queue", "capacity"];
@@ -152,6 +152,7 @@ pub fn parse_graph(doc: &Yaml) -> (GraphSpec, Vec<Diagnostic>) {
         name: String::new(),
         description: None,
         seed: 0,
+        oracle: None,
         nodes: Vec::new(),
         variants: Vec::new(),
         nodes_span: doc.span,
@@ -188,6 +189,7 @@ pub fn parse_graph(doc: &Yaml) -> (GraphSpec, Vec<Diagnostic>) {
             }
             "description" => spec.description = string(value, "`description`", &mut diags),
             "seed" => spec.seed = unsigned(value, "`seed`", u64::MAX, &mut diags).unwrap_or(0),
+            "oracle" => spec.oracle = boolean(value, "`oracle`", &mut diags).map(|b| (b, key.span)),
             "nodes" => {
                 seen_nodes = true;
                 spec.nodes_span = key.span;
@@ -206,11 +208,19 @@ pub fn parse_graph(doc: &Yaml) -> (GraphSpec, Vec<Diagnostic>) {
                                 .with_hint("variant ids start with a letter or `_` and contain only letters, digits, `_`, `-` and `+`"),
                         );
                     }
-                    let patches = entries(body, &format!("variant `{}`", name.text), None, &mut diags)
-                        .into_iter()
-                        .map(|(node, patch)| parse_patch(&name.text, node, patch, &mut diags))
-                        .collect();
-                    spec.variants.push(VariantSpec { name: name.text.clone(), span: name.span, patches });
+                    let mut oracle = None;
+                    let mut patches = Vec::new();
+                    for (node, patch) in entries(body, &format!("variant `{}`", name.text), None, &mut diags) {
+                        // `oracle: true|false` declares the variant's use of ground truth; a
+                        // mapping under the same key would patch a node named `oracle`.
+                        if node.text == "oracle" && !matches!(patch.kind, YamlKind::Map(_)) {
+                            let what = format!("`oracle` of variant `{}`", name.text);
+                            oracle = boolean(patch, &what, &mut diags).map(|b| (b, node.span));
+                        } else {
+                            patches.push(parse_patch(&name.text, node, patch, &mut diags));
+                        }
+                    }
+                    spec.variants.push(VariantSpec { name: name.text.clone(), span: name.span, oracle, patches });
                 }
             }
             _ => {}

@@ -20,6 +20,10 @@ pub struct ResolvedGraph {
     pub source_text: Arc<str>,
     /// The graph file's path as given.
     pub source_name: String,
+    /// `Some` when the graph (with its variant) is an oracle, one that decides with ground
+    /// truth: the decisions that read it (`node/port <- producer.port`); every result of such a
+    /// run is marked "(oracle)".
+    pub oracle: Option<Vec<String>>,
     /// Nodes in file order (disabled ones included, marked).
     pub nodes: Vec<ResolvedNode>,
     /// Edges, one per wired input.

@@ -53,6 +53,7 @@ pub fn validate(
     let out_types = resolve_output_types(spec, &ops, &index);
     let edges = check_inputs(spec, &ops, &index, &out_types, &mut diags);
     check_cycles(spec, &edges, &mut diags);
+    let oracle = check_oracle(spec, &ops, &edges, cx, &mut diags);
 
     let all_ops_known = ops.iter().all(Option::is_some);
     if all_ops_known && !ops.iter().flatten().any(|op| op.kind == OpKind::Source) && !spec.nodes.is_empty() {
@@ -151,10 +152,58 @@ pub fn validate(
         variant: cx.variant.clone(),
         source_text: cx.source_text.clone(),
         source_name: cx.source_name.clone(),
+        oracle,
         nodes,
         edges: edges.into_iter().map(|e| e.edge).collect(),
     };
     (Some(graph), diags)
+}
+
+/// Follows ground truth through the graph and checks the graph's `oracle:` declaration
+/// against what its decisions read. Returns what the resolved graph records: `None` for a
+/// graph that decides without ground truth, else the decisions that read it.
+fn check_oracle(
+    spec: &GraphSpec,
+    ops: &[Option<&OpSpec>],
+    edges: &[SpannedEdge],
+    cx: &ResolveContext,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<Vec<String>> {
+    let wires: Vec<super::oracle::Wire> = edges
+        .iter()
+        .map(|e| ((e.edge.from_node, e.edge.from_port), (e.edge.to_node, e.edge.to_port), e.span))
+        .collect();
+    let uses = super::oracle::ground_truth_uses(spec, ops, &wires);
+    let declared = spec.oracle.is_some_and(|(b, _)| b);
+    let what = cx.variant.as_ref().map_or_else(|| "the graph".to_owned(), |v| format!("variant `{v}`"));
+    if !declared {
+        let hint = match &cx.variant {
+            Some(v) => format!(
+                "if {what} is meant to decide with ground truth (a bound, not a result), add `oracle: true` to the variant (`{v}: {{ oracle: true, ... }}`); otherwise wire an estimate (a detector's mask, the tracker's pose)"
+            ),
+            None => "if the graph is meant to decide with ground truth (a bound, not a result), add `oracle: true` at its top; otherwise wire an estimate (a detector's mask, the tracker's pose)".to_owned(),
+        };
+        for u in &uses {
+            diags.push(
+                Diagnostic::error(
+                    "undeclared-oracle",
+                    u.span,
+                    format!("{what} decides with ground truth but does not declare `oracle: true`: {}", u.describe()),
+                )
+                .with_hint(hint.clone()),
+            );
+        }
+    } else if uses.is_empty() {
+        diags.push(
+            Diagnostic::warning(
+                "unused-oracle",
+                spec.oracle.map(|(_, s)| s),
+                format!("{what} declares `oracle: true`, but none of its decisions reads ground truth"),
+            )
+            .with_hint("remove `oracle: true` (or set it to `false` in this variant), so its results are not marked as an oracle's"),
+        );
+    }
+    (declared || !uses.is_empty()).then(|| uses.iter().map(super::oracle::GroundTruthUse::describe).collect())
 }
 
 fn lookup_op<'r>(n: &NodeSpec, registry: &'r Registry, diags: &mut Vec<Diagnostic>) -> Option<&'r OpSpec> {

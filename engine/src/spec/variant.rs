@@ -78,6 +78,9 @@ pub fn apply_variant(spec: &GraphSpec, name: &str) -> Result<(GraphSpec, Vec<Dia
         ]);
     };
     let mut out = spec.clone();
+    if variant.oracle.is_some() {
+        out.oracle = variant.oracle;
+    }
     let mut diags = Vec::new();
     for patch in &variant.patches {
         if !apply_patch(&mut out, patch) {

@@ -3,15 +3,16 @@
 
 use dynaflow_gpu::Gpu;
 
-/// The adapter there is; `None` (after a note) without one, unless `DYNAFLOW_REQUIRE_GPU` is
-/// set (CI, on lavapipe), where a missing adapter fails the test.
-pub fn gpu() -> Option<Gpu> {
-    match Gpu::new() {
-        Ok(g) => Some(g),
-        Err(e) => {
-            assert!(std::env::var_os("DYNAFLOW_REQUIRE_GPU").is_none(), "GPU required: {e}");
-            eprintln!("note: {e}; skipping (CI runs it on lavapipe)");
-            None
-        }
-    }
+#[path = "../../../tests/common/peers.rs"]
+pub mod peers;
+
+/// The adapter there is for `comparison`; `None` when it is skipped ([`peers::peer_runs`]:
+/// without an adapter a failure under `DYNAFLOW_REQUIRE_PEERS`, as on CI's lavapipe).
+pub fn gpu(comparison: &str) -> Option<Gpu> {
+    let mut gpu = None;
+    let runs = peers::peer_runs("gpu", comparison, || {
+        gpu = Some(Gpu::new().map_err(|e| e.to_string())?);
+        Ok(())
+    });
+    gpu.filter(|_| runs)
 }

@@ -5,31 +5,37 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-/// Build the peer into `dir`; `None` (or a panic under `DYNAFLOW_REQUIRE_PEERS`)
-/// when g++ or liboctomap is missing.
-pub fn octomap_peer(dir: &Path) -> Option<PathBuf> {
+#[path = "../../../tests/common/peers.rs"]
+pub mod peers;
+
+/// Build the peer into `dir` for `comparison`; `None` when that comparison is skipped
+/// ([`peers::peer_runs`]: a panic under `DYNAFLOW_REQUIRE_PEERS` when g++ or liboctomap is
+/// missing).
+pub fn octomap_peer(dir: &Path, comparison: &str) -> Option<PathBuf> {
     let src = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join(if env!("CARGO_MANIFEST_DIR").ends_with("octomap") {
         "../tests/peers/octomap_peer.cpp"
     } else {
         "tests/peers/octomap_peer.cpp"
     });
     let exe = dir.join("octomap_peer");
-    let ok = Command::new("g++")
-        .args(["-O2", "-std=c++17"])
-        .arg(&src)
-        .args(["-loctomap", "-loctomath", "-o"])
-        .arg(&exe)
-        .output()
-        .is_ok_and(|o| o.status.success());
-    if !ok {
-        assert!(
-            std::env::var_os("DYNAFLOW_REQUIRE_PEERS").is_none(),
-            "OctoMap peer required: g++ and liboctomap-dev (Debian) must be installed"
-        );
-        eprintln!("note: no g++ with liboctomap-dev; skipping the OctoMap comparison (CI runs it)");
-        return None;
-    }
-    Some(exe)
+    peers::peer_runs("octomap", comparison, || {
+        let out = Command::new("g++")
+            .args(["-O2", "-std=c++17"])
+            .arg(&src)
+            .args(["-loctomap", "-loctomath", "-o"])
+            .arg(&exe)
+            .output()
+            .map_err(|e| format!("g++: {e}"))?;
+        if out.status.success() {
+            Ok(())
+        } else {
+            Err(format!(
+                "g++ with liboctomap-dev: {}",
+                String::from_utf8_lossy(&out.stderr).lines().next().unwrap_or("")
+            ))
+        }
+    })
+    .then_some(exe)
 }
 
 /// One scan: world points, sensor origin, max range (negative: none).

@@ -511,25 +511,16 @@ impl Operator for CombineOp {
             }
         };
         let (a, b) = (get("a")?, get("b")?);
-        let find = |l: &PointLabels, i: usize| l.labels.iter().find(|x| x.index as usize == i).copied();
-        let and = self.0.mode == "and";
-        let decisions: Vec<Decision> = (0..t.tracks.len())
-            .map(|i| {
-                let (la, lb) = (find(a, i), find(b, i));
-                let (da, db) = (la.is_some_and(|l| l.dynamic), lb.is_some_and(|l| l.dynamic));
-                let dynamic = if and { da && db } else { da || db };
-                let decider = if dynamic == da { la.or(lb) } else { lb.or(la) };
-                Decision {
-                    dynamic,
-                    reason: if dynamic {
-                        decider.map_or(LabelReason::Static, |l| l.reason)
-                    } else {
-                        LabelReason::Static
-                    },
-                    score: decider.map_or(f32::NAN, |l| l.score),
-                }
+        let find = |l: &PointLabels, i: usize| {
+            l.labels.iter().find(|x| x.index as usize == i).map(|x| Decision {
+                dynamic: x.dynamic,
+                reason: x.reason,
+                score: x.score,
             })
-            .collect();
+        };
+        let how = if self.0.mode == "and" { rules::Combine::And } else { rules::Combine::Or };
+        let decisions: Vec<Decision> =
+            (0..t.tracks.len()).map(|i| rules::combine(find(a, i), find(b, i), how)).collect();
         Ok(labelled(msg, t, &decisions, &[]))
     }
 }

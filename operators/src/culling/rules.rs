@@ -316,9 +316,66 @@ pub fn box_depth_mask(
     mask
 }
 
+/// How [`combine`] joins two decisions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Combine {
+    /// Dynamic if either says so (MG-SLAM's S+G).
+    Or,
+    /// Dynamic only if both do.
+    And,
+}
+
+/// Two rules' decisions about one point, `(dynamic, reason, score)` each, `None` where a rule
+/// left the point unlabelled (it then counts as static). The combined decision takes the
+/// reason and score of the rule that decided: `a`'s when `a` agrees with the result, else
+/// `b`'s (falling back to the other's measure when the decider gave none); a static result
+/// has reason `Static`.
+pub fn combine(a: Option<Decision>, b: Option<Decision>, how: Combine) -> Decision {
+    let (da, db) = (a.is_some_and(|l| l.dynamic), b.is_some_and(|l| l.dynamic));
+    let dynamic = match how {
+        Combine::Or => da || db,
+        Combine::And => da && db,
+    };
+    let decider = if dynamic == da { a.or(b) } else { b.or(a) };
+    Decision {
+        dynamic,
+        reason: if dynamic { decider.map_or(LabelReason::Static, |l| l.reason) } else { LabelReason::Static },
+        score: decider.map_or(f32::NAN, |l| l.score),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn combine_labels_decision_table() {
+        let s = |score| Some(Decision { dynamic: false, reason: LabelReason::Static, score });
+        let sem = Some(Decision { dynamic: true, reason: LabelReason::Semantic, score: 1.0 });
+        let epi = Some(Decision { dynamic: true, reason: LabelReason::Epipolar, score: 0.9 });
+        // (a, b, mode) -> (dynamic, reason, score): every combination of static, dynamic and
+        // unlabelled on both sides, for both modes.
+        let table = [
+            (s(0.1), s(0.2), Combine::Or, false, LabelReason::Static, 0.1),
+            (sem, s(0.2), Combine::Or, true, LabelReason::Semantic, 1.0),
+            (s(0.1), epi, Combine::Or, true, LabelReason::Epipolar, 0.9),
+            (sem, epi, Combine::Or, true, LabelReason::Semantic, 1.0),
+            (None, epi, Combine::Or, true, LabelReason::Epipolar, 0.9),
+            (sem, None, Combine::Or, true, LabelReason::Semantic, 1.0),
+            (None, s(0.2), Combine::Or, false, LabelReason::Static, 0.2),
+            (s(0.1), s(0.2), Combine::And, false, LabelReason::Static, 0.1),
+            (sem, s(0.2), Combine::And, false, LabelReason::Static, 0.2),
+            (s(0.1), epi, Combine::And, false, LabelReason::Static, 0.1),
+            (sem, epi, Combine::And, true, LabelReason::Semantic, 1.0),
+            (None, epi, Combine::And, false, LabelReason::Static, 0.9),
+            (sem, None, Combine::And, false, LabelReason::Static, 1.0),
+        ];
+        for (k, (a, b, how, dynamic, reason, score)) in table.into_iter().enumerate() {
+            let d = combine(a, b, how);
+            assert_eq!((d.dynamic, d.reason, d.score), (dynamic, reason, score), "row {k}: {a:?} {how:?} {b:?}");
+        }
+        assert!(combine(None, None, Combine::Or).score.is_nan() && !combine(None, None, Combine::Or).dynamic);
+    }
 
     #[test]
     fn fixed_and_adaptive_epipolar_rules() {

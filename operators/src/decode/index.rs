@@ -153,6 +153,29 @@ pub fn associate(rgb: &[(f64, String)], depth: &[(f64, String)], max_difference:
     out
 }
 
+/// The pose whose stamp is nearest `t`, if within `max_diff` seconds: the association evo
+/// (`sync.associate_trajectories`, `--t_max_diff`, default 0.01 s) and the TUM benchmark's
+/// `associate.py` make between an estimate and its ground truth. On equal distances the
+/// earlier pose wins, as numpy's `argmin` picks the first. `traj` is sorted by stamp.
+pub fn nearest_pose(traj: &[(f64, Isometry3<f64>)], t: f64, max_diff: f64) -> Option<Isometry3<f64>> {
+    let i = traj.partition_point(|(s, _)| *s < t);
+    let before = i.checked_sub(1).and_then(|k| traj.get(k));
+    let after = traj.get(i);
+    let best = match (before, after) {
+        (Some(a), Some(b)) => {
+            if (t - a.0).abs() <= (b.0 - t).abs() {
+                a
+            } else {
+                b
+            }
+        }
+        (Some(a), None) => a,
+        (None, Some(b)) => b,
+        (None, None) => return None,
+    };
+    ((best.0 - t).abs() <= max_diff).then_some(best.1)
+}
+
 /// The pose at `t`: linear in translation, slerp in rotation, between the two bracketing
 /// poses. `None` when `t` is outside the trajectory by more than `slack` seconds.
 pub fn interpolate_pose(traj: &[(f64, Isometry3<f64>)], t: f64, slack: f64) -> Option<Isometry3<f64>> {
@@ -177,6 +200,22 @@ pub fn interpolate_pose(traj: &[(f64, Isometry3<f64>)], t: f64, slack: f64) -> O
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn nearest_pose_is_evos_association() {
+        let at = |x: f64| Isometry3::from_parts(Translation3::new(x, 0.0, 0.0), nalgebra::UnitQuaternion::identity());
+        let traj: Vec<(f64, Isometry3<f64>)> = [1.0, 1.01, 1.02, 1.05].iter().map(|&t| (t, at(t))).collect();
+        let x = |t: f64, d: f64| nearest_pose(&traj, t, d).map(|p| p.translation.vector.x);
+        assert_eq!(x(1.004, 0.01), Some(1.0));
+        assert_eq!(x(1.006, 0.01), Some(1.01));
+        // A tie takes the earlier pose (numpy's argmin).
+        assert_eq!(x(1.035, 0.02), Some(1.02));
+        // Nothing within max_diff: no pose (evo leaves the estimate unmatched).
+        assert_eq!(x(1.035, 0.01), None);
+        assert_eq!(x(0.98, 0.01), None);
+        assert_eq!(x(1.06, 0.01), Some(1.05));
+        assert_eq!(nearest_pose(&[], 1.0, 1.0), None);
+    }
 
     fn list(ts: &[f64]) -> Vec<(f64, String)> {
         ts.iter().map(|t| (*t, format!("{t}.png"))).collect()

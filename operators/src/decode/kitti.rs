@@ -32,7 +32,7 @@ pub(crate) const KITTI_ODOMETRY: OpSpec = OpSpec {
         PortSpec::output("right", PortType::Image, "right rectified image"),
         PortSpec::output("camera_info", PortType::CameraInfo, "left camera intrinsics (rectified, no distortion)"),
         PortSpec::output("stereo", PortType::Scalars, "`baseline_m`: stereo baseline in metres"),
-        PortSpec::output(
+        PortSpec::ground_truth(
             "gt_pose",
             PortType::Pose,
             "ground-truth world_from_cam of the left camera, when poses are available",

@@ -14,7 +14,7 @@ mod tum;
 
 pub(crate) use folder::IMAGE_FOLDER;
 pub use folder::{Layout, detect_layout};
-pub use index::{Associated, IndexError, associate, interpolate_pose, read_index, read_trajectory};
+pub use index::{Associated, IndexError, associate, interpolate_pose, nearest_pose, read_index, read_trajectory};
 pub use intrinsics::{Intrinsics, preset_for_folder};
 pub(crate) use kitti::KITTI_ODOMETRY;
 pub use png::{load_depth, load_rgb};

@@ -95,6 +95,12 @@ impl Operator for OrbOp {
         let img = super::gray(msg)?;
         let mask = match inputs.get("mask").map(|m| &m.body) {
             Some(Body::Mask(m)) => {
+                if (m.width as usize, m.height as usize) != (img.width, img.height) {
+                    return Err(OpError::Input(format!(
+                        "`mask` is {}x{} but `image` is {}x{}: a mask must cover the image pixel for pixel",
+                        m.width, m.height, img.width, img.height
+                    )));
+                }
                 let data = m.classes.iter().map(|&c| u8::from(c != 0)).collect();
                 GrayImage::from_vec(m.width as usize, m.height as usize, data)
             }

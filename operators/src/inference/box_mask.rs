@@ -27,7 +27,11 @@ pub const BOX_TO_MASK: OpSpec = OpSpec {
         PortSpec::input("detections", PortType::Detections, "boxes"),
         PortSpec::input("depth", PortType::Depth, "depth in metres, same image"),
     ],
-    outputs: &[PortSpec::output("mask", PortType::Mask, "class 0 static, 1 a listed class; instance = box index + 1")],
+    outputs: &[PortSpec::output(
+        "mask",
+        PortType::Mask,
+        "class 0 static, k the k-th class of `classes` (named in the mask); instance = box index + 1",
+    )],
     params: &[
         ParamSpec {
             name: "classes",
@@ -65,21 +69,33 @@ impl Operator for BoxToMask {
         let Body::Depth(depth) = &inputs.require("depth")?.body else {
             return Err(OpError::Input("`depth` is not a depth image".into()));
         };
+        // One class id per listed class (1, 2, ... in the order given; 0 is static).
         let wanted: Vec<&str> = self.config.classes.split(',').map(str::trim).filter(|s| !s.is_empty()).collect();
-        let mut boxes: Vec<(f32, [f32; 4])> =
-            d.detections.iter().filter(|x| wanted.contains(&&*x.label)).map(|x| (x.score, x.bbox)).collect();
+        let mut boxes: Vec<(f32, [f32; 4], u16)> = d
+            .detections
+            .iter()
+            .filter_map(|x| {
+                let class = wanted.iter().position(|w| *w == &*x.label)?;
+                Some((x.score, x.bbox, u16::try_from(class + 1).unwrap_or(u16::MAX)))
+            })
+            .collect();
         // Ascending score: the best box is drawn last and wins overlaps.
         boxes.sort_by(|a, b| a.0.total_cmp(&b.0));
         let rects: Vec<[f32; 4]> = boxes.iter().map(|b| b.1).collect();
         let (w, h) = (depth.width as usize, depth.height as usize);
         let instances = box_depth_mask(&rects, &depth.data, w, h, self.config.bin as f32, self.config.tolerance as f32);
-        let classes = instances.iter().map(|&i| u16::from(i != 0)).collect();
+        // Instance k + 1 is box k's.
+        let classes = instances
+            .iter()
+            .map(|&i| if i == 0 { 0 } else { boxes.get(usize::from(i) - 1).map_or(0, |b| b.2) })
+            .collect();
+        let class_names = std::iter::once("static").chain(wanted.iter().copied()).map(Arc::from).collect();
         let mask = SegmentationMask {
             width: depth.width,
             height: depth.height,
             classes,
             instances: Some(instances),
-            class_names: vec![Arc::from("static"), Arc::from(self.config.classes.as_str())],
+            class_names,
         };
         Ok(Outputs::new().with("mask", msg.header.clone(), Body::Mask(mask)))
     }

@@ -36,8 +36,8 @@ pub(crate) const SYNTH: OpSpec = OpSpec {
         PortSpec::output("rgb", PortType::Image, "RGB8 camera image"),
         PortSpec::output("depth", PortType::Depth, "depth in metres (0 = no measurement)"),
         PortSpec::output("camera_info", PortType::CameraInfo, "pinhole intrinsics (TUM fr3, scaled to the resolution)"),
-        PortSpec::output("gt_pose", PortType::Pose, "ground-truth world_from_cam"),
-        PortSpec::output("gt_mask", PortType::Mask, "ground-truth class (0 static, 1 person) and instance masks"),
+        PortSpec::ground_truth("gt_pose", PortType::Pose, "ground-truth world_from_cam"),
+        PortSpec::ground_truth("gt_mask", PortType::Mask, "ground-truth class (0 static, 1 person) and instance masks"),
     ],
     params: &[
         ParamSpec {

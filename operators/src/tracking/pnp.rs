@@ -50,7 +50,7 @@ pub const PNP_TRACK: OpSpec = OpSpec {
             PortType::Tracks,
             "the tracks `labels` index (a keypoint whose nearest labelled track within `label_radius` is dynamic is left out)",
         ),
-        PortSpec::optional("gt_pose", PortType::Pose, "ground truth, for the ATE in the summary"),
+        PortSpec::evaluation("gt_pose", PortType::Pose, "ground truth, for the ATE in the summary"),
     ],
     outputs: &[
         PortSpec::output("pose", PortType::Pose, "world_from_cam (the first key frame is the world)"),
@@ -181,6 +181,7 @@ fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]], label_radius: f32) ->
     let mut dynamic = vec![false; points.len()];
     if let Some(Body::Mask(m)) = inputs.get("mask").map(|m| &m.body) {
         for (d, p) in dynamic.iter_mut().zip(points) {
+            // (The mask's size was checked against the depth image's.)
             let (x, y) = (p[0].round() as i64, p[1].round() as i64);
             if x >= 0 && y >= 0 && (x as u32) < m.width && (y as u32) < m.height {
                 *d |= m.classes.get(y as usize * m.width as usize + x as usize).is_some_and(|&c| c != 0);
@@ -210,6 +211,14 @@ impl Operator for PnpTrack {
         let Body::CameraInfo(k) = &inputs.require("camera_info")?.body else {
             return Err(OpError::Input("`camera_info` is not camera info".into()));
         };
+        if let Some(Body::Mask(m)) = inputs.get("mask").map(|m| &m.body)
+            && (m.width, m.height) != (depth.width, depth.height)
+        {
+            return Err(OpError::Input(format!(
+                "`mask` is {}x{} but `depth` is {}x{}: a mask must cover the image the keypoints come from, pixel for pixel",
+                m.width, m.height, depth.width, depth.height
+            )));
+        }
         let descriptors = match &kp.descriptors {
             Some(d) if d.bytes_per == 32 && d.data.len() == 32 * kp.points.len() => &d.data,
             Some(d) if kp.points.is_empty() || d.data.is_empty() => &d.data,

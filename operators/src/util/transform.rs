@@ -4,8 +4,8 @@ use std::time::{Duration, Instant};
 
 use dynaflow_engine::msg::{Body, Header, PortType, Scalars};
 use dynaflow_engine::op::{
-    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
-    PortSpec,
+    Context, Default, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType,
+    Params, PortSpec,
 };
 use rand_core::Rng;
 use std::collections::BTreeSet;
@@ -289,7 +289,8 @@ pub(super) const MASK_STATS: OpSpec = OpSpec {
     family: "util",
     doc: "Statistics of a segmentation mask: the fraction of pixels of a non-background class (`dynamic_fraction`) and the number of distinct instances (`instances`). Shows how dynamic each frame of a sequence is.",
     kind: OpKind::Transform,
-    inputs: &[PortSpec::input("mask", PortType::Mask, "class (and instance) mask; class 0 is background/static")],
+    inputs: &[PortSpec::input("mask", PortType::Mask, "class (and instance) mask; class 0 is background/static")
+        .with_role(InputRole::Statistics)],
     outputs: &[PortSpec::output("stats", PortType::Scalars, "`dynamic_fraction`, `instances`")],
     params: &[],
     cpu_heavy: false,

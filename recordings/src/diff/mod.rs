@@ -145,6 +145,10 @@ pub struct DiffReport {
     pub a: PathBuf,
     /// Run B.
     pub b: PathBuf,
+    /// Whether run A is an oracle's (decides with ground truth), from its provenance.
+    pub oracle_a: bool,
+    /// Whether run B is.
+    pub oracle_b: bool,
     /// Whether either file was cut short.
     pub truncated: bool,
     /// Per topic present in both runs.
@@ -264,6 +268,8 @@ pub fn diff(a: &Recording, b: &Recording, tols: &[Tolerance]) -> DiffReport {
     DiffReport {
         a: a.path.clone(),
         b: b.path.clone(),
+        oracle_a: a.is_oracle(),
+        oracle_b: b.is_oracle(),
         truncated: a.truncated || b.truncated,
         topics,
         only_in_a,
@@ -284,7 +290,14 @@ pub fn diff(a: &Recording, b: &Recording, tols: &[Tolerance]) -> DiffReport {
 impl DiffReport {
     /// A human-readable table.
     pub fn table(&self) -> String {
-        let mut out = format!("A: {}\nB: {}\n\n", self.a.display(), self.b.display());
+        let mark = |o: bool| if o { " (oracle: decides with ground truth)" } else { "" };
+        let mut out = format!(
+            "A: {}{}\nB: {}{}\n\n",
+            self.a.display(),
+            mark(self.oracle_a),
+            self.b.display(),
+            mark(self.oracle_b)
+        );
         out.push_str(&format!(
             "{:<28} {:<12} {:>6} {:>6} {:>8} {:>10}  {}\n",
             "topic", "type", "A", "B", "differ", "first", "largest deltas"

@@ -31,6 +31,14 @@ pub struct Recording {
     pub truncated: bool,
 }
 
+impl Recording {
+    /// Whether the run was an oracle's (its decisions read ground truth): the provenance's
+    /// `oracle` entry, `true: ...` with the decisions (recordings made before it have none).
+    pub fn is_oracle(&self) -> bool {
+        self.metadata.get("oracle").is_some_and(|o| o.starts_with("true"))
+    }
+}
+
 /// Largest record the reader accepts, inside chunks too: a record (or a decompressed chunk)
 /// may exceed its file through compression, but never absurdly. A corrupt length field then
 /// fails as "record too large" instead of asking the allocator for exabytes.

@@ -626,6 +626,7 @@ mod tests {
         let info = RunInfo {
             graph: "t".into(),
             variant: None,
+            oracle: None,
             seed: 0,
             graph_yaml: String::new(),
             params: BTreeMap::new(),

@@ -1,0 +1,24 @@
+#!/usr/bin/env bash
+# The README's test command: installs the peers (scripts/peers.sh), runs the whole test suite
+# with every peer comparison required, and ends with one line naming every comparison that
+# was skipped. Extra arguments go to `cargo test` (e.g. `scripts/test.sh --test eval`).
+#   DYNAFLOW_SKIP_PEERS=evo,opencv,...  skips those peers' comparisons on purpose
+#   (peers: opencv, evo, onnxruntime, octomap, rerun, mcap, gpu; or all).
+set -uo pipefail
+cd "$(dirname "$0")/.."
+target="${CARGO_TARGET_DIR:-$PWD/target}"
+export DYNAFLOW_PEERS="${DYNAFLOW_PEERS:-$target/peers}"
+bash scripts/peers.sh || { echo "error: installing the peers failed (scripts/peers.sh)" >&2; exit 1; }
+export DYNAFLOW_REQUIRE_PEERS=1
+skips="$target/peer-skips"
+rm -rf "$skips" && mkdir -p "$skips"
+export DYNAFLOW_SKIP_LOG="$skips"
+cargo test --workspace --release "$@"
+status=$?
+list="$(cat "$skips"/*.txt 2>/dev/null | sort -u)"
+if [ -z "$list" ]; then
+  echo "peer comparisons skipped: none"
+else
+  echo "peer comparisons skipped ($(printf '%s\n' "$list" | wc -l)): $(printf '%s\n' "$list" | paste -sd';' - | sed 's/;/; /g')"
+fi
+exit $status
