@@ -64,7 +64,8 @@ fn main() {
             (v.iter().sum::<f64>() / v.len().max(1) as f64, v[v.len() / 2])
         };
         let (om, od) = stats(&mut ours);
-        let peer_row = peer::octomap_peer(&dir, "bench octomap: liboctomap side by side").map(|exe| peer::run_peer(&exe, &scans, 0.05, &dir, "bench"));
+        let peer_row = peer::octomap_peer(&dir, "bench octomap: liboctomap side by side")
+            .map(|exe| peer::run_peer(&exe, &scans, 0.05, &dir, "bench"));
         match peer_row {
             Some(r) => {
                 let mut theirs: Vec<f64> = r["ms"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();

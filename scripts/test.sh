@@ -13,7 +13,7 @@ export DYNAFLOW_REQUIRE_PEERS=1
 skips="$target/peer-skips"
 rm -rf "$skips" && mkdir -p "$skips"
 export DYNAFLOW_SKIP_LOG="$skips"
-cargo test --workspace --release "$@"
+cargo test --workspace --release --no-fail-fast "$@"
 status=$?
 list="$(cat "$skips"/*.txt 2>/dev/null | sort -u)"
 if [ -z "$list" ]; then

@@ -305,3 +305,97 @@ fn a_closed_stdout_is_not_a_crash() {
     assert!(!err.contains("panicked"), "{err}");
     assert_eq!(out.status.code(), Some(0));
 }
+
+#[test]
+fn constants_table_lists_every_default() {
+    // docs/constants.md names, for every tuning parameter of the deciding operators, its
+    // default and where it comes from: each row's first number is the operator's default, and
+    // no such parameter is left out.
+    let table = std::fs::read_to_string(common::repo().join("docs/constants.md")).unwrap();
+    let out = common::bin().args(["ops", "--json"]).output().unwrap();
+    let ops: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let default_of = |op: &str, param: &str| -> Option<serde_json::Value> {
+        let op = ops.as_array()?.iter().find(|o| o["name"] == op)?;
+        op["params"].as_array()?.iter().find(|p| p["name"] == param).map(|p| p["default"].clone())
+    };
+    let mut listed = std::collections::BTreeSet::new();
+    for row in table.lines().filter(|l| l.starts_with("| `")) {
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        let (names, value) = (cells[1], cells[2]);
+        let numbers: Vec<f64> = value
+            .split(|c: char| !(c.is_ascii_digit() || c == '.' || c == 'e' || c == '-'))
+            .filter_map(|s| s.parse::<f64>().ok())
+            .collect();
+        // The backticked names: `op.a`, `op.b`, or `op.a`, `b`, `c` (the same operator); a
+        // bare `op` names an operator's built-in rule, not a parameter.
+        let mut op = String::new();
+        let tokens: Vec<&str> = names.split('`').skip(1).step_by(2).collect();
+        for (k, token) in tokens.iter().enumerate() {
+            let name = match token.split_once('.') {
+                Some((o, p)) => {
+                    op = o.to_owned();
+                    p
+                }
+                None if tokens.len() == 1 => continue,
+                None => token,
+            };
+            let default = default_of(&op, name).unwrap_or_else(|| panic!("{row}: `{op}.{name}` is no parameter"));
+            listed.insert(format!("{op}.{name}"));
+            match &default {
+                serde_json::Value::Number(n) => {
+                    let want = n.as_f64().unwrap();
+                    // Several parameters in one row: their values in order.
+                    let got = numbers.get(k).or(numbers.first()).copied().unwrap_or(f64::NAN);
+                    assert!(
+                        (got - want).abs() <= 1e-9 * want.abs().max(1.0),
+                        "{row}: {op}.{name} is {want} in the code, {got} in the table"
+                    );
+                }
+                serde_json::Value::String(s) => {
+                    assert!(value.contains(s.as_str()), "{row}: {op}.{name} is `{s}` in the code")
+                }
+                serde_json::Value::Bool(b) => {
+                    assert!(value.contains(&b.to_string()), "{row}: {op}.{name} is {b} in the code")
+                }
+                other => panic!("{row}: {op}.{name} has default {other}"),
+            }
+        }
+    }
+    // Parameters that choose a mode, a file or an output, not a tuned number.
+    let not_constants = [
+        "cull.mode",
+        "cull.values",
+        "detect.model",
+        "detect.decoder",
+        "detect.backend",
+        "orb_extract.distribution",
+        "octomap.dynamic_classes",
+        "octomap.color",
+        "octomap.snapshot_every",
+        "local_map.baseline",
+    ];
+    for op in [
+        "cull",
+        "fundamental_ransac",
+        "homography_prosac",
+        "combine_labels",
+        "keyframe_gate",
+        "box_to_mask",
+        "detect",
+        "oracle_boxes",
+        "orb_extract",
+        "lk_flow",
+        "pnp_track",
+        "local_map",
+        "octomap",
+    ] {
+        let spec = ops.as_array().unwrap().iter().find(|o| o["name"] == op).unwrap();
+        for p in spec["params"].as_array().unwrap() {
+            let key = format!("{op}.{}", p["name"].as_str().unwrap());
+            assert!(
+                listed.contains(&key) || not_constants.contains(&key.as_str()),
+                "{key} is missing from docs/constants.md"
+            );
+        }
+    }
+}

@@ -1,4 +1,4 @@
-//! `dynaflow eval` against evo (PyPI `evo`, in the peers venv): ATE with SE(3) and Sim(3)
+//! `dynaflow eval` against evo (PyPI `evo`, in the peers venv): ATE with SE(3), Sim(3) and no
 //! alignment and RPE (translation, rotation) equal to 1e-6 on a real TUM-format pair and on
 //! generated pairs with noise, gaps, unequal rates and a scale error.
 #![allow(clippy::unwrap_used, clippy::panic)]
@@ -130,7 +130,7 @@ fn eval_equals_evo_on_real_and_generated_pairs() {
     let evo: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
     for ((g, e, delta), theirs) in cases.iter().zip(&evo) {
         let (gt, est) = (read_trajectory(g).unwrap(), read_trajectory(e).unwrap());
-        for (align, key) in [(Align::Se3, "se3"), (Align::Sim3, "sim3")] {
+        for (align, key) in [(Align::Se3, "se3"), (Align::Sim3, "sim3"), (Align::None, "none")] {
             let ours: Evaluation = evaluate_with(&gt, &est, 0.01, align, *delta).unwrap();
             let what = format!("{} ({key}, {delta:?})", e.display());
             assert_eq!(ours.matched as u64, theirs["matched"].as_u64().unwrap(), "{what}");

@@ -322,8 +322,18 @@ fn detector_gate_graph_runs_and_reports_its_gate() {
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("detector_gate.summary.json")).unwrap()).unwrap();
     let gate = s["nodes"].as_array().unwrap().iter().find(|n| n["node"] == "gate").unwrap();
     let rules = gate["report"]["rules"].as_object().unwrap();
+    let rule = |k: &str| rules[k].as_u64().unwrap();
     assert_eq!(rules.values().map(|v| v.as_u64().unwrap()).sum::<u64>(), 8);
     assert_eq!(gate["report"]["frames"], 8);
+    // The gate both skips and infers, and not only by its clock: the tracker's key frames and
+    // relocalisations and the culling's dynamic count (its feedback inputs) open it too.
+    let inferred = gate["report"]["inferred"].as_u64().unwrap();
+    assert!(rule("skipped") > 0 && inferred > 1, "{rules:?}");
+    assert_eq!(inferred, 8 - rule("skipped"));
+    assert!(rule("keyframe") + rule("relocalised") + rule("few_dynamic") > 0, "no feedback rule fired: {rules:?}");
+    // The detector ran on exactly the frames the gate passed.
+    let detector = s["nodes"].as_array().unwrap().iter().find(|n| n["node"] == "detector").unwrap();
+    assert_eq!(detector["frames"].as_u64(), Some(inferred), "{detector}");
     assert!(s["ate"]["rmse"].as_f64().is_some());
 }
 

@@ -154,11 +154,19 @@ fn malformed_tum_folders_give_errors_naming_file_and_line() {
     let e = build_error(d.path(), fr2);
     assert!(e.contains("rgb.txt:2:") && e.contains("expected `timestamp filename`"), "{e}");
 
-    // Ground truth not covering the frames.
+    // Ground truth within 10 ms of no frame (evo would match nothing): an error.
     let d = broken_copy("gt");
-    std::fs::write(d.path().join("groundtruth.txt"), "# gt\n1.0 0 0 0 0 0 0 1\n1.5 0 0 0 0 0 0 1\n").unwrap();
+    std::fs::write(d.path().join("groundtruth.txt"), "# gt\n1.02 0 0 0 0 0 0 1\n1.5 0 0 0 0 0 0 1\n").unwrap();
     let e = build_error(d.path(), fr2);
-    assert!(e.contains("groundtruth.txt") && e.contains("covers 1.000000..1.500000"), "{e}");
+    assert!(e.contains("groundtruth.txt") && e.contains("no pose within 0.01 s of any frame"), "{e}");
+    assert!(e.contains("1.020000..1.500000") && e.contains("frames 1.000000..2.000000"), "{e}");
+    // Within 10 ms of the first frame only: that frame has ground truth, the second none (a
+    // motion-capture gap, which evo leaves out of the ATE too).
+    std::fs::write(d.path().join("groundtruth.txt"), "# gt\n1.004 0 0 0 0 0 0 1\n1.5 0 0 0 0 0 0 1\n").unwrap();
+    let (report, sink) = run(&tum_graph(d.path(), fr2)).unwrap();
+    assert_eq!(report.status, RunStatus::Completed);
+    let seqs: Vec<u64> = sink.port("cam", "gt_pose").iter().map(|m| m.header.seq).collect();
+    assert_eq!(seqs, [0]);
 
     // Bad quaternion in the ground truth.
     let d = broken_copy("quat");

@@ -1,4 +1,4 @@
-"""evo's side of `tests/eval.rs`: ATE (SE(3) and Sim(3) alignment) and RPE (translation,
+"""evo's side of `tests/eval.rs`: ATE (SE(3), Sim(3) and no alignment) and RPE (translation,
 rotation in degrees) for each trajectory pair of the job, with evo's own association."""
 import copy
 import json
@@ -13,9 +13,10 @@ for case in json.load(open(sys.argv[1])):
     est = file_interface.read_tum_trajectory_file(case["est"])
     ref, est = sync.associate_trajectories(ref, est, max_diff=case["max_diff"])
     res = {"matched": ref.num_poses}
-    for align in ["se3", "sim3"]:
+    for align in ["se3", "sim3", "none"]:
         e = copy.deepcopy(est)
-        e.align(ref, correct_scale=(align == "sim3"))
+        if align != "none":  # evo_ape without -a: the estimate as it is
+            e.align(ref, correct_scale=(align == "sim3"))
         ape = metrics.APE(metrics.PoseRelation.translation_part)
         ape.process_data((ref, e))
         res["ate_" + align] = ape.get_all_statistics()

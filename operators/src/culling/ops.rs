@@ -56,7 +56,7 @@ const RANSAC_PARAMS: [ParamSpec; 2] = [
         name: "ransac_threshold",
         ty: ParamType::Float { min: 0.01, max: 100.0 },
         default: Default::Float(1.0),
-        doc: "RANSAC inlier threshold on the epipolar distances, pixels (OpenCV's default)",
+        doc: "RANSAC inlier threshold on the epipolar distances, pixels (chosen for sub-pixel LK tracks; OpenCV's default is 3)",
     },
     ParamSpec {
         name: "confidence",

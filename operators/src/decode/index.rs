@@ -213,7 +213,7 @@ mod tests {
         // Nothing within max_diff: no pose (evo leaves the estimate unmatched).
         assert_eq!(x(1.035, 0.01), None);
         assert_eq!(x(0.98, 0.01), None);
-        assert_eq!(x(1.06, 0.01), Some(1.05));
+        assert_eq!(x(1.059, 0.01), Some(1.05));
         assert_eq!(nearest_pose(&[], 1.0, 1.0), None);
     }
 

@@ -5,13 +5,20 @@ use super::texture::hash;
 
 /// Kinect v1 baseline times focal length times 8 sub-disparity steps (metres·pixels):
 /// depth is quantised to `c / round(c / z)`.
-const DISPARITY_C: f64 = 0.075 * 525.0 * 8.0;
+pub(super) const DISPARITY_C: f64 = 0.075 * 525.0 * 8.0;
+/// Axial noise: σ = this · z² metres (Khoshelham & Elberink 2012 measured 0.0014-0.0015 for the
+/// Kinect v1).
+pub(super) const SIGMA_Z2: f64 = 0.0015;
+/// Share of depth-edge pixels left without depth.
+pub(super) const EDGE_DROPOUT: f32 = 0.6;
+/// Share of all other pixels left without depth.
+pub(super) const DROPOUT: f32 = 0.004;
 /// Nearest measurable depth.
 pub const MIN_RANGE: f32 = 0.45;
 /// Farthest measurable depth.
 pub const MAX_RANGE: f32 = 6.0;
 /// A depth step above this between neighbours marks an edge where holes appear.
-const EDGE_STEP_M: f32 = 0.15;
+pub(super) const EDGE_STEP_M: f32 = 0.15;
 
 /// A per-pixel 32-bit random word, deterministic in (seed, frame, pixel, salt).
 fn word(seed: u32, frame: u32, idx: u32, salt: u32) -> u32 {
@@ -59,11 +66,11 @@ pub fn kinect_depth(truth: &[f32], width: usize, seed: u32, frame: u32) -> Vec<f
                 .into_iter()
                 .any(|k| neighbour(k) > EDGE_STEP_M);
             let r = uniform(word(seed, frame, i as u32, 1));
-            if (edge && r < 0.6) || r < 0.004 {
+            if (edge && r < EDGE_DROPOUT) || r < DROPOUT {
                 continue;
             }
             let n = normal(word(seed, frame, i as u32, 2));
-            let noisy = f64::from(z) + f64::from(n) * 0.0015 * f64::from(z) * f64::from(z);
+            let noisy = f64::from(z) + f64::from(n) * SIGMA_Z2 * f64::from(z) * f64::from(z);
             let disparity = (DISPARITY_C / noisy).round().max(1.0);
             *o = (DISPARITY_C / disparity) as f32;
         }

@@ -127,10 +127,50 @@ fn kinect_noise_scales_with_depth_squared_and_leaves_holes() {
     let f = g.frame(0, false);
     let valid: Vec<(f32, f32)> =
         f.depth.iter().zip(&f.depth_true).filter(|(n, _)| **n > 0.0).map(|(n, t)| (*n, *t)).collect();
-    let holes = 1.0 - valid.len() as f64 / f.depth.len() as f64;
-    assert!((0.003..0.3).contains(&holes), "hole fraction {holes}");
+    // Holes, as the model makes them: every pixel out of range, `EDGE_DROPOUT` of the pixels
+    // at a depth edge, `DROPOUT` of the rest; the count within 4 binomial sigmas of that.
+    use super::sensor::{DISPARITY_C, DROPOUT, EDGE_DROPOUT, EDGE_STEP_M, MAX_RANGE, MIN_RANGE, SIGMA_Z2};
+    let (t, w) = (&f.depth_true, g.config().intrinsics.width as usize);
+    let (mut mean, mut var) = (0.0f64, 0.0f64);
+    for (i, &z) in t.iter().enumerate() {
+        let p = if !(MIN_RANGE..=MAX_RANGE).contains(&z) {
+            1.0
+        } else {
+            let step = |k: Option<usize>| k.and_then(|k| t.get(k)).is_some_and(|&n| (n - z).abs() > EDGE_STEP_M);
+            let edge = [i.checked_sub(1), Some(i + 1), i.checked_sub(w), Some(i + w)].into_iter().any(step);
+            f64::from(if edge { EDGE_DROPOUT } else { DROPOUT })
+        };
+        mean += p;
+        var += p * (1.0 - p);
+    }
+    let holes = (f.depth.len() - valid.len()) as f64;
+    eprintln!("holes {holes}, the model's expectation {mean:.0} +- {:.0}", var.sqrt());
+    assert!((holes - mean).abs() <= 4.0 * var.sqrt() + 1.0, "{holes} holes, expected {mean} +- {}", var.sqrt());
+    // Noise: the median |error| / z² against the same model simulated here, with its own
+    // random numbers, at the same true depths: σ = SIGMA_Z2 z² times the generator's
+    // approximately normal variable (the sum of four uniform bytes, standardised), then the
+    // disparity quantisation. 3 % allows for sampling (tens of thousands of pixels).
     let rel: Vec<f64> = valid.iter().map(|(n, t)| f64::from((n - t).abs()) / f64::from(t * t)).collect();
     let m = median(rel);
-    // σ = 0.0015 z² plus disparity quantisation: the median |error|/z² is of that order.
-    assert!((0.0005..0.006).contains(&m), "median |error|/z² = {m}");
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut normal = || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        let bytes: u64 = (0..4).map(|k| (state >> (8 * k)) & 0xff).sum();
+        (bytes as f64 - 510.0) / 147.8
+    };
+    let simulated: Vec<f64> = valid
+        .iter()
+        .map(|&(_, z)| {
+            let z = f64::from(z);
+            let n = normal();
+            let noisy = z + n * SIGMA_Z2 * z * z;
+            let quantised = DISPARITY_C / (DISPARITY_C / noisy).round().max(1.0);
+            (quantised - z).abs() / (z * z)
+        })
+        .collect();
+    let want = median(simulated);
+    eprintln!("median |error|/z^2: {m:.6}, the model simulated {want:.6}");
+    assert!((m / want - 1.0).abs() <= 0.03, "median |error|/z² = {m}, the model's {want}");
 }
