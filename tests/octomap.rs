@@ -31,9 +31,23 @@ fn scan(
     max_range: f64,
     keep: impl Fn(usize) -> bool,
 ) -> peer::Scan {
+    scan_pixels(depth, w, k, pose, step, max_range, keep).0
+}
+
+/// [`scan`], and the pixel index of each point (as the `octomap` operator makes its scans).
+#[allow(clippy::too_many_arguments)]
+fn scan_pixels(
+    depth: &[f32],
+    w: usize,
+    k: [f64; 4],
+    pose: &Isometry3<f64>,
+    step: usize,
+    max_range: f64,
+    keep: impl Fn(usize) -> bool,
+) -> (peer::Scan, Vec<usize>) {
     let [fx, fy, cx, cy] = k;
     let h = depth.len() / w;
-    let mut pts = Vec::new();
+    let (mut pts, mut pixels) = (Vec::new(), Vec::new());
     for v in (0..h).step_by(step) {
         for u in (0..w).step_by(step) {
             let i = v * w + u;
@@ -41,11 +55,36 @@ fn scan(
             if z > 0.0 && z.is_finite() && keep(i) {
                 let q = pose * Point3::new((u as f64 - cx) * z / fx, (v as f64 - cy) * z / fy, z);
                 pts.push([q.x as f32, q.y as f32, q.z as f32]);
+                pixels.push(i);
             }
         }
     }
     let t = pose.translation.vector;
-    (pts, [t.x as f32, t.y as f32, t.z as f32], max_range)
+    ((pts, [t.x as f32, t.y as f32, t.z as f32], max_range), pixels)
+}
+
+/// `n` frames (every `every`-th) of the synthetic walking scene with seed `seed`, the
+/// people left out by their ground-truth masks as `graphs/octomap.yaml` does: the scans and
+/// each point's image colour.
+fn coloured_scans(seed: u64, n: u64, every: u64) -> (Vec<peer::Scan>, Vec<Vec<[u8; 3]>>) {
+    let g = Generator::new(SynthConfig { seed, ..SynthConfig::default() });
+    let c = g.config().intrinsics.clone();
+    (0..n)
+        .map(|k| {
+            let f = g.frame(k * every, false);
+            let kk = [c.fx, c.fy, c.cx, c.cy];
+            let (s, pixels) =
+                scan_pixels(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |i| f.class[i] == 0);
+            let colours = pixels.iter().map(|&i| [f.rgb[3 * i], f.rgb[3 * i + 1], f.rgb[3 * i + 2]]).collect();
+            (s, colours)
+        })
+        .unzip()
+}
+
+/// `compare_octrees`' KLD between two OcTree files.
+fn kld(said: &str) -> f64 {
+    let line = said.lines().find(|l| l.trim_start().starts_with("KLD:")).unwrap_or_else(|| panic!("no KLD: {said}"));
+    line.trim_start().trim_start_matches("KLD:").trim().parse().unwrap_or_else(|_| panic!("{line}"))
 }
 
 /// The five ICL-NUIM frames of slambook2's ch12 with their poses.
@@ -133,23 +172,81 @@ fn our_tree_equals_octomaps_on_real_and_synthetic_depth() {
         let theirs = read(&dir.path().join(format!("{name}.ot"))).unwrap();
         let (occ_ours, occ_theirs) = (t.occupied_leaves().len(), report["occupied_leafs"].as_u64().unwrap() as usize);
         let (share, sampled) = agreement(&t, &theirs);
-        let same_bytes = ot_bytes(&t) == std::fs::read(dir.path().join(format!("{name}.ot"))).unwrap()
-            && bt_bytes(&t) == std::fs::read(dir.path().join(format!("{name}.bt"))).unwrap();
         eprintln!(
-            "{name}: {} rays; occupied leaves ours {occ_ours} / OctoMap {occ_theirs}; same decision at {:.4} % of {sampled} sampled voxels; files byte-identical: {same_bytes}",
+            "{name}: {} rays; occupied leaves ours {occ_ours} / OctoMap {occ_theirs}; same decision at {:.4} % of {sampled} sampled voxels",
             scans.iter().map(|s| s.0.len()).sum::<usize>(),
             100.0 * share
         );
-        assert!((occ_ours as f64 - occ_theirs as f64).abs() <= 0.01 * occ_theirs as f64);
+        // The same tree: the same files, byte for byte.
+        assert!(ot_bytes(&t) == std::fs::read(dir.path().join(format!("{name}.ot"))).unwrap(), "{name}: .ot differs");
+        assert!(bt_bytes(&t) == std::fs::read(dir.path().join(format!("{name}.bt"))).unwrap(), "{name}: .bt differs");
+        assert_eq!(occ_ours, occ_theirs);
         assert_eq!(t.leaves().len(), report["leafs"].as_u64().unwrap() as usize);
-        assert!(share >= 0.99, "{share}");
-        // OctoMap's own comparison of our .ot against its tree.
+        assert_eq!(share, 1.0);
+        // OctoMap's own comparison of our .ot against its tree: no divergence at all.
         let path = dir.path().join(format!("{name}.ours.ot"));
         dynaflow_octomap::write_ot(&t, &path).unwrap();
         let said = compare_octrees(&path, &dir.path().join(format!("{name}.ot")));
         eprintln!("compare_octrees: {}", said.lines().filter(|l| !l.trim().is_empty()).collect::<Vec<_>>().join(" | "));
         assert!(!said.to_lowercase().contains("error"), "{said}");
+        assert_eq!(kld(&said), 0.0, "{said}");
     }
+}
+
+#[test]
+fn our_color_tree_equals_octomaps_color_octree() {
+    // The same coloured scans (synthetic walking frames, people masked out, image colours):
+    // OctoMap's ColorOcTree, coloured as octomap_server does (averageNodeColor per point after
+    // each insertion, updateInnerOccupancy before writing), and ours write the same bytes.
+    let dir = common::TempDir::new("octomap-color");
+    let Some(exe) =
+        peer::octomap_peer(dir.path(), "octomap::our_color_tree_equals_octomaps_color_octree: vs liboctomap")
+    else {
+        return;
+    };
+    let (scans, colours) = coloured_scans(3, 10, 6);
+    peer::run_peer_with(&exe, &scans, Some(&colours), 0.05, dir.path(), "color");
+    let mut t = OcTree::new(Params::default(), true).unwrap();
+    for (s, c) in scans.iter().zip(&colours) {
+        let labels: Vec<dynaflow_octomap::Label> =
+            c.iter().map(|&color| dynaflow_octomap::Label { color, class: 0 }).collect();
+        t.insert_scan(&s.0, Some(&labels), s.1, s.2);
+    }
+    let theirs = std::fs::read(dir.path().join("color.ot")).unwrap();
+    let ours = ot_bytes(&t);
+    let coloured = t.leaves().iter().filter(|l| l.node.color_set()).count();
+    eprintln!(
+        "ColorOcTree: {} nodes, {coloured} coloured leaves; .ot {} / {} bytes",
+        t.size(),
+        ours.len(),
+        theirs.len()
+    );
+    assert!(coloured > 1000, "{coloured}");
+    assert!(ours == theirs, "our ColorOcTree .ot differs from OctoMap's");
+}
+
+#[test]
+fn the_colour_octree_a_run_writes_equals_octomaps() {
+    // `graphs/octomap.yaml` itself: its ColorOcTree file against OctoMap's ColorOcTree built
+    // from the same frames (the generator's, with the run's seed), the same way.
+    let dir = common::TempDir::new("octomap-run-color");
+    let Some(exe) =
+        peer::octomap_peer(dir.path(), "octomap::the_colour_octree_a_run_writes_equals_octomaps: vs liboctomap")
+    else {
+        return;
+    };
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--frames", "6", "--set", "camera.seed=5", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/octomap.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let (scans, colours) = coloured_scans(5, 6, 1);
+    peer::run_peer_with(&exe, &scans, Some(&colours), 0.05, dir.path(), "peer");
+    let ours = std::fs::read(dir.path().join("octomap.map.ot")).unwrap();
+    let theirs = std::fs::read(dir.path().join("peer.ot")).unwrap();
+    assert!(ours == theirs, "the run's .ot ({} bytes) differs from OctoMap's ({} bytes)", ours.len(), theirs.len());
 }
 
 #[test]

@@ -68,7 +68,9 @@ fn average_color(t: &OcTree, n: &Node) -> Option<[u8; 3]> {
     let (mut sum, mut k) = ([0u32; 3], 0u32);
     for i in 0..8 {
         if let Some(c) = t.child(n, i) {
-            let c = if c.has_children() { average_color(t, c).unwrap_or(c.color) } else { c.color };
+            // An inner child's colour is its own children's average (white without one), as
+            // `updateInnerOccupancy` leaves it, bottom up.
+            let c = if c.has_children() { average_color(t, c).unwrap_or([255; 3]) } else { c.color };
             if c != [255; 3] {
                 for j in 0..3 {
                     sum[j] += u32::from(c[j]);

@@ -96,9 +96,10 @@ impl Node {
         self.children != NONE
     }
 
-    /// Whether a colour was observed.
+    /// Whether a colour was observed: OctoMap's `isColorSet`, any colour but white (a white
+    /// pixel counts as unobserved there too).
     pub fn color_set(&self) -> bool {
-        self.flags & COLOR_SET != 0
+        self.color != [255; 3]
     }
 
     pub(crate) fn exists(&self) -> bool {
@@ -206,6 +207,11 @@ fn morton(k: Key) -> u64 {
         (x | (x << 2)) & 0x0009_2492_4924_9249
     }
     spread(k.0[0]) | (spread(k.0[1]) << 1) | (spread(k.0[2]) << 2)
+}
+
+/// The key [`Key::packed`] made.
+fn unpack(p: u64) -> Key {
+    Key([(p >> 32) as u16, (p >> 16) as u16, p as u16])
 }
 
 fn unmorton(m: u64) -> Key {
@@ -408,6 +414,42 @@ impl OcTree {
         if at.0 == NONE { &mut self.root } else { &mut self.blocks[at.0 as usize][at.1] }
     }
 
+    /// [`OcTree::search`], for changing the node.
+    fn search_mut(&mut self, key: Key) -> Option<&mut Node> {
+        if !self.root.exists() {
+            return None;
+        }
+        let mut at = (NONE, 0usize);
+        for level in (0..DEPTH).rev() {
+            let n = *self.node_mut(at);
+            if !n.has_children() {
+                break;
+            }
+            let pos = key.child_index(level);
+            if !self.blocks[n.children as usize][pos].exists() {
+                return None;
+            }
+            at = (n.children, pos);
+        }
+        Some(self.node_mut(at))
+    }
+
+    /// OctoMap's `ColorOcTree::averageNodeColor`: the node holding `key` (the voxel, or the
+    /// pruned node it lies in) takes the mean of its colour and `color` (each channel
+    /// `(old + new) / 2`, rounded down), or `color` if it had none; nothing in unknown space.
+    pub fn average_node_color(&mut self, key: Key, color: [u8; 3]) {
+        if let Some(n) = self.search_mut(key) {
+            if n.color_set() {
+                for (c, new) in n.color.iter_mut().zip(color) {
+                    *c = ((u16::from(*c) + u16::from(new)) / 2) as u8;
+                }
+            } else {
+                n.color = color;
+            }
+            n.flags |= COLOR_SET;
+        }
+    }
+
     /// The deepest node on `key`'s path: the voxel, or the pruned node holding it; `None`
     /// for unknown space.
     pub fn search(&self, key: Key) -> Option<&Node> {
@@ -559,8 +601,10 @@ impl OcTree {
     /// each ray from `origin` up to its end point are updated free once, each end point's
     /// voxel occupied once (a voxel that is both counts as occupied); a point beyond
     /// `max_range` (when positive) clears the ray up to `max_range` and marks nothing. With
-    /// `labels` (one per point) a semantic tree keeps, per occupied voxel, the mean colour and
-    /// the most frequent class of its points. Points are world coordinates.
+    /// `labels` (one per point) a semantic tree then colours, point by point in scan order,
+    /// the node holding each end point as OctoMap's ColorOcTree does after an insertion
+    /// (`averageNodeColor`, what octomap_server calls), and gives it the most frequent class
+    /// of the scan's points in it. Points are world coordinates.
     pub fn insert_scan(&mut self, points: &[[f32; 3]], labels: Option<&[Label]>, origin: [f32; 3], max_range: f64) {
         let mut s = std::mem::take(&mut self.scratch);
         // The scan's bounding box in keys: the sensor's range around it, or the points'.
@@ -607,8 +651,26 @@ impl OcTree {
         }
         for &m in &s.occupied.list {
             let k = unmorton(m);
-            if let Some(now) = self.update(k, true, s.labels.get(&k.packed()).map(Votes::<4>::label)) {
+            if let Some(now) = self.update(k, true, None) {
                 s.changes.push((k, now));
+            }
+        }
+        if self.semantic
+            && let Some(labels) = labels
+        {
+            for (p, l) in points.iter().zip(labels) {
+                let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+                let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                if (max_range < 0.0 || norm <= max_range)
+                    && let Some(k) = self.grid.key(*p)
+                {
+                    self.average_node_color(k, l.color);
+                }
+            }
+            for (&packed, votes) in &s.labels {
+                if let Some(n) = self.search_mut(unpack(packed)) {
+                    n.class = votes.label().class;
+                }
             }
         }
         self.scratch = s;

@@ -43,8 +43,13 @@ pub type Scan = (Vec<[f32; 3]>, [f32; 3], f64);
 
 /// Scans as the peer reads them.
 pub fn scans_file(scans: &[Scan], path: &Path) {
+    scans_file_with(scans, None, path);
+}
+
+/// Scans as the peer reads them, with a colour per point (`colors`, one list per scan).
+pub fn scans_file_with(scans: &[Scan], colors: Option<&[Vec<[u8; 3]>]>, path: &Path) {
     let mut b = Vec::new();
-    for (pts, origin, range) in scans {
+    for (k, (pts, origin, range)) in scans.iter().enumerate() {
         b.extend((pts.len() as u32).to_le_bytes());
         for v in origin {
             b.extend(v.to_le_bytes());
@@ -55,6 +60,10 @@ pub fn scans_file(scans: &[Scan], path: &Path) {
                 b.extend(v.to_le_bytes());
             }
         }
+        if let Some(c) = colors {
+            assert_eq!(c[k].len(), pts.len());
+            b.extend(c[k].iter().flatten());
+        }
     }
     std::fs::write(path, b).unwrap();
 }
@@ -62,13 +71,26 @@ pub fn scans_file(scans: &[Scan], path: &Path) {
 /// Run the peer on `scans` at `resolution`: its JSON report; it writes `PREFIX.ot` and
 /// `PREFIX.bt`.
 pub fn run_peer(peer: &Path, scans: &[Scan], resolution: f64, dir: &Path, prefix: &str) -> serde_json::Value {
-    scans_file(scans, &dir.join(format!("{prefix}.scans")));
-    let out = Command::new(peer)
-        .arg(dir.join(format!("{prefix}.scans")))
-        .arg(resolution.to_string())
-        .arg(dir.join(prefix))
-        .output()
-        .unwrap();
+    run_peer_with(peer, scans, None, resolution, dir, prefix)
+}
+
+/// [`run_peer`]; with `colors` (one per point) OctoMap builds a ColorOcTree, colouring each
+/// scan's points with `averageNodeColor` after inserting it.
+pub fn run_peer_with(
+    peer: &Path,
+    scans: &[Scan],
+    colors: Option<&[Vec<[u8; 3]>]>,
+    resolution: f64,
+    dir: &Path,
+    prefix: &str,
+) -> serde_json::Value {
+    scans_file_with(scans, colors, &dir.join(format!("{prefix}.scans")));
+    let mut cmd = Command::new(peer);
+    cmd.arg(dir.join(format!("{prefix}.scans"))).arg(resolution.to_string()).arg(dir.join(prefix));
+    if colors.is_some() {
+        cmd.arg("color");
+    }
+    let out = cmd.output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     serde_json::from_slice(&out.stdout).unwrap()
 }
