@@ -14,7 +14,7 @@ const HOPS: usize = 10;
 
 fn chain_yaml(frames: u64) -> String {
     let mut y = format!(
-        "name: chain\nnodes:\n  src: {{ op: test_pattern, params: {{ frames: {frames}, width: 1, height: 1 }} }}\n"
+        "name: chain\nnodes:\n  src: {{ op: testing.test_pattern, params: {{ frames: {frames}, width: 1, height: 1 }} }}\n"
     );
     let mut prev = "src.tick".to_owned();
     for i in 0..HOPS {

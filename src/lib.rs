@@ -20,7 +20,7 @@ pub fn registry() -> Registry {
 /// 1.20x the run without it) and `malloc_trim` once a second (the free pages between live
 /// blocks of its arenas otherwise stayed resident and grew with the run). jemalloc hands
 /// back unused pages itself, from a background thread, and reuses size classes without that
-/// cost; measured in docs/benchmarks.md ("Fourth pass"). Not on MSVC, which jemalloc does
+/// cost; measured when chosen (git history of docs/benchmarks.md, issue 15's fourth pass). Not on MSVC, which jemalloc does
 /// not build for.
 #[cfg(not(target_env = "msvc"))]
 #[global_allocator]

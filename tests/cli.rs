@@ -52,7 +52,7 @@ fn default_graph_runs_and_writes_summary_and_log() {
 fn failing_operator_exits_1_and_names_the_node() {
     let dir = common::TempDir::new("fail");
     let graph = dir.path().join("fail.yaml");
-    std::fs::write(&graph, "name: fail\nnodes:\n  camera: { op: test_pattern }\n  bad: { op: fault, in: { input: camera.tick }, params: { at_frame: 3, mode: panic } }\n").unwrap();
+    std::fs::write(&graph, "name: fail\nnodes:\n  camera: { op: testing.test_pattern }\n  bad: { op: testing.fault, in: { input: camera.tick }, params: { at_frame: 3, mode: panic } }\n").unwrap();
     let out = common::bin()
         .args(["run", "--no-progress", "--record", "rrd,mcap,jsonl", "--out"])
         .arg(dir.path())
@@ -95,7 +95,7 @@ fn sigint_finishes_in_flight_frames_and_closes_sinks() {
     let graph = dir.path().join("long.yaml");
     std::fs::write(
         &graph,
-        "name: long\nnodes:\n  camera: { op: test_pattern, params: { frames: 1000000 } }\n  work: { op: simulate_work, in: { input: camera.tick }, params: { work_us: 2000 } }\n",
+        "name: long\nnodes:\n  camera: { op: testing.test_pattern, params: { frames: 1000000 } }\n  work: { op: testing.simulate_work, in: { input: camera.tick }, params: { work_us: 2000 } }\n",
     )
     .unwrap();
     let child = common::bin()
@@ -151,12 +151,28 @@ fn ops_json_lists_every_operator_with_ports_and_params() {
     let out = common::bin().args(["ops", "--json"]).output().unwrap();
     let ops: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     let names: Vec<&str> = ops.as_array().unwrap().iter().map(|o| o["name"].as_str().unwrap()).collect();
-    for op in ["test_pattern", "passthrough", "gate", "random_scalar", "scalar_sum", "simulate_work", "fault"] {
+    for op in [
+        "testing.test_pattern",
+        "passthrough",
+        "gate",
+        "testing.random_scalar",
+        "testing.scalar_sum",
+        "testing.simulate_work",
+        "testing.fault",
+    ] {
         assert!(names.contains(&op), "{op} missing from {names:?}");
     }
-    let tp = ops.as_array().unwrap().iter().find(|o| o["name"] == "test_pattern").unwrap();
+    let tp = ops.as_array().unwrap().iter().find(|o| o["name"] == "testing.test_pattern").unwrap();
     assert_eq!(tp["params"][0]["name"], "frames");
     assert_eq!(tp["outputs"][0]["ty"], "image");
+    // The operators that exist to exercise the engine (fault injection, simulated work,
+    // random scalars, test patterns) are in the `testing.` namespace, and only they.
+    for o in ops.as_array().unwrap() {
+        let (name, family) = (o["name"].as_str().unwrap(), o["family"].as_str().unwrap());
+        assert_eq!(name.starts_with("testing."), family == "testing", "{name} in family {family}");
+    }
+    let testing: Vec<&&str> = names.iter().filter(|n| n.starts_with("testing.")).collect();
+    assert_eq!(testing.len(), 5, "{testing:?}");
 }
 
 #[test]
@@ -253,7 +269,7 @@ fn bad_flags_and_hostile_graphs_are_bad_input_not_crashes() {
     std::fs::write(
         &deep,
         format!(
-            "name: deep\nnodes:\n  cam:\n    op: test_pattern\n    params:\n      frames:\n        {}1\n",
+            "name: deep\nnodes:\n  cam:\n    op: testing.test_pattern\n    params:\n      frames:\n        {}1\n",
             "- ".repeat(50_000)
         ),
     )
@@ -263,7 +279,8 @@ fn bad_flags_and_hostile_graphs_are_bad_input_not_crashes() {
     assert!(err.contains("deep.yaml:7:") && err.contains("nested deeper"), "{err}");
     // A name that would write outside --out.
     let escape = dir.path().join("escape.yaml");
-    std::fs::write(&escape, "name: ../escaped\nnodes:\n  cam: { op: test_pattern, params: { frames: 2 } }\n").unwrap();
+    std::fs::write(&escape, "name: ../escaped\nnodes:\n  cam: { op: testing.test_pattern, params: { frames: 2 } }\n")
+        .unwrap();
     let sub = dir.path().join("sub");
     let (code, _, err) =
         dynaflow(&["run", "--no-progress", "--out", sub.to_str().unwrap(), escape.to_str().unwrap()], &[]);
@@ -278,7 +295,7 @@ fn unknown_op_does_not_hide_an_unknown_input_node() {
     let g = dir.path().join("g.yaml");
     std::fs::write(
         &g,
-        "name: g\nnodes:\n  cam: { op: test_pattern }\n  det: { op: yolo_magic, in: { image: ghost_node.rgb } }\n",
+        "name: g\nnodes:\n  cam: { op: testing.test_pattern }\n  det: { op: yolo_magic, in: { image: ghost_node.rgb } }\n",
     )
     .unwrap();
     let (code, _, err) = dynaflow(&["validate", g.to_str().unwrap()], &[]);

@@ -50,7 +50,7 @@ enum Kind {
         offset: u64,
     },
     Pass,
-    /// `simulate_work`: a pass-through that takes time, so dropping queues do drop.
+    /// `testing.simulate_work`: a pass-through that takes time, so dropping queues do drop.
     Work,
     Sum {
         b: Option<Wire>,
@@ -131,7 +131,7 @@ fn wire_yaml(g: &Graph, w: &Wire) -> String {
 
 fn yaml(g: &Graph) -> String {
     let mut s = format!(
-        "name: prop\nnodes:\n  cam: {{ op: test_pattern, params: {{ frames: {}, width: 4, height: 4 }} }}\n",
+        "name: prop\nnodes:\n  cam: {{ op: testing.test_pattern, params: {{ frames: {}, width: 4, height: 4 }} }}\n",
         g.frames
     );
     for (j, n) in g.nodes.iter().enumerate() {
@@ -142,9 +142,9 @@ fn yaml(g: &Graph) -> String {
                 format!("op: gate, in: {{ input: {input} }}, params: {{ every: {every}, offset: {offset} }}")
             }
             Kind::Pass => format!("op: passthrough, in: {{ input: {input} }}"),
-            Kind::Work => format!("op: simulate_work, in: {{ input: {input} }}, params: {{ work_us: 300 }}"),
-            Kind::Sum { b: None } => format!("op: scalar_sum, in: {{ a: {input} }}"),
-            Kind::Sum { b: Some(b) } => format!("op: scalar_sum, in: {{ a: {input}, b: {} }}", wire_yaml(g, b)),
+            Kind::Work => format!("op: testing.simulate_work, in: {{ input: {input} }}, params: {{ work_us: 300 }}"),
+            Kind::Sum { b: None } => format!("op: testing.scalar_sum, in: {{ a: {input} }}"),
+            Kind::Sum { b: Some(b) } => format!("op: testing.scalar_sum, in: {{ a: {input}, b: {} }}", wire_yaml(g, b)),
         };
         s.push_str(&format!("  {}: {{ {body}, disabled: {} }}\n", name(i), n.disabled));
     }

@@ -65,9 +65,9 @@ fn dropping_queue_into_a_feedback_loop_with_a_latest_join_never_hangs() {
     let hang2 = r"
 name: hang2
 nodes:
-  cam: { op: test_pattern, params: { frames: 100 } }
+  cam: { op: testing.test_pattern, params: { frames: 100 } }
   acc:
-    op: scalar_sum
+    op: testing.scalar_sum
     in:
       a: { from: cam.tick, queue: latest }
       b: { from: acc.sum, join: latest, delay: 1 }
@@ -75,9 +75,9 @@ nodes:
     let two_nodes = r"
 name: hang2b
 nodes:
-  cam: { op: test_pattern, params: { frames: 100 } }
-  a: { op: scalar_sum, in: { a: cam.tick, b: { from: b.sum, delay: 1 } } }
-  b: { op: scalar_sum, in: { a: { from: cam.tick, queue: latest }, b: { from: a.sum, join: latest } } }
+  cam: { op: testing.test_pattern, params: { frames: 100 } }
+  a: { op: testing.scalar_sum, in: { a: cam.tick, b: { from: b.sum, delay: 1 } } }
+  b: { op: testing.scalar_sum, in: { a: { from: cam.tick, queue: latest }, b: { from: a.sum, join: latest } } }
 ";
     for text in [hang2, two_nodes] {
         for _ in 0..5 {
@@ -95,13 +95,13 @@ fn slow_node_inside_the_loop_drops_frames_and_the_loop_still_runs() {
     let text = r"
 name: loop
 nodes:
-  cam: { op: test_pattern, params: { frames: 100 } }
+  cam: { op: testing.test_pattern, params: { frames: 100 } }
   acc:
-    op: scalar_sum
+    op: testing.scalar_sum
     in:
       a: { from: cam.tick, queue: latest }
       b: { from: slow.output, join: latest, delay: 1 }
-  slow: { op: simulate_work, in: { input: acc.sum }, params: { work_us: 2000 } }
+  slow: { op: testing.simulate_work, in: { input: acc.sum }, params: { work_us: 2000 } }
 ";
     let (report, sink) = run(&common::graph(text));
     assert_eq!(report.status, RunStatus::Completed);
@@ -128,8 +128,8 @@ fn first_stop_request_ends_a_run_whose_operator_is_stuck() {
     let text = r"
 name: stuck
 nodes:
-  cam: { op: test_pattern, params: { frames: 1000, rate_hz: 1000 } }
-  stuck: { op: simulate_work, in: { input: cam.tick }, params: { work_us: 30000000 } }
+  cam: { op: testing.test_pattern, params: { frames: 1000, rate_hz: 1000 } }
+  stuck: { op: testing.simulate_work, in: { input: cam.tick }, params: { work_us: 30000000 } }
 ";
     let options = RunOptions { stop_grace: Some(Duration::from_millis(300)), ..RunOptions::default() };
     let stop = options.stop.clone();
@@ -154,9 +154,9 @@ fn delayed_edge_with_a_dropping_queue_keeps_every_delayed_frame() {
     let text = r"
 name: d3
 nodes:
-  cam: { op: test_pattern, params: { frames: 12 } }
+  cam: { op: testing.test_pattern, params: { frames: 12 } }
   acc:
-    op: scalar_sum
+    op: testing.scalar_sum
     in:
       a: cam.tick
       b: { from: acc.sum, delay: 3, queue: latest }
@@ -187,7 +187,7 @@ fn alias_bomb_and_deep_nesting_are_located_errors() {
     assert!(d.len() == 1 && d[0].contains("test.yaml:") && d[0].contains("alias bomb"), "{d:?}");
 
     let deep = format!(
-        "name: deep\nnodes:\n  cam:\n    op: test_pattern\n    params:\n      frames:\n        {}1\n",
+        "name: deep\nnodes:\n  cam:\n    op: testing.test_pattern\n    params:\n      frames:\n        {}1\n",
         "- ".repeat(50_000)
     );
     let d = diagnostics(&deep);
@@ -199,11 +199,11 @@ fn alias_bomb_and_deep_nesting_are_located_errors() {
 #[test]
 fn graph_names_must_be_plain_file_names() {
     for bad in ["../escaped", "/tmp/abs", "\"\"", "a/b", ".hidden", "'a\\b'", "'sp ace'"] {
-        let d = diagnostics(&format!("name: {bad}\nnodes:\n  cam: {{ op: test_pattern }}\n"));
+        let d = diagnostics(&format!("name: {bad}\nnodes:\n  cam: {{ op: testing.test_pattern }}\n"));
         assert!(d.iter().any(|m| m.contains("invalid graph name")), "`{bad}` accepted: {d:?}");
     }
     for good in ["default", "mg_slam-v2", "run.3", "_x"] {
-        let d = diagnostics(&format!("name: {good}\nnodes:\n  cam: {{ op: test_pattern }}\n"));
+        let d = diagnostics(&format!("name: {good}\nnodes:\n  cam: {{ op: testing.test_pattern }}\n"));
         assert!(d.is_empty(), "`{good}` rejected: {d:?}");
     }
 }
@@ -215,9 +215,9 @@ fn drop_counts_are_lost_messages_not_watermarks() {
     let text = r"
 name: gated
 nodes:
-  cam: { op: test_pattern, params: { frames: 200 } }
+  cam: { op: testing.test_pattern, params: { frames: 200 } }
   key: { op: gate, in: { input: cam.tick }, params: { every: 5 } }
-  slow: { op: simulate_work, in: { input: { from: key.output, queue: latest } }, params: { work_us: 3000 } }
+  slow: { op: testing.simulate_work, in: { input: { from: key.output, queue: latest } }, params: { work_us: 3000 } }
 ";
     let (report, sink) = run(&common::graph(text));
     let sent = sink.port("key", "output").len() as u64;
@@ -243,7 +243,7 @@ fn completed_runs_with_delays_discard_nothing_and_report_no_reserved_depth() {
 
 fn graph_text(name: &str, b: &str) -> String {
     format!(
-        "name: {name}\nnodes:\n  cam: {{ op: test_pattern, params: {{ frames: 50 }} }}\n  smooth: {{ op: scalar_sum, in: {{ a: cam.tick, b: {b} }} }}\n"
+        "name: {name}\nnodes:\n  cam: {{ op: testing.test_pattern, params: {{ frames: 50 }} }}\n  smooth: {{ op: testing.scalar_sum, in: {{ a: cam.tick, b: {b} }} }}\n"
     )
 }
 
@@ -256,8 +256,8 @@ fn realtime_slow_node_drops_instead_of_throttling_the_camera() {
     let text = r"
 name: rt
 nodes:
-  cam: { op: test_pattern, params: { frames: 50, rate_hz: 100 } }
-  slow: { op: simulate_work, in: { input: cam.tick }, params: { work_us: 200000 } }
+  cam: { op: testing.test_pattern, params: { frames: 50, rate_hz: 100 } }
+  slow: { op: testing.simulate_work, in: { input: cam.tick }, params: { work_us: 200000 } }
 ";
     let t = Instant::now();
     let (report, sink) = run_within(
@@ -286,9 +286,9 @@ nodes:
 
 #[test]
 fn seed_accepts_the_whole_u64_range_in_yaml_like_the_flag() {
-    let g = common::graph("name: s\nseed: 18446744073709551615\nnodes:\n  cam: { op: test_pattern }\n");
+    let g = common::graph("name: s\nseed: 18446744073709551615\nnodes:\n  cam: { op: testing.test_pattern }\n");
     assert_eq!(g.seed, u64::MAX);
-    let d = diagnostics("name: s\nseed: 18446744073709551616\nnodes:\n  cam: { op: test_pattern }\n");
+    let d = diagnostics("name: s\nseed: 18446744073709551616\nnodes:\n  cam: { op: testing.test_pattern }\n");
     assert!(d.iter().any(|m| m.contains("`seed` must be an integer")), "{d:?}");
 }
 
@@ -297,7 +297,7 @@ fn variant_patching_an_unknown_node_still_reports_its_other_errors() {
     let text = r"
 name: v
 nodes:
-  cam: { op: test_pattern }
+  cam: { op: testing.test_pattern }
 variants:
   bad:
     ghost: { disabled: true }
@@ -318,7 +318,7 @@ fn invalid_delay_is_one_error_not_also_a_cycle() {
 
 #[test]
 fn variant_disabling_the_only_source_is_an_error() {
-    let text = "name: v\nnodes:\n  cam: { op: test_pattern }\nvariants:\n  off: { cam: { disabled: true } }\n";
+    let text = "name: v\nnodes:\n  cam: { op: testing.test_pattern }\nvariants:\n  off: { cam: { disabled: true } }\n";
     let req = LoadRequest { variant: Some("off".into()), ..LoadRequest::default() };
     let loaded = load_str("test.yaml", text, None, &dynaflow::registry(), &req);
     assert!(loaded.graph.is_none());
@@ -336,7 +336,7 @@ fn validation_is_linear_in_a_reversed_chain() {
         for i in (1..n).rev() {
             s.push_str(&format!("  p{i}: {{ op: passthrough, in: {{ input: p{}.output }} }}\n", i - 1));
         }
-        s.push_str("  p0: { op: passthrough, in: { input: cam.tick } }\n  cam: { op: test_pattern }\n");
+        s.push_str("  p0: { op: passthrough, in: { input: cam.tick } }\n  cam: { op: testing.test_pattern }\n");
         s
     }
     let time = |n: usize| {
@@ -377,7 +377,7 @@ fn diff_reader_survives_every_flipped_bit() {
     let graph = dir.path().join("small.yaml");
     std::fs::write(
         &graph,
-        "name: small\nnodes:\n  cam: { op: test_pattern, params: { frames: 10, width: 4, height: 4 } }\n",
+        "name: small\nnodes:\n  cam: { op: testing.test_pattern, params: { frames: 10, width: 4, height: 4 } }\n",
     )
     .unwrap();
     let out = common::bin()

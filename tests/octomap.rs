@@ -338,8 +338,12 @@ fn masked_people_leave_no_trace_and_unmasked_ones_leave_ghosts() {
         share(ga)
     );
     assert!(swept.len() > 1000);
-    assert!(share(gm) < 5.0, "masked: {:.2} %", share(gm));
-    assert!(ga > gm, "without masks the people leave voxels behind");
+    // Bounded by what the same frames give without masks: the masks take away at least three
+    // quarters of the ghost voxels (what stays are pixels at the masks' borders, where the
+    // Kinect model mixes a person's depth with the wall's), and without masks the people
+    // leave a trail over at least 1 % of their swept volume.
+    assert!(4 * gm <= ga, "masked {gm} ghost voxels, unmasked {ga}");
+    assert!(share(ga) >= 1.0, "unmasked: {:.2} %", share(ga));
 }
 
 #[test]

@@ -103,7 +103,7 @@ fn default_run_writes_complete_rrd_and_mcap() {
     assert_eq!(rec.topics["/camera/image"].frames.len(), 300);
     assert_eq!(rec.topics["/keyframes/output"].frames.len(), 60);
     assert_eq!(rec.metadata["graph"], "engine_smoke");
-    assert!(rec.metadata["graph_yaml"].contains("random_scalar"));
+    assert!(rec.metadata["graph_yaml"].contains("testing.random_scalar"));
     assert_eq!(rec.metadata["seed"], "7");
     // The MCAP and the message log agree message for message (same digests).
     let log = std::fs::read_to_string(dir.path().join("engine_smoke.messages.jsonl")).unwrap();
@@ -131,7 +131,7 @@ fn sigkill_midway_leaves_readable_prefixes() {
     let graph = dir.path().join("kill.yaml");
     std::fs::write(
         &graph,
-        "name: kill\nnodes:\n  camera: { op: test_pattern, params: { frames: 300, width: 320, height: 240 } }\n  work: { op: simulate_work, in: { input: camera.tick }, params: { work_us: 20000 } }\n",
+        "name: kill\nnodes:\n  camera: { op: testing.test_pattern, params: { frames: 300, width: 320, height: 240 } }\n  work: { op: testing.simulate_work, in: { input: camera.tick }, params: { work_us: 20000 } }\n",
     )
     .unwrap();
     let mut child = common::bin()
@@ -467,6 +467,19 @@ fn mcap_replay_restores_recorded_messages() {
         let original = &recorded.topics["/dynamics/stats"].frames[&m.header.seq]["data"]["dynamic_fraction"];
         assert_eq!(s.get("dynamic_fraction").unwrap(), original.as_f64().unwrap());
     }
+    // Replayed ground truth is still ground truth: the recording marks its ground-truth
+    // topics (and what derives from them: `dynamics.stats`), and a replay that decides with
+    // them must declare `oracle: true`.
+    let channels = dynaflow_recordings::replay::ground_truth_topics(&mcap).unwrap();
+    for t in ["/camera/gt_mask", "/camera/gt_pose", "/dynamics/stats"] {
+        assert!(channels.iter().any(|c| c == t), "{t} not marked: {channels:?}");
+    }
+    assert!(!channels.iter().any(|c| c == "/camera/rgb" || c == "/track/pose"), "{channels:?}");
+    let deciding = format!("{yaml}  orb: {{ op: orb_extract, in: {{ image: src.rgb, mask: src.mask }} }}\n");
+    let loaded = dynaflow_engine::load_str("t.yaml", &deciding, None, &dynaflow::registry(), &Default::default());
+    let d = loaded.diagnostics.iter().find(|d| d.code == "undeclared-oracle").expect("an undeclared oracle");
+    assert!(d.message.contains("orb/mask <- src.mask"), "{}", d.message);
+    common::graph(&deciding.replace("name: replay\n", "name: replay\noracle: true\n"));
     // A topic that is not in the file is a clear error listing the topics.
     let bad = yaml.replace("/camera/gt_pose", "/camera/gt_pos");
     let graph = common::graph(&bad);

@@ -106,9 +106,9 @@ fn disabled_node_in_a_variant() {
 const SLOW: &str = r"
 name: slow
 nodes:
-  camera: { op: test_pattern, params: { frames: 200, width: 8, height: 8 } }
+  camera: { op: testing.test_pattern, params: { frames: 200, width: 8, height: 8 } }
   slow:
-    op: simulate_work
+    op: testing.simulate_work
     in: { input: { from: camera.tick, QUEUE } }
     params: { work_us: 1500 }
 ";
@@ -146,7 +146,7 @@ fn drop_oldest_counts_exactly_the_lost_messages() {
 fn operator_error_and_panic_stop_the_run_and_close_sinks() {
     for mode in ["error", "panic"] {
         let text = format!(
-            "name: f\nnodes:\n  camera: {{ op: test_pattern, params: {{ frames: 100000 }} }}\n  bad: {{ op: fault, in: {{ input: camera.tick }}, params: {{ at_frame: 20, mode: {mode} }} }}\n"
+            "name: f\nnodes:\n  camera: {{ op: testing.test_pattern, params: {{ frames: 100000 }} }}\n  bad: {{ op: testing.fault, in: {{ input: camera.tick }}, params: {{ at_frame: 20, mode: {mode} }} }}\n"
         );
         let (report, sink) = run(&common::graph(&text));
         assert_eq!(report.status, RunStatus::Failed, "{mode}");
@@ -161,7 +161,9 @@ fn operator_error_and_panic_stop_the_run_and_close_sinks() {
 
 #[test]
 fn realtime_paces_sources_at_sensor_rate() {
-    let g = common::graph("name: rt\nnodes:\n  camera: { op: test_pattern, params: { frames: 11, rate_hz: 50 } }\n");
+    let g = common::graph(
+        "name: rt\nnodes:\n  camera: { op: testing.test_pattern, params: { frames: 11, rate_hz: 50 } }\n",
+    );
     let t = Instant::now();
     let (report, _) = run_with(&g, RunOptions { realtime: true, ..RunOptions::default() });
     // 10 intervals of 20 ms; a slow machine can only make this longer.
@@ -175,13 +177,13 @@ fn realtime_latest_join_never_waits_for_a_slow_detector() {
     let text = r"
 name: lag
 nodes:
-  camera: { op: test_pattern, params: { frames: 40, rate_hz: 100 } }
+  camera: { op: testing.test_pattern, params: { frames: 40, rate_hz: 100 } }
   detector:
-    op: simulate_work
+    op: testing.simulate_work
     in: { input: { from: camera.tick, queue: latest } }
     params: { work_us: 30000 }
   fuse:
-    op: scalar_sum
+    op: testing.scalar_sum
     in:
       a: camera.tick
       b: { from: detector.output, join: latest }
@@ -203,7 +205,7 @@ nodes:
 
 #[test]
 fn max_frames_and_stop_handle() {
-    let g = common::graph("name: s\nnodes:\n  camera: { op: test_pattern, params: { frames: 1000 } }\n");
+    let g = common::graph("name: s\nnodes:\n  camera: { op: testing.test_pattern, params: { frames: 1000 } }\n");
     let (report, _) = run_with(&g, RunOptions { max_frames: Some(7), ..RunOptions::default() });
     assert_eq!(report.frames, 7);
     assert_eq!(report.status, RunStatus::Completed);

@@ -52,7 +52,7 @@ fn yaml_syntax_error() {
 
 #[test]
 fn unknown_op() {
-    check("unknown_op.yaml", &[(3, 17, "unknown-op", "did you mean `test_pattern`?")]);
+    check("unknown_op.yaml", &[(3, 17, "unknown-op", "did you mean `testing.test_pattern`?")]);
 }
 
 #[test]
@@ -120,7 +120,7 @@ fn structural_errors() {
         "structure.yaml",
         &[
             (2, 1, "unknown-key", "did you mean `seed`?"),
-            (4, 39, "bad-value", "record policy"),
+            (4, 47, "bad-value", "record policy"),
             (5, 3, "bad-id", "letters, digits"),
             (5, 3, "missing-input", "required input `input`"),
             (9, 37, "bad-value", "did you mean `lockstep`?"),
@@ -159,7 +159,7 @@ fn bad_set_override_points_at_the_node() {
 
 #[test]
 fn unused_outputs_are_warnings() {
-    let text = "name: w\nnodes:\n  camera: { op: test_pattern, record: { image: none } }\n  p: { op: passthrough, in: { input: camera.tick } }\n";
+    let text = "name: w\nnodes:\n  camera: { op: testing.test_pattern, record: { image: none } }\n  p: { op: passthrough, in: { input: camera.tick } }\n";
     let loaded = load_str("w.yaml", text, None, &dynaflow::registry(), &LoadRequest::default());
     assert!(loaded.graph.is_some());
     let w: Vec<_> = loaded.diagnostics.iter().filter(|d| d.severity == Severity::Warning).collect();
@@ -228,7 +228,7 @@ fn token_soup_never_panics() {
         "nodes:\n",
         "  a: ",
         "  b: ",
-        "{ op: test_pattern }",
+        "{ op: testing.test_pattern }",
         "{ op: passthrough, in: { input: a.image } }",
         "op: ",
         "in: ",

@@ -50,6 +50,9 @@ pub struct RunInfo {
     pub realtime: bool,
     /// Recorded ports: `node/port` → type.
     pub ports: BTreeMap<String, PortType>,
+    /// The ports that carry ground truth (`node/port`): emitted by a ground-truth output or
+    /// derived from one.
+    pub ground_truth_ports: std::collections::BTreeSet<String>,
 }
 
 impl RunInfo {
@@ -74,6 +77,11 @@ impl RunInfo {
                 .iter()
                 .flat_map(|n| n.outputs.iter().map(move |o| (format!("{}/{}", n.id, o.name), o.ty)))
                 .collect(),
+            ground_truth_ports: graph
+                .nodes
+                .iter()
+                .flat_map(|n| n.outputs.iter().filter(|o| o.ground_truth).map(move |o| format!("{}/{}", n.id, o.name)))
+                .collect(),
         }
     }
 }
@@ -96,6 +104,12 @@ impl RunInfo {
             ("git_commit".to_owned(), self.git_commit.clone()),
             ("realtime".to_owned(), self.realtime.to_string()),
             ("digest".to_owned(), crate::msg::DIGEST_SCHEME.to_owned()),
+            // Comma-separated `/node/port` topics that carry ground truth (`mcap_replay` keeps
+            // the mark on them).
+            (
+                "ground_truth_topics".to_owned(),
+                self.ground_truth_ports.iter().map(|p| format!("/{p}")).collect::<Vec<_>>().join(","),
+            ),
         ])
     }
 }

@@ -61,8 +61,61 @@ pub const MCAP_REPLAY: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: Some(replayed_ground_truth),
     build,
 };
+
+/// The ports that replay a topic the recorded run marked as ground truth (its provenance's
+/// `ground_truth_topics`), so validation follows them as it followed the original ports. A
+/// file that cannot be read marks nothing here; building the operator then reports it.
+fn replayed_ground_truth(params: &Params) -> Vec<&'static str> {
+    let (Some(path), Some(topics)) =
+        (params.get("path").and_then(Value::as_str), params.get("topics").and_then(Value::as_str))
+    else {
+        return Vec::new();
+    };
+    let Some(marked) = ground_truth_topics(&params.resolve_path(path)) else { return Vec::new() };
+    topics
+        .split(',')
+        .filter_map(|pair| pair.split_once('='))
+        .filter(|(_, topic)| marked.iter().any(|m| m == topic.trim()))
+        .filter_map(|(port, _)| OUTPUTS.iter().find(|p| p.name == port.trim()).map(|p| p.name))
+        .collect()
+}
+
+/// The `ground_truth_topics` of a dynaflow MCAP recording's provenance, read from the start
+/// of the file (the recorder writes the record first; no chunk is decompressed). `None` when
+/// the file cannot be read or has no such record (a recording made before the mark existed).
+pub fn ground_truth_topics(path: &Path) -> Option<Vec<String>> {
+    use mcap::records::Record;
+    use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
+    use std::io::Read as _;
+    let mut file = std::fs::File::open(path).ok()?;
+    let mut reader = LinearReader::new_with_options(
+        LinearReaderOptions::default().with_skip_end_magic(true).with_record_length_limit(64 << 20),
+    );
+    while let Some(event) = reader.next_event() {
+        match event.ok()? {
+            LinearReadEvent::ReadRequest(need) => {
+                let n = file.read(reader.insert(need)).ok()?;
+                reader.notify_read(n);
+                if n == 0 {
+                    return None;
+                }
+            }
+            LinearReadEvent::Record { data, opcode } => match mcap::parse_record(opcode, data).ok()? {
+                Record::Metadata(m) if m.name == "dynaflow" => {
+                    let list = m.metadata.get("ground_truth_topics")?;
+                    return Some(list.split(',').filter(|t| !t.is_empty()).map(str::to_owned).collect());
+                }
+                // The recorder writes its provenance before any message.
+                Record::Chunk { .. } | Record::Message { .. } => return None,
+                _ => {}
+            },
+        }
+    }
+    None
+}
 
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]

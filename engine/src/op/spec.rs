@@ -210,6 +210,11 @@ pub struct OpSpec {
     pub params: &'static [ParamSpec],
     /// Run `process` on the blocking pool (CPU-heavy work).
     pub cpu_heavy: bool,
+    /// Outputs that emit ground truth depending on the parameters (a replayed recording's
+    /// ground-truth topics), beside the ports declared [`PortSpec::ground_truth`]; called at
+    /// validation.
+    #[serde(skip)]
+    pub ground_truth_outputs: Option<fn(&Params) -> Vec<&'static str>>,
     /// Constructor from validated parameters.
     #[serde(skip)]
     pub build: fn(&Params) -> Result<Instance, OpError>,

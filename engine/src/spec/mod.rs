@@ -16,7 +16,7 @@
 //! oracle: false            # true when a decision reads ground truth (validation checks it)
 //! nodes:                   # node id -> node; ids match [A-Za-z_][A-Za-z0-9_-]*
 //!   camera:
-//!     op: test_pattern     # operator name (`dynaflow ops` lists them)
+//!     op: testing.test_pattern     # operator name (`dynaflow ops` lists them)
 //!     params: { frames: 300 }
 //!     record: all          # all | none | every N | {port: policy, ...}
 //!   blur:

@@ -39,8 +39,16 @@ impl GroundTruthUse {
 /// One wired input: producer (node, output), consumer (node, input), where it is written.
 pub(super) type Wire = ((usize, usize), (usize, usize), Span);
 
-/// Every enabled node input that receives ground truth for a decision, in edge order.
-pub(super) fn ground_truth_uses(spec: &GraphSpec, ops: &[Option<&OpSpec>], wires: &[Wire]) -> Vec<GroundTruthUse> {
+/// What the analysis found: every enabled node input that receives ground truth for a
+/// decision (in edge order), and per node and output whether it carries ground truth.
+pub(super) struct Analysis {
+    pub uses: Vec<GroundTruthUse>,
+    pub carries: Vec<Vec<bool>>,
+}
+
+/// Follow ground truth from the ports that emit it (`dynamic`: per node, the outputs its
+/// parameters make ground truth) through the wires.
+pub(super) fn analyse(spec: &GraphSpec, ops: &[Option<&OpSpec>], dynamic: &[Vec<&str>], wires: &[Wire]) -> Analysis {
     let enabled = |i: usize| spec.nodes.get(i).is_some_and(|n| !n.disabled) && ops.get(i).is_some_and(Option::is_some);
     let label = |i: usize, port: &str| format!("{}.{port}", spec.nodes.get(i).map_or("?", |n| n.id.as_str()));
     // Per node: the ground-truth origin its outputs carry (one origin per output port).
@@ -49,7 +57,9 @@ pub(super) fn ground_truth_uses(spec: &GraphSpec, ops: &[Option<&OpSpec>], wires
         .enumerate()
         .map(|(i, op)| {
             op.map_or_else(Vec::new, |op| {
-                op.outputs.iter().map(|p| (p.ground_truth && enabled(i)).then(|| label(i, p.name))).collect()
+                let gt =
+                    |p: &crate::op::PortSpec| p.ground_truth || dynamic.get(i).is_some_and(|d| d.contains(&p.name));
+                op.outputs.iter().map(|p| (gt(p) && enabled(i)).then(|| label(i, p.name))).collect()
             })
         })
         .collect();
@@ -73,7 +83,7 @@ pub(super) fn ground_truth_uses(spec: &GraphSpec, ops: &[Option<&OpSpec>], wires
             }
         }
     }
-    wires
+    let uses = wires
         .iter()
         .filter(|&&((from, _), (to, input), _)| enabled(from) && enabled(to) && role(to, input) == InputRole::Decision)
         .filter_map(|&((from, out), (to, input), span)| {
@@ -87,5 +97,7 @@ pub(super) fn ground_truth_uses(spec: &GraphSpec, ops: &[Option<&OpSpec>], wires
                 span,
             })
         })
-        .collect()
+        .collect();
+    let carries = origin.iter().map(|o| o.iter().map(Option::is_some).collect()).collect();
+    Analysis { uses, carries }
 }

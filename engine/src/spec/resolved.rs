@@ -69,6 +69,9 @@ pub struct ResolvedOutput {
     pub ty: PortType,
     /// What the recorders get.
     pub record: RecordPolicy,
+    /// Whether it carries ground truth (emits it, or derives from it); recorded as such, so
+    /// a replay of the recording keeps the mark.
+    pub ground_truth: bool,
 }
 
 /// A wired input.

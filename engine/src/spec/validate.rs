@@ -53,7 +53,12 @@ pub fn validate(
     let out_types = resolve_output_types(spec, &ops, &index);
     let edges = check_inputs(spec, &ops, &index, &out_types, &mut diags);
     check_cycles(spec, &edges, &mut diags);
-    let oracle = check_oracle(spec, &ops, &edges, cx, &mut diags);
+    let dynamic_gt: Vec<Vec<&str>> = ops
+        .iter()
+        .zip(&params)
+        .map(|(op, p)| op.and_then(|op| op.ground_truth_outputs).map_or_else(Vec::new, |f| f(p)))
+        .collect();
+    let (oracle, carries) = check_oracle(spec, &ops, &dynamic_gt, &edges, cx, &mut diags);
 
     let all_ops_known = ops.iter().all(Option::is_some);
     if all_ops_known && !ops.iter().flatten().any(|op| op.kind == OpKind::Source) && !spec.nodes.is_empty() {
@@ -63,7 +68,7 @@ pub fn validate(
                 spec.nodes_span,
                 "the graph has no source node, so no frame is ever produced",
             )
-            .with_hint("add a source such as `synth` or `test_pattern`; `dynaflow ops` marks sources"),
+            .with_hint("add a source such as `synth` or `testing.test_pattern`; `dynaflow ops` marks sources"),
         );
     }
     let sources: Vec<&NodeSpec> = spec
@@ -105,6 +110,7 @@ pub fn validate(
                 name: p.name,
                 ty: out_types.get(i).and_then(|t| t.get(j)).copied().unwrap_or(p.ty),
                 record: record_policy(n, p.name),
+                ground_truth: carries.get(i).and_then(|c| c.get(j)).copied().unwrap_or(false),
             })
             .collect::<Vec<_>>();
         for (port, span, _) in &n.record.ports {
@@ -161,19 +167,21 @@ pub fn validate(
 
 /// Follows ground truth through the graph and checks the graph's `oracle:` declaration
 /// against what its decisions read. Returns what the resolved graph records: `None` for a
-/// graph that decides without ground truth, else the decisions that read it.
+/// graph that decides without ground truth, else the decisions that read it; and per node
+/// and output whether it carries ground truth.
 fn check_oracle(
     spec: &GraphSpec,
     ops: &[Option<&OpSpec>],
+    dynamic_gt: &[Vec<&str>],
     edges: &[SpannedEdge],
     cx: &ResolveContext,
     diags: &mut Vec<Diagnostic>,
-) -> Option<Vec<String>> {
+) -> (Option<Vec<String>>, Vec<Vec<bool>>) {
     let wires: Vec<super::oracle::Wire> = edges
         .iter()
         .map(|e| ((e.edge.from_node, e.edge.from_port), (e.edge.to_node, e.edge.to_port), e.span))
         .collect();
-    let uses = super::oracle::ground_truth_uses(spec, ops, &wires);
+    let super::oracle::Analysis { uses, carries } = super::oracle::analyse(spec, ops, dynamic_gt, &wires);
     let declared = spec.oracle.is_some_and(|(b, _)| b);
     let what = cx.variant.as_ref().map_or_else(|| "the graph".to_owned(), |v| format!("variant `{v}`"));
     if !declared {
@@ -203,7 +211,9 @@ fn check_oracle(
             .with_hint("remove `oracle: true` (or set it to `false` in this variant), so its results are not marked as an oracle's"),
         );
     }
-    (declared || !uses.is_empty()).then(|| uses.iter().map(super::oracle::GroundTruthUse::describe).collect())
+    let oracle =
+        (declared || !uses.is_empty()).then(|| uses.iter().map(super::oracle::GroundTruthUse::describe).collect());
+    (oracle, carries)
 }
 
 fn lookup_op<'r>(n: &NodeSpec, registry: &'r Registry, diags: &mut Vec<Diagnostic>) -> Option<&'r OpSpec> {
@@ -212,14 +222,25 @@ fn lookup_op<'r>(n: &NodeSpec, registry: &'r Registry, diags: &mut Vec<Diagnosti
     }
     let op = registry.get(&n.op);
     if op.is_none() {
-        let hint =
-            did_you_mean(&n.op, registry.names()).unwrap_or_else(|| "run `dynaflow ops` to list operators".to_owned());
+        // A namespaced operator (`testing.fault`) is also found by its name alone.
+        let hint = did_you_mean(&n.op, registry.names())
+            .or_else(|| {
+                let guess = did_you_mean(bare_of(&n.op), registry.names().map(bare_of))?;
+                let full = registry.names().find(|name| guess.contains(&format!("`{}`", bare_of(name))))?;
+                Some(format!("did you mean `{full}`?"))
+            })
+            .unwrap_or_else(|| "run `dynaflow ops` to list operators".to_owned());
         diags.push(
             Diagnostic::error("unknown-op", n.op_span, format!("node `{}`: unknown op `{}`", n.id, n.op))
                 .with_hint(hint),
         );
     }
     op
+}
+
+/// `op` without a namespace.
+fn bare_of(op: &str) -> &str {
+    op.rsplit_once('.').map_or(op, |(_, b)| b)
 }
 
 fn port_hint<'a>(given: &str, names: impl Iterator<Item = &'a str> + Clone) -> String {

@@ -108,6 +108,7 @@ pub const FUNDAMENTAL_RANSAC: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         let c: FConfig = p.parse()?;
         Ok(Instance::Transform(Box::new(FundamentalOp(RansacConfig {
@@ -181,6 +182,7 @@ pub const HOMOGRAPHY_PROSAC: OpSpec = OpSpec {
         doc: "inlier threshold on the transfer error, pixels",
     }],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(HomographyOp(p.parse()?)))),
 };
 
@@ -307,6 +309,7 @@ pub const CULL: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         let c: CullConfig = p.parse()?;
         let mut values: Vec<(String, f32)> =
@@ -496,6 +499,7 @@ pub const COMBINE_LABELS: OpSpec = OpSpec {
         doc: "how the two decisions combine",
     }],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(CombineOp(p.parse()?)))),
 };
 
@@ -547,6 +551,7 @@ pub const ORACLE_BOXES: OpSpec = OpSpec {
         doc: "instances smaller than this are left out (a detector would not see them)",
     }],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(OracleOp(p.parse()?)))),
 };
 

@@ -68,6 +68,7 @@ pub(crate) const IMAGE_FOLDER: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build,
 };
 

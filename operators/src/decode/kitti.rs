@@ -65,6 +65,7 @@ pub(crate) const KITTI_ODOMETRY: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build,
 };
 

@@ -86,6 +86,7 @@ pub(crate) const TUM_RGBD: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build,
 };
 

@@ -99,6 +99,7 @@ pub const LK_FLOW: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         let c: Config = p.parse()?;
         let lk = LkConfig {

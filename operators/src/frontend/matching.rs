@@ -57,6 +57,7 @@ pub const MATCH_DESCRIPTORS: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         let c: Config = p.parse()?;
         let config = MatchConfig {

@@ -72,6 +72,7 @@ pub const ORB_EXTRACT: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         let c: Config = p.parse()?;
         let config = OrbConfig {

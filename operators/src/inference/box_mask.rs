@@ -53,6 +53,7 @@ pub const BOX_TO_MASK: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(BoxToMask { config: p.parse()? }))),
 };
 

@@ -66,6 +66,7 @@ pub const DETECT: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         let c: Config = p.parse()?;
         let (model, bytes) = if c.model.is_empty() {

@@ -53,6 +53,7 @@ pub const KEYFRAME_GATE: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         Ok(Instance::Transform(Box::new(KeyframeGate { config: p.parse()?, since: None, fired: [0; 6], frames: 0 })))
     },

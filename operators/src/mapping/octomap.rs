@@ -115,6 +115,7 @@ pub const OCTOMAP: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         let c: Config = p.parse()?;
         let params = TreeParams {

@@ -103,6 +103,7 @@ pub(crate) const SYNTH: OpSpec = OpSpec {
         ParamSpec { name: "blur", ty: ParamType::Bool, default: Default::Bool(true), doc: "3×3 image blur" },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build,
 };
 

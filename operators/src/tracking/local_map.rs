@@ -60,6 +60,7 @@ pub const LOCAL_MAP: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         Ok(Instance::Transform(Box::new(LocalMap { config: p.parse()?, mapper: None, ba_ms: Vec::new() })))
     },

@@ -116,6 +116,7 @@ pub const PNP_TRACK: OpSpec = OpSpec {
         ),
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| {
         Ok(Instance::Transform(Box::new(PnpTrack {
             config: p.parse()?,

@@ -1,4 +1,4 @@
-//! `test_pattern`: a moving colour gradient and a frame counter.
+//! `testing.test_pattern`: a moving colour gradient and a frame counter.
 
 use std::sync::Arc;
 
@@ -7,7 +7,7 @@ use dynaflow_engine::op::{
     Context, Default, Instance, OpError, OpKind, OpSpec, Outputs, ParamSpec, ParamType, Params, PortSpec, Source,
 };
 
-/// `test_pattern` configuration.
+/// `testing.test_pattern` configuration.
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
 struct Config {
@@ -18,9 +18,9 @@ struct Config {
 }
 
 pub(super) const TEST_PATTERN: OpSpec = OpSpec {
-    name: "test_pattern",
-    family: "util",
-    doc: "A moving RGB gradient and a frame counter at a fixed rate. For engine tests and smoke runs; it is not a camera model and feeds no SLAM result.",
+    name: "testing.test_pattern",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): A moving RGB gradient and a frame counter at a fixed rate. For engine tests and smoke runs; it is not a camera model and feeds no SLAM result.",
     kind: OpKind::Source,
     inputs: &[],
     outputs: &[
@@ -54,6 +54,7 @@ pub(super) const TEST_PATTERN: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: build_test_pattern,
 };
 

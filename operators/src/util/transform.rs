@@ -31,6 +31,7 @@ pub(super) const PASSTHROUGH: OpSpec = OpSpec {
     outputs: SAME_OUT,
     params: &[],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |_| Ok(Instance::Transform(Box::new(Passthrough))),
 };
 
@@ -52,9 +53,9 @@ struct WorkConfig {
 }
 
 pub(super) const SIMULATE_WORK: OpSpec = OpSpec {
-    name: "simulate_work",
-    family: "util",
-    doc: "Forwards its input after spending `work_us` on the blocking pool (sleeping, or spinning with `spin`). Models a slow consumer.",
+    name: "testing.simulate_work",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input after spending `work_us` on the blocking pool (sleeping, or spinning with `spin`). Models a slow consumer.",
     kind: OpKind::Transform,
     inputs: ANY_IN,
     outputs: SAME_OUT,
@@ -73,6 +74,7 @@ pub(super) const SIMULATE_WORK: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: true,
+    ground_truth_outputs: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(SimulateWork(p.parse()?)))),
 };
 
@@ -103,9 +105,9 @@ struct RandomConfig {
 }
 
 pub(super) const RANDOM_SCALAR: OpSpec = OpSpec {
-    name: "random_scalar",
-    family: "util",
-    doc: "Emits one random number per frame from the node's seeded RNG (`value`). Shows that runs with the same seed are identical.",
+    name: "testing.random_scalar",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Emits one random number per frame from the node's seeded RNG (`value`). Shows that runs with the same seed are identical.",
     kind: OpKind::Transform,
     inputs: &[PortSpec::input("trigger", PortType::Any, "any message; one value is drawn per frame")],
     outputs: &[PortSpec::output("value", PortType::Scalars, "`value`: the draw")],
@@ -124,6 +126,7 @@ pub(super) const RANDOM_SCALAR: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(RandomScalar(p.parse()?)))),
 };
 
@@ -179,6 +182,7 @@ pub(super) const GATE: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(Gate(p.parse()?)))),
 };
 
@@ -193,9 +197,9 @@ impl Operator for Gate {
 // --- scalar_sum ------------------------------------------------------------------------
 
 pub(super) const SCALAR_SUM: OpSpec = OpSpec {
-    name: "scalar_sum",
-    family: "util",
-    doc: "Sums the first value of `a` and, when present, of `b` into `sum`; also reports whether `b` was present (`b_present`). Exercises joins and feedback.",
+    name: "testing.scalar_sum",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Sums the first value of `a` and, when present, of `b` into `sum`; also reports whether `b` was present (`b_present`). Exercises joins and feedback.",
     kind: OpKind::Transform,
     inputs: &[
         PortSpec::input("a", PortType::Scalars, "first addend (required)"),
@@ -204,6 +208,7 @@ pub(super) const SCALAR_SUM: OpSpec = OpSpec {
     outputs: &[PortSpec::output("sum", PortType::Scalars, "`sum`, `b_present`, `b_seq` (frame of `b`, -1 if absent)")],
     params: &[],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |_| Ok(Instance::Transform(Box::new(ScalarSum))),
 };
 
@@ -241,9 +246,9 @@ struct FaultConfig {
 }
 
 pub(super) const FAULT: OpSpec = OpSpec {
-    name: "fault",
-    family: "util",
-    doc: "Forwards its input until frame `at_frame`, then fails with an error or a panic. Tests shutdown on operator failure.",
+    name: "testing.fault",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input until frame `at_frame`, then fails with an error or a panic. Tests shutdown on operator failure.",
     kind: OpKind::Transform,
     inputs: ANY_IN,
     outputs: SAME_OUT,
@@ -262,6 +267,7 @@ pub(super) const FAULT: OpSpec = OpSpec {
         },
     ],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(Fault(p.parse()?)))),
 };
 
@@ -294,6 +300,7 @@ pub(super) const MASK_STATS: OpSpec = OpSpec {
     outputs: &[PortSpec::output("stats", PortType::Scalars, "`dynamic_fraction`, `instances`")],
     params: &[],
     cpu_heavy: false,
+    ground_truth_outputs: None,
     build: |_| Ok(Instance::Transform(Box::new(MaskStats))),
 };
 

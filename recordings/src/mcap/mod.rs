@@ -46,6 +46,8 @@ pub struct McapSink {
     cache: EncodeCache,
     /// Messages and their bytes (before chunk compression) per channel.
     bytes: HashMap<u16, (u64, u64)>,
+    /// `node/port` of the ports that carry ground truth (their channels say so).
+    ground_truth: std::collections::BTreeSet<String>,
 }
 
 impl McapSink {
@@ -60,6 +62,7 @@ impl McapSink {
             chunk_size: DEFAULT_CHUNK_SIZE,
             flush_interval: DEFAULT_FLUSH_INTERVAL,
             last_flush: Instant::now(),
+            ground_truth: std::collections::BTreeSet::new(),
             cache: EncodeCache::default(),
             bytes: HashMap::new(),
         }
@@ -112,7 +115,10 @@ impl McapSink {
                 id
             }
         };
-        let meta = BTreeMap::from([("dynaflow.type".to_owned(), ty.name().to_owned())]);
+        let mut meta = BTreeMap::from([("dynaflow.type".to_owned(), ty.name().to_owned())]);
+        if self.ground_truth.contains(&format!("{node}/{port}")) {
+            meta.insert("dynaflow.ground_truth".to_owned(), "true".to_owned());
+        }
         let encoding = if protobuf { "protobuf" } else { "json" };
         let id = writer.add_channel(schema, &format!("/{node}/{port}"), encoding, &meta).map_err(err)?;
         self.channels.insert((node.to_owned(), port.to_owned()), id);
@@ -158,6 +164,7 @@ impl Sink for McapSink {
             .profile("")
             .library(format!("dynaflow {}", info.version));
         let mut writer = options.create(BufWriter::new(file)).map_err(|e| writer_error(&self.path, &e))?;
+        self.ground_truth.clone_from(&info.ground_truth_ports);
         let metadata = mcap::records::Metadata { name: "dynaflow".into(), metadata: info.to_strings() };
         writer.write_metadata(&metadata).map_err(|e| writer_error(&self.path, &e))?;
         self.writer = Some(writer);

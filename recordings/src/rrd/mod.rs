@@ -634,6 +634,7 @@ mod tests {
             git_commit: String::new(),
             realtime: false,
             ports: BTreeMap::new(),
+            ground_truth_ports: Default::default(),
         };
         let cache = EncodeCache::new(2);
         let mut rrd = RrdSink::new(dir.join("t.rrd")).with_cache(cache.clone());
