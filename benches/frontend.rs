@@ -4,7 +4,7 @@
 //!
 //! `cargo bench --bench frontend` (add `-- REPS`, default 30). The OpenCV side is
 //! `tests/peers/frontend_cv2.py` in the peers venv (`DYNAFLOW_PEERS`, default
-//! `/tmp/dynaflow-peers`, with `opencv-python-headless`).
+//! `<target folder>/peers`, as `scripts/peers.sh` makes it).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 #[path = "../tests/common/mod.rs"]

@@ -6,7 +6,7 @@
 //! GPU time table from timestamp queries.
 //!
 //! `cargo bench --bench infer` (add `-- REPS`, default 10). `DYNAFLOW_PEERS` (default
-//! `/tmp/dynaflow-peers`) is the venv with onnxruntime; `DYNAFLOW_REPO` overrides where the
+//! `<target folder>/peers`, as `scripts/peers.sh` makes it) is the venv with onnxruntime; `DYNAFLOW_REPO` overrides where the
 //! models and fixtures are (for a copied binary); `DYNAFLOW_BENCH_JSON` writes the figures.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
@@ -44,7 +44,15 @@ fn max_diff(a: &[Tensor], b: &[f32]) -> f64 {
 }
 
 fn python_with(module: &str) -> Option<PathBuf> {
-    let venv = std::env::var_os("DYNAFLOW_PEERS").map_or_else(|| PathBuf::from("/tmp/dynaflow-peers"), PathBuf::from);
+    // The venv `scripts/peers.sh` makes: `DYNAFLOW_PEERS`, else `<target folder>/peers`.
+    let venv = std::env::var_os("DYNAFLOW_PEERS").map_or_else(
+        || {
+            std::env::var_os("CARGO_TARGET_DIR")
+                .map_or_else(|| PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/target")), PathBuf::from)
+                .join("peers")
+        },
+        PathBuf::from,
+    );
     [venv.join("bin/python"), PathBuf::from("python3")]
         .into_iter()
         .find(|p| Command::new(p).args(["-c", &format!("import {module}")]).output().is_ok_and(|o| o.status.success()))

@@ -1,7 +1,7 @@
 //! Source throughput: the synthetic scene generator (frames/s at 640×480, noise on), and TUM
 //! decoding of the folder it wrote (colour + depth PNG per frame), side by side with OpenCV's
 //! `cv2.imread` on the same files when a Python with OpenCV is available
-//! (`DYNAFLOW_PEERS` venv, default `/tmp/dynaflow-peers`).
+//! (`DYNAFLOW_PEERS` venv, default `<target folder>/peers` as `scripts/peers.sh` makes it).
 //!
 //! `cargo bench --bench sources` (add `-- FRAMES`, default 120).
 
@@ -53,7 +53,12 @@ fn main() {
     let ours = t.elapsed().as_secs_f64();
     println!("TUM decode: {} frames (colour PNG + 16-bit depth PNG → metres)", pairs.len());
     println!("  dynaflow (image crate): {:6.1} frames/s", pairs.len() as f64 / ours);
-    let venv = std::env::var("DYNAFLOW_PEERS").unwrap_or_else(|_| "/tmp/dynaflow-peers".into());
+    // The venv `scripts/peers.sh` makes: `DYNAFLOW_PEERS`, else `<target folder>/peers`.
+    let venv = std::env::var("DYNAFLOW_PEERS").unwrap_or_else(|_| {
+        let target =
+            std::env::var("CARGO_TARGET_DIR").unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/target").into());
+        format!("{target}/peers")
+    });
     let python = Path::new(&venv).join("bin/python");
     let script = r##"
 import sys, time, cv2, numpy as np
