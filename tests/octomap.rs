@@ -81,6 +81,14 @@ fn coloured_scans(seed: u64, n: u64, every: u64) -> (Vec<peer::Scan>, Vec<Vec<[u
         .unzip()
 }
 
+/// A fresh folder with the OctoMap peer built in it, for `comparison`; `None` when that
+/// comparison is skipped.
+fn peer_in(tag: &str, comparison: &str) -> Option<(common::TempDir, std::path::PathBuf)> {
+    let dir = common::TempDir::new(tag);
+    let exe = peer::octomap_peer(dir.path(), &format!("octomap::{comparison}: vs liboctomap"))?;
+    Some((dir, exe))
+}
+
 /// `compare_octrees`' KLD between two OcTree files.
 fn kld(said: &str) -> f64 {
     let line = said.lines().find(|l| l.trim_start().starts_with("KLD:")).unwrap_or_else(|| panic!("no KLD: {said}"));
@@ -160,10 +168,7 @@ fn compare_octrees(a: &Path, b: &Path) -> String {
 
 #[test]
 fn our_tree_equals_octomaps_on_real_and_synthetic_depth() {
-    let dir = common::TempDir::new("octomap-peer");
-    let Some(exe) =
-        peer::octomap_peer(dir.path(), "octomap::our_tree_equals_octomaps_on_real_and_synthetic_depth: vs liboctomap")
-    else {
+    let Some((dir, exe)) = peer_in("octomap-peer", "our_tree_equals_octomaps_on_real_and_synthetic_depth") else {
         return;
     };
     for (name, scans) in [("icl_nuim", icl_scans()), ("synthetic_walking", synthetic_scans(12))] {
@@ -198,12 +203,7 @@ fn our_color_tree_equals_octomaps_color_octree() {
     // The same coloured scans (synthetic walking frames, people masked out, image colours):
     // OctoMap's ColorOcTree, coloured as octomap_server does (averageNodeColor per point after
     // each insertion, updateInnerOccupancy before writing), and ours write the same bytes.
-    let dir = common::TempDir::new("octomap-color");
-    let Some(exe) =
-        peer::octomap_peer(dir.path(), "octomap::our_color_tree_equals_octomaps_color_octree: vs liboctomap")
-    else {
-        return;
-    };
+    let Some((dir, exe)) = peer_in("octomap-color", "our_color_tree_equals_octomaps_color_octree") else { return };
     let (scans, colours) = coloured_scans(3, 10, 6);
     peer::run_peer_with(&exe, &scans, Some(&colours), 0.05, dir.path(), "color");
     let mut t = OcTree::new(Params::default(), true).unwrap();
@@ -229,10 +229,7 @@ fn our_color_tree_equals_octomaps_color_octree() {
 fn the_colour_octree_a_run_writes_equals_octomaps() {
     // `graphs/octomap.yaml` itself: its ColorOcTree file against OctoMap's ColorOcTree built
     // from the same frames (the generator's, with the run's seed), the same way.
-    let dir = common::TempDir::new("octomap-run-color");
-    let Some(exe) =
-        peer::octomap_peer(dir.path(), "octomap::the_colour_octree_a_run_writes_equals_octomaps: vs liboctomap")
-    else {
+    let Some((dir, exe)) = peer_in("octomap-run-color", "the_colour_octree_a_run_writes_equals_octomaps") else {
         return;
     };
     let out = common::bin()

@@ -191,25 +191,34 @@ fn baseline_is_deterministic_in_lockstep_and_runs_in_realtime() {
     assert!(s["ate"]["rmse"].as_f64().is_some(), "{s}");
 }
 
+/// Run `graphs/default.yaml` (`variant`, at most `frames`) into `out`, nothing recorded: what it
+/// printed and its summary.
+fn default_run(variant: Option<&str>, frames: Option<u64>, out: &Path) -> (String, serde_json::Value) {
+    let mut cmd = common::bin();
+    cmd.args(["run", "--no-progress", "--record", "none", "--out"]).arg(out);
+    if let Some(v) = variant {
+        cmd.args(["--variant", v]);
+    }
+    if let Some(f) = frames {
+        cmd.args(["--frames", &f.to_string()]);
+    }
+    let o = cmd.arg(common::repo().join("graphs/default.yaml")).output().unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let stem = variant.map_or_else(|| "default".to_owned(), |v| format!("default-{v}"));
+    let summary = std::fs::read_to_string(out.join(format!("{stem}.summary.json"))).unwrap();
+    (String::from_utf8_lossy(&o.stdout).into_owned(), serde_json::from_str(&summary).unwrap())
+}
+
 #[test]
 fn default_graph_prints_mg_slam_next_to_the_baseline() {
     // The README's first command: MG-SLAM (S+G) and the unculled baseline side by side in
     // one run, on the same frames and keypoints; each ATE printed, MG-SLAM's against the
     // baseline's, and both kept in the summary.
     let dir = common::TempDir::new("tracking-default");
-    let o = common::bin()
-        .args(["run", "--no-progress", "--record", "none", "--frames", "150", "--out"])
-        .arg(dir.path())
-        .arg(common::repo().join("graphs/default.yaml"))
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
-    let stdout = String::from_utf8_lossy(&o.stdout);
+    let (stdout, s) = default_run(None, Some(150), dir.path());
     assert!(stdout.contains("ATE of `baseline` (150 poses"), "{stdout}");
     let line = stdout.lines().find(|l| l.starts_with("ATE of `track`")).unwrap_or_default();
     assert!(line.contains("% vs `baseline`)"), "{stdout}");
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("default.summary.json")).unwrap()).unwrap();
     let (baseline, mg) = (&s["trackers"]["baseline"], &s["trackers"]["track"]);
     assert_eq!(s["ate"]["node"], "baseline", "the first tracker is the reference");
     assert_eq!(baseline["pairs"], 150);
@@ -218,17 +227,8 @@ fn default_graph_prints_mg_slam_next_to_the_baseline() {
     assert!(stdout.lines().all(|l| !l.contains("(oracle)")), "the default graph decides without ground truth");
     // The bound on culling, computed here: the same graph and frames with the generator's
     // masks in place of the detector's (`masked`, an oracle), whose tracker sees no walker.
-    let masked = dir.path().join("masked");
-    let o = common::bin()
-        .args(["run", "--no-progress", "--record", "none", "--frames", "150", "--variant", "masked", "--out"])
-        .arg(&masked)
-        .arg(common::repo().join("graphs/default.yaml"))
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
-    assert!(String::from_utf8_lossy(&o.stdout).contains("ATE of `track` (oracle)"), "the oracle run says so");
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(masked.join("default-masked.summary.json")).unwrap()).unwrap();
+    let (printed, s) = default_run(Some("masked"), Some(150), &dir.path().join("masked"));
+    assert!(printed.contains("ATE of `track` (oracle)"), "the oracle run says so: {printed}");
     let oracle = s["trackers"]["track"]["rmse"].as_f64().unwrap();
     eprintln!("150 frames: baseline {b:.4} m, MG-SLAM {m:.4} m, with ground-truth masks {oracle:.4} m");
     // MG-SLAM within twice what perfect masks give, and the walkers' damage to the baseline
@@ -246,14 +246,7 @@ fn the_readme_example_output_is_what_the_default_graph_prints() {
     let quoted: Vec<&str> = readme.lines().filter(|l| l.starts_with("ATE of `")).collect();
     assert_eq!(quoted.len(), 2, "{quoted:?}");
     let dir = common::TempDir::new("tracking-readme");
-    let o = common::bin()
-        .args(["run", "--no-progress", "--record", "none", "--out"])
-        .arg(dir.path())
-        .arg(common::repo().join("graphs/default.yaml"))
-        .output()
-        .unwrap();
-    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
-    let stdout = String::from_utf8_lossy(&o.stdout);
+    let (stdout, _) = default_run(None, None, dir.path());
     for line in quoted {
         assert!(stdout.lines().any(|l| l == line), "README says\n{line}\nthe run printed\n{stdout}");
     }
