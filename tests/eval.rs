@@ -209,7 +209,8 @@ fn eval_plot_is_a_png_of_both_panels_and_a_bad_path_is_an_error() {
         .args(["--plot", "/nonexistent/dir/ate.png"])
         .output()
         .unwrap();
-    assert_eq!(out.status.code(), Some(1));
+    // A path the user gave that cannot be written is bad input (exit 2), not a failed run.
+    assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/dir/ate.png"));
 }
 
@@ -265,4 +266,34 @@ fn the_ate_a_run_prints_on_a_tum_folder_is_evos() {
     eprintln!("run's ATE {printed:.9} m, evo_ape on the folder {theirs:.9} m over {} poses", evo[0]["matched"]);
     assert_eq!(summary["ate"]["pairs"].as_u64(), evo[0]["matched"].as_u64());
     assert!((printed - theirs).abs() <= 1e-6 * theirs.max(1e-3), "run {printed}, evo {theirs}");
+}
+
+#[test]
+fn eval_and_infer_refuse_what_evo_and_the_graph_refuse() {
+    // issue 29, defect 8: no RPE pair, a NaN time window, thresholds outside 0..=1.
+    let fixtures = common::repo().join("tests/fixtures/slambook2_trajectories");
+    let eval = |extra: &[&str]| {
+        let out = common::bin()
+            .args(["eval", "--gt"])
+            .arg(fixtures.join("groundtruth.txt"))
+            .arg("--est")
+            .arg(fixtures.join("estimated.txt"))
+            .args(extra)
+            .output()
+            .unwrap();
+        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+    };
+    let (code, err) = eval(&["--rpe-delta", "100000"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("no pair of matched poses is 100000 frames apart"), "{err}");
+    let (code, err) = eval(&["--max-diff", "NaN"]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("--max-diff"), "{err}");
+    let img = common::repo().join("tests/fixtures/slambook2_rgbd_pair/rgb/1.png");
+    for (flag, value) in [("--score", "2"), ("--score", "NaN"), ("--iou", "NaN"), ("--iou", "1.5")] {
+        let out = common::bin().args(["infer", flag, value]).arg(&img).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{flag} {value}: {err}");
+        assert!(err.contains(&format!("{flag} must be in 0..=1")), "{err}");
+    }
 }

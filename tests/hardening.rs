@@ -419,6 +419,14 @@ fn a_mask_of_another_size_than_the_image_is_an_error_naming_both() {
             "track",
             "orb: { op: orb_extract, in: { image: camera.rgb } }\n  track: { op: pnp_track, in: { keypoints: orb.keypoints, depth: camera.depth, camera_info: camera.camera_info, mask: small.gt_mask } }",
         ),
+        (
+            "map",
+            "map: { op: octomap, in: { depth: camera.depth, camera_info: camera.camera_info, pose: camera.gt_pose, mask: small.gt_mask } }",
+        ),
+        (
+            "map",
+            "map: { op: octomap, in: { depth: camera.depth, camera_info: camera.camera_info, pose: camera.gt_pose, image: small.rgb } }",
+        ),
     ] {
         let text = format!(
             "name: t\noracle: true\nnodes:\n  camera: {{ op: synth, params: {{ frames: 2 }} }}\n  small: {{ op: synth, params: {{ frames: 2, width: 320, height: 240 }} }}\n  {wiring}\n"

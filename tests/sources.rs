@@ -311,3 +311,46 @@ fn kitti_sequence_reads_stereo_calibration_and_poses() {
             .to_string();
     assert!(e.contains("07.txt") && e.contains("1 poses for 3 frames"), "{e}");
 }
+
+// --- issue 29: sizes that change, masks that are missing or of another size --------------
+
+/// Write a grey 8-bit (`depth == false`) or 16-bit depth PNG of `w`x`h` to `path`.
+fn png(path: &Path, w: u32, h: u32, depth: bool) {
+    std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+    if depth {
+        image::ImageBuffer::<image::Luma<u16>, Vec<u16>>::from_pixel(w, h, image::Luma([5000])).save(path).unwrap();
+    } else {
+        image::GrayImage::from_pixel(w, h, image::Luma([0])).save(path).unwrap();
+    }
+}
+
+#[test]
+fn a_frame_of_another_size_or_a_missing_or_mismatched_mask_is_an_error() {
+    let fr2 = ", intrinsics: fr2";
+    // The second frame (colour and depth alike) smaller than the first.
+    let d = broken_copy("size-change");
+    png(&d.path().join("rgb/2.png"), 320, 240, false);
+    png(&d.path().join("depth/2.png"), 320, 240, true);
+    let e = run_failure(d.path(), fr2);
+    assert!(e.contains("rgb/2.png: 320x240 but the sequence's first frame is 640x480"), "{e}");
+    // A `mask/` folder without the second frame's mask.
+    let d = broken_copy("mask-missing");
+    png(&d.path().join("mask/1.png"), 640, 480, false);
+    let e = run_failure(d.path(), fr2);
+    assert!(e.contains("mask/2.png: missing"), "{e}");
+    // A mask of another size than its image.
+    png(&d.path().join("mask/2.png"), 320, 240, false);
+    let e = run_failure(d.path(), fr2);
+    assert!(e.contains("mask/2.png: 320x240 but rgb/2.png is 640x480"), "{e}");
+    // An image folder whose second image is smaller than the first.
+    let d = common::TempDir::new("folder-size-change");
+    png(&d.path().join("a.png"), 64, 48, false);
+    png(&d.path().join("b.png"), 32, 24, false);
+    let yaml = format!(
+        "name: f\nnodes:\n  cam: {{ op: image_folder, params: {{ path: '{}', intrinsics: '50,50,32,24' }} }}\n",
+        d.path().display()
+    );
+    let (report, _) = run(&yaml).unwrap();
+    assert_eq!(report.status, RunStatus::Failed);
+    assert!(report.failures[0].error.contains("b.png: 32x24 but the first image is 64x48"), "{:?}", report.failures);
+}

@@ -67,6 +67,10 @@ pub fn eval(args: &EvalArgs) -> u8 {
         }
         RpeDelta::Frames(args.rpe_delta as usize)
     };
+    if !(args.max_diff.is_finite() && args.max_diff >= 0.0) {
+        eprintln!("error: --max-diff must be a number of seconds >= 0, got {}", args.max_diff);
+        return EXIT_BAD_INPUT;
+    }
     let delta = if args.rpe_unit == "m" { format!("{} m", args.rpe_delta) } else { format!("{}", args.rpe_delta) };
     let result = match evaluate_with(&gt, &est, args.max_diff, align, rpe) {
         Ok(r) => r,
@@ -75,11 +79,23 @@ pub fn eval(args: &EvalArgs) -> u8 {
             return EXIT_BAD_INPUT;
         }
     };
+    if result.rpe_translation.count == 0 {
+        // evo refuses too: an RPE over no pair is not 0.
+        let unit = if args.rpe_unit == "m" { "" } else { " frames" };
+        eprintln!(
+            "error: {} vs {}: no pair of matched poses is {delta}{unit} apart ({} matched): no RPE; use a smaller --rpe-delta",
+            args.est.display(),
+            args.gt.display(),
+            result.matched
+        );
+        return EXIT_BAD_INPUT;
+    }
     if let Some(path) = &args.plot {
         let title = format!("{} vs {}", args.est.display(), args.gt.display());
         if let Err(e) = crate::plot::evaluation(&result, &title, path) {
+            // The path is the user's input: a folder that does not exist, one not writable.
             eprintln!("error: {e}");
-            return crate::EXIT_FAILED;
+            return EXIT_BAD_INPUT;
         }
     }
     // Written with errors ignored: a closed pipe (`| head`) is not a failure of the evaluation.

@@ -40,6 +40,12 @@ pub fn infer(args: &InferArgs) -> u8 {
         Some(p) => onnx::load_with_bytes(p),
         None => onnx::parse(YOLOX_NANO).map(|m| (m, YOLOX_NANO.to_vec())),
     };
+    for (flag, v) in [("--score", args.score), ("--iou", args.iou)] {
+        if !(0.0..=1.0).contains(&v) {
+            eprintln!("error: {flag} must be in 0..=1, got {v}");
+            return EXIT_BAD_INPUT;
+        }
+    }
     let decoder = if args.decoder == "fastestdet" { Decoder::FastestDet } else { Decoder::Yolox };
     // Without an adapter (or for a model it cannot plan) `wgpu` warns and runs on the CPU.
     let ready = loaded.map_err(|e| e.to_string()).and_then(|(m, bytes)| {

@@ -143,6 +143,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         rate: c.rate_hz,
         factor: c.depth_factor,
         frame_id: "camera".into(),
+        size: None,
     })))
 }
 
@@ -153,12 +154,25 @@ struct Folder {
     rate: f64,
     factor: f64,
     frame_id: Arc<str>,
+    /// The first image's size: every later one must have it (the intrinsics are for it).
+    size: Option<(u32, u32)>,
 }
 
 impl Source for Folder {
     fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
         let Some(path) = self.images.get(seq as usize) else { return Ok(None) };
         let img = load_rgb(path).map_err(OpError::Input)?;
+        if let Some((w, h)) = self.size
+            && (w, h) != (img.width, img.height)
+        {
+            return Err(OpError::Input(format!(
+                "{}: {}x{} but the first image is {w}x{h}",
+                path.display(),
+                img.width,
+                img.height
+            )));
+        }
+        self.size = Some((img.width, img.height));
         let header = Header { seq, stamp: seq as f64 / self.rate, frame_id: self.frame_id.clone() };
         let k = &self.intrinsics;
         let info = CameraInfo {
@@ -172,7 +186,19 @@ impl Source for Folder {
         };
         let mut out = Outputs::new().with("camera_info", header.clone(), Body::CameraInfo(info));
         if let Some(d) = self.depth.as_ref().and_then(|d| d.get(seq as usize)) {
-            out.push("depth", header.clone(), Body::Depth(load_depth(d, self.factor).map_err(OpError::Input)?));
+            let depth = load_depth(d, self.factor).map_err(OpError::Input)?;
+            if (depth.width, depth.height) != (img.width, img.height) {
+                return Err(OpError::Input(format!(
+                    "{}: {}x{} but {} is {}x{}",
+                    d.display(),
+                    depth.width,
+                    depth.height,
+                    path.display(),
+                    img.width,
+                    img.height
+                )));
+            }
+            out.push("depth", header.clone(), Body::Depth(depth));
         }
         out.push("rgb", header, Body::Image(img));
         Ok(Some(out))

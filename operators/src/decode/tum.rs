@@ -166,6 +166,8 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         }
     }
     Ok(Instance::Source(Box::new(TumSource {
+        masks: dir.join("mask").is_dir(),
+        size: std::cell::Cell::new(None),
         dir,
         frames,
         gt,
@@ -179,6 +181,10 @@ fn build(params: &Params) -> Result<Instance, OpError> {
 
 struct TumSource {
     dir: PathBuf,
+    /// Whether the folder has `mask/` (written by `dynaflow synth`): then every frame has one.
+    masks: bool,
+    /// The first frame's size.
+    size: std::cell::Cell<Option<(u32, u32)>>,
     frames: Vec<Associated>,
     gt: Option<Vec<(f64, Isometry3<f64>)>>,
     intrinsics: Intrinsics,
@@ -192,6 +198,14 @@ impl TumSource {
     fn load(&self, seq: u64, f: &Associated) -> Result<Outputs, String> {
         let rgb = load_rgb(&self.dir.join(&f.rgb))?;
         let depth = load_depth(&self.dir.join(&f.depth), self.factor)?;
+        let rgb_size = (rgb.width, rgb.height);
+        // Every frame of a sequence has the first frame's size (the intrinsics are the first's).
+        if let Some((w, h)) = self.size.get()
+            && (w, h) != rgb_size
+        {
+            return Err(format!("{}: {}x{} but the sequence's first frame is {w}x{h}", f.rgb, rgb.width, rgb.height));
+        }
+        self.size.set(Some(rgb_size));
         if (rgb.width, rgb.height) != (depth.width, depth.height) {
             return Err(format!(
                 "{}: {}x{} but {} is {}x{}",
@@ -214,7 +228,13 @@ impl TumSource {
             .with("depth", header.clone(), Body::Depth(depth))
             .with("camera_info", header.clone(), Body::CameraInfo(info));
         let mask_path = self.dir.join("mask").join(Path::new(&f.rgb).file_name().unwrap_or_default());
-        if mask_path.is_file() {
+        if self.masks && !mask_path.is_file() {
+            return Err(format!(
+                "{}: missing (the folder has `mask/`, so every frame needs its mask)",
+                mask_path.display()
+            ));
+        }
+        if self.masks {
             let classes = load_rgb(&mask_path)?;
             let inst_path = self.dir.join("instance").join(Path::new(&f.rgb).file_name().unwrap_or_default());
             let instances = if inst_path.is_file() {
@@ -224,6 +244,17 @@ impl TumSource {
             };
             if classes.format != dynaflow_engine::msg::PixelFormat::Gray8 {
                 return Err(format!("{}: expected an 8-bit grey class mask", mask_path.display()));
+            }
+            if (classes.width, classes.height) != (rgb_size.0, rgb_size.1) {
+                return Err(format!(
+                    "{}: {}x{} but {} is {}x{}",
+                    mask_path.display(),
+                    classes.width,
+                    classes.height,
+                    f.rgb,
+                    rgb_size.0,
+                    rgb_size.1
+                ));
             }
             let mask = dynaflow_engine::msg::SegmentationMask {
                 width: classes.width,

@@ -179,12 +179,29 @@ impl Operator for Octomap {
         let Body::Pose(pose) = &inputs.require("pose")?.body else {
             return Err(OpError::Input("`pose` is not a pose".into()));
         };
+        // An image or mask of another size would be read at the wrong pixels: an error.
+        let same_size = |what: &str, (w, h): (u32, u32)| {
+            if (w, h) == (depth.width, depth.height) {
+                Ok(())
+            } else {
+                Err(OpError::Input(format!(
+                    "`{what}` is {w}x{h} but `depth` is {}x{}: it must cover the depth image pixel for pixel",
+                    depth.width, depth.height
+                )))
+            }
+        };
         let image = match inputs.get("image").map(|m| &m.body) {
-            Some(Body::Image(i)) if i.width == depth.width && i.height == depth.height => Some(i),
+            Some(Body::Image(i)) => {
+                same_size("image", (i.width, i.height))?;
+                Some(i)
+            }
             _ => None,
         };
         let mask = match inputs.get("mask").map(|m| &m.body) {
-            Some(Body::Mask(m)) if m.width == depth.width && m.height == depth.height => Some(m),
+            Some(Body::Mask(m)) => {
+                same_size("mask", (m.width, m.height))?;
+                Some(m)
+            }
             _ => None,
         };
         let dynamic: Vec<u16> = mask.map_or_else(Vec::new, |m| {
