@@ -297,3 +297,51 @@ fn eval_and_infer_refuse_what_evo_and_the_graph_refuse() {
         assert!(err.contains(&format!("{flag} must be in 0..=1")), "{err}");
     }
 }
+
+#[test]
+fn an_official_style_tum_file_with_repeated_stamps_reads_and_evaluates_as_evo() {
+    // issue 29, defect 0: ground truth as the TUM benchmark publishes it (comment lines,
+    // 100 Hz stamps with four decimals, some written twice with two different poses, a gap),
+    // an estimate with six decimals at 30 Hz; `dynaflow eval` reads both and equals evo.
+    let Some(python) = frontend::python_with("evo", "evo", "eval: TUM file with repeated stamps vs evo") else {
+        return;
+    };
+    let dir = common::TempDir::new("eval-dups");
+    let dense = ground_truth(1200, 100.0);
+    let mut text = String::from("# ground truth trajectory\n# file: 'rgbd_dataset_freiburg3_walking_xyz.bag'\n# timestamp tx ty tz qx qy qz qw\n");
+    let mut repeated = 0;
+    for (i, (t, p)) in dense.iter().enumerate() {
+        if (500..540).contains(&i) {
+            continue; // a motion-capture gap
+        }
+        let (v, q) = (p.translation.vector, p.rotation.coords);
+        let row = |t: f64, dx: f64| format!("{:.4} {:.4} {:.4} {:.4} {:.4} {:.4} {:.4} {:.4}\n", t, v.x + dx, v.y, v.z, q.x, q.y, q.z, q.w);
+        text.push_str(&row(1_311_868_164.0 + t, 0.0));
+        if i % 97 == 0 {
+            text.push_str(&row(1_311_868_164.0 + t, 0.002));
+            repeated += 1;
+        }
+    }
+    let gt_path = dir.path().join("groundtruth.txt");
+    std::fs::write(&gt_path, text).unwrap();
+    let est: Vec<(f64, Isometry3<f64>)> =
+        estimate(&dense, 1.0, 0.01, 3, 0..0).into_iter().map(|(t, p)| (1_311_868_164.0 + t, p)).collect();
+    let est_path = dir.path().join("estimate.txt");
+    write_tum(&est_path, &est);
+    let out = common::bin().args(["eval", "--json", "--gt"]).arg(&gt_path).arg("--est").arg(&est_path).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(0), "{stderr}");
+    assert!(stderr.contains(&format!("{repeated} poses repeat the previous pose's timestamp")), "{stderr}");
+    let ours: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let job = serde_json::json!([{ "gt": gt_path, "est": est_path, "max_diff": 0.01, "delta": 1, "unit": "frames" }]);
+    let job_path = dir.path().join("job.json");
+    std::fs::write(&job_path, job.to_string()).unwrap();
+    let o = Command::new(&python).arg(common::repo().join("tests/peers/evo_eval.py")).arg(&job_path).output().unwrap();
+    assert!(o.status.success(), "evo: {}", String::from_utf8_lossy(&o.stderr));
+    let evo: Vec<serde_json::Value> = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(ours["matched"], evo[0]["matched"]);
+    for (key, theirs) in [("ate", "ate_se3"), ("rpe_translation", "rpe_t_se3"), ("rpe_rotation_deg", "rpe_r_se3")] {
+        let (a, b) = (ours[key]["rmse"].as_f64().unwrap(), evo[0][theirs]["rmse"].as_f64().unwrap());
+        assert!((a - b).abs() <= 1e-6 * b.abs().max(1.0), "{key}: ours {a}, evo {b}");
+    }
+}

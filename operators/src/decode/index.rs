@@ -78,7 +78,8 @@ pub fn read_index(path: &Path) -> Result<Vec<(f64, String)>, IndexError> {
 /// A TUM trajectory file: `(stamp, world_from_cam)` in order.
 pub fn read_trajectory(path: &Path) -> Result<Vec<(f64, Isometry3<f64>)>, IndexError> {
     let mut out = Vec::new();
-    let mut prev = None;
+    let mut prev: Option<(usize, f64)> = None;
+    let mut duplicates = 0usize;
     for (line, fields) in lines(path)? {
         if fields.len() != 8 {
             return Err(bad(
@@ -88,7 +89,13 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<(f64, Isometry3<f64>)>, IndexE
             ));
         }
         let v: Vec<f64> = fields.iter().map(|f| stamp(path, line, f)).collect::<Result<_, _>>()?;
-        check_order(path, prev, line, v[0])?;
+        // Official TUM ground truth holds equal stamps (100 Hz motion capture written with four
+        // decimals): kept, as evo keeps them; only a stamp going back is an error.
+        if prev.is_some_and(|(_, t)| t == v[0]) {
+            duplicates += 1;
+        } else {
+            check_order(path, prev, line, v[0])?;
+        }
         prev = Some((line, v[0]));
         if v.iter().any(|x| !x.is_finite()) {
             return Err(bad(path, line, "a value is not a finite number"));
@@ -101,6 +108,12 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<(f64, Isometry3<f64>)>, IndexE
             v[0],
             Isometry3::from_parts(Translation3::new(v[1], v[2], v[3]), UnitQuaternion::from_quaternion(q)),
         ));
+    }
+    if duplicates > 0 {
+        tracing::warn!(
+            "{}: {duplicates} poses repeat the previous pose's timestamp; all are kept and associated as evo associates them (nearest stamp; of equal ones, the last)",
+            path.display()
+        );
     }
     Ok(out)
 }
@@ -154,26 +167,26 @@ pub fn associate(rgb: &[(f64, String)], depth: &[(f64, String)], max_difference:
 }
 
 /// The pose whose stamp is nearest `t`, if within `max_diff` seconds: the association evo
-/// (`sync.associate_trajectories`, `--t_max_diff`, default 0.01 s) and the TUM benchmark's
-/// `associate.py` make between an estimate and its ground truth. On equal distances the
-/// earlier pose wins, as numpy's `argmin` picks the first. `traj` is sorted by stamp.
+/// (`sync.matching_time_indices`, `--t_max_diff`, default 0.01 s) makes between an estimate
+/// and its ground truth, step for step: the insertion point after equal stamps (numpy's
+/// `searchsorted(side="right")`), then the later neighbour only if strictly nearer, so on
+/// equal distances the earlier pose wins and of equal stamps the last. `traj` is sorted.
 pub fn nearest_pose(traj: &[(f64, Isometry3<f64>)], t: f64, max_diff: f64) -> Option<Isometry3<f64>> {
-    let i = traj.partition_point(|(s, _)| *s < t);
-    let before = i.checked_sub(1).and_then(|k| traj.get(k));
-    let after = traj.get(i);
-    let best = match (before, after) {
-        (Some(a), Some(b)) => {
-            if (t - a.0).abs() <= (b.0 - t).abs() {
-                a
-            } else {
-                b
-            }
-        }
-        (Some(a), None) => a,
-        (None, Some(b)) => b,
-        (None, None) => return None,
-    };
-    ((best.0 - t).abs() <= max_diff).then_some(best.1)
+    let (first, last) = (traj.first()?, traj.last()?);
+    if t < first.0 - max_diff || t > last.0 + max_diff {
+        return None;
+    }
+    let j = traj.partition_point(|(s, _)| *s <= t).min(traj.len() - 1);
+    let upper = traj.get(j)?;
+    let lower = j.checked_sub(1).and_then(|k| traj.get(k));
+    let (diff_ub, diff_lb) = (upper.0 - t, lower.map_or(f64::INFINITY, |l| t - l.0));
+    if diff_ub <= max_diff && diff_ub < diff_lb {
+        Some(upper.1)
+    } else if diff_lb <= max_diff && diff_lb <= diff_ub {
+        lower.map(|l| l.1)
+    } else {
+        None
+    }
 }
 
 /// The pose at `t`: linear in translation, slerp in rotation, between the two bracketing
@@ -215,6 +228,10 @@ mod tests {
         assert_eq!(x(0.98, 0.01), None);
         assert_eq!(x(1.059, 0.01), Some(1.05));
         assert_eq!(nearest_pose(&[], 1.0, 1.0), None);
+        // Equal stamps: an exact match takes the last of them, as evo's association does.
+        let dup: Vec<(f64, Isometry3<f64>)> = vec![(1.0, at(1.0)), (1.0, at(2.0)), (1.01, at(3.0))];
+        assert_eq!(nearest_pose(&dup, 1.0, 0.01).map(|p| p.translation.vector.x), Some(2.0));
+        assert_eq!(nearest_pose(&dup, 1.004, 0.01).map(|p| p.translation.vector.x), Some(2.0));
     }
 
     fn list(ts: &[f64]) -> Vec<(f64, String)> {
