@@ -308,14 +308,18 @@ fn an_official_style_tum_file_with_repeated_stamps_reads_and_evaluates_as_evo() 
     };
     let dir = common::TempDir::new("eval-dups");
     let dense = ground_truth(1200, 100.0);
-    let mut text = String::from("# ground truth trajectory\n# file: 'rgbd_dataset_freiburg3_walking_xyz.bag'\n# timestamp tx ty tz qx qy qz qw\n");
+    let mut text = String::from(
+        "# ground truth trajectory\n# file: 'rgbd_dataset_freiburg3_walking_xyz.bag'\n# timestamp tx ty tz qx qy qz qw\n",
+    );
     let mut repeated = 0;
     for (i, (t, p)) in dense.iter().enumerate() {
         if (500..540).contains(&i) {
             continue; // a motion-capture gap
         }
         let (v, q) = (p.translation.vector, p.rotation.coords);
-        let row = |t: f64, dx: f64| format!("{:.4} {:.4} {:.4} {:.4} {:.4} {:.4} {:.4} {:.4}\n", t, v.x + dx, v.y, v.z, q.x, q.y, q.z, q.w);
+        let row = |t: f64, dx: f64| {
+            format!("{:.4} {:.4} {:.4} {:.4} {:.4} {:.4} {:.4} {:.4}\n", t, v.x + dx, v.y, v.z, q.x, q.y, q.z, q.w)
+        };
         text.push_str(&row(1_311_868_164.0 + t, 0.0));
         if i % 97 == 0 {
             text.push_str(&row(1_311_868_164.0 + t, 0.002));
@@ -328,7 +332,8 @@ fn an_official_style_tum_file_with_repeated_stamps_reads_and_evaluates_as_evo() 
         estimate(&dense, 1.0, 0.01, 3, 0..0).into_iter().map(|(t, p)| (1_311_868_164.0 + t, p)).collect();
     let est_path = dir.path().join("estimate.txt");
     write_tum(&est_path, &est);
-    let out = common::bin().args(["eval", "--json", "--gt"]).arg(&gt_path).arg("--est").arg(&est_path).output().unwrap();
+    let out =
+        common::bin().args(["eval", "--json", "--gt"]).arg(&gt_path).arg("--est").arg(&est_path).output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(0), "{stderr}");
     assert!(stderr.contains(&format!("{repeated} poses repeat the previous pose's timestamp")), "{stderr}");

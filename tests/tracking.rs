@@ -251,3 +251,45 @@ fn the_readme_example_output_is_what_the_default_graph_prints() {
         assert!(stdout.lines().any(|l| l == line), "README says\n{line}\nthe run printed\n{stdout}");
     }
 }
+
+#[test]
+fn a_tracker_that_never_initialises_says_so_and_fails_its_bench_row() {
+    // issue 29, defect 9: every depth beyond `max_depth` (0.1 m; the scene is 0.45 m or
+    // farther), so no frame can start a map.
+    let dir = common::TempDir::new("tracking-never");
+    let o = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--frames", "5", "--set", "track.max_depth=0.1", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        stdout.contains("`track` has no trajectory: the tracker never initialised in 5 frames: at most 0 keypoints"),
+        "{stdout}"
+    );
+    let trajectory = std::fs::read_to_string(dir.path().join("orb_baseline.track.trajectory.txt")).unwrap();
+    assert_eq!(trajectory.lines().filter(|l| !l.starts_with('#')).count(), 0, "{trajectory}");
+    let bench = dir.path().join("bench");
+    let o = common::bin()
+        .args([
+            "bench",
+            "--variants",
+            "base",
+            "--frames",
+            "5",
+            "--no-progress",
+            "--set",
+            "track.max_depth=0.1",
+            "--out",
+        ])
+        .arg(&bench)
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stdout));
+    let csv = std::fs::read_to_string(bench.join("bench.csv")).unwrap();
+    let row = csv.lines().nth(1).unwrap();
+    assert!(row.contains(",failed,") && row.contains("never initialised"), "{row}");
+}

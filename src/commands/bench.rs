@@ -203,6 +203,12 @@ fn run_one(exe: &Path, job: &Job, args: &BenchArgs) -> Row {
             {
                 row.rpe = Some([t, r]);
             }
+            if let Some(why) = n["report"]["not_initialised_because"].as_str()
+                && row.ok
+            {
+                row.ok = false;
+                row.error = format!("`{name}`: {why}");
+            }
             let busy = n["busy_s"].as_f64().unwrap_or(0.0);
             row.nodes.push((name, 1e3 * busy / row.frames.max(1) as f64));
         }

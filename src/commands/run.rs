@@ -154,6 +154,9 @@ pub fn run(args: &RunArgs) -> u8 {
     let mut trackers = serde_json::Map::new();
     let mut reference: Option<(String, f64)> = None;
     for n in &report.nodes {
+        if let Some(why) = n.report.as_ref().and_then(|r| r.get("not_initialised_because")).and_then(|w| w.as_str()) {
+            say!("`{}` has no trajectory: {why}", n.node);
+        }
         let Some(ate) = n.report.as_ref().and_then(|r| r.get("ate")) else { continue };
         let f = |k: &str| ate.get(k).and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
         let versus = match &reference {

@@ -125,6 +125,7 @@ pub const PNP_TRACK: OpSpec = OpSpec {
             ground_truth: Vec::new(),
             counts: [0; 5],
             last_map: None,
+            best_usable: 0,
         })))
     },
 };
@@ -138,6 +139,9 @@ struct PnpTrack {
     counts: [u64; 5],
     /// The map batch last applied (a `latest` join may repeat it).
     last_map: Option<Arc<Message>>,
+    /// The most keypoints of one frame that a map could start from (static, with a depth up
+    /// to `max_depth`): what the end-of-run message says when no map ever started.
+    best_usable: usize,
 }
 
 /// Nearest-neighbour label transfer: each point whose nearest labelled track lies within
@@ -270,6 +274,9 @@ impl Operator for PnpTrack {
                 }
             })
             .collect();
+        let max_depth = self.config.max_depth;
+        let usable = features.iter().filter(|f| !f.dynamic && f.depth.is_some_and(|z| z <= max_depth)).count();
+        self.best_usable = self.best_usable.max(usable);
         let stamp = msg.header.stamp;
         let r = tracker.track(stamp, &features);
         self.counts[r.state.code() as usize] += 1;
@@ -305,6 +312,18 @@ impl Operator for PnpTrack {
                         "relocalised": relocalised, "lost": lost },
             "maps": self.tracker.as_ref().map_or(0, Tracker::map_id),
         });
+        if new_map == 0 {
+            // No map ever started: no pose, no ATE. Said here, in the summary and by `run`.
+            let why = format!(
+                "the tracker never initialised in {not_initialised} frames: at most {} keypoints of a frame had a depth up to max_depth {} m and no mask or dynamic label; a map needs {}",
+                self.best_usable,
+                self.config.max_depth,
+                TrackerConfig::rgbd(1.0).min_init_points
+            );
+            tracing::warn!("`{}`: {why}", ctx.node);
+            report["initialised"] = serde_json::json!(false);
+            report["not_initialised_because"] = serde_json::json!(why);
+        }
         if !self.ground_truth.is_empty() && !self.trajectory.is_empty() {
             // evo's default tolerance (10 ms); SE(3) alignment as the RGB-D papers report it.
             match evaluate(&self.ground_truth, &self.trajectory, 0.01, Align::Se3, 1) {
@@ -332,7 +351,9 @@ impl PnpTrack {
     fn write_trajectory(&self, ctx: &Context) -> Result<(), OpError> {
         let Some(dir) = &ctx.out_dir else { return Ok(()) };
         for (what, poses) in [("trajectory", &self.trajectory), ("groundtruth", &self.ground_truth)] {
-            if poses.is_empty() {
+            // The estimate's file is written even empty (a tracker that never initialised),
+            // so a script finds it; the ground truth only when there is some.
+            if poses.is_empty() && what == "groundtruth" {
                 continue;
             }
             let path = dir.join(format!("{}.{}.{what}.txt", ctx.stem, ctx.node));
