@@ -310,6 +310,42 @@ fn kitti_sequence_reads_stereo_calibration_and_poses() {
             .unwrap_err()
             .to_string();
     assert!(e.contains("07.txt") && e.contains("1 poses for 3 frames"), "{e}");
+
+    // issue 29, defect 5: each broken file named with its line.
+    let graph = format!("name: k\nnodes:\n  cam: {{ op: kitti_odometry, params: {{ path: '{}' }} }}\n", seq.display());
+    let build_error = |what: &str| run(&graph).map(|_| ()).expect_err(what).to_string();
+    // A pose whose 3x3 part is no rotation (a scaled matrix).
+    std::fs::write(
+        dir.path().join("dataset/poses/07.txt"),
+        "1 0 0 0 0 1 0 0 0 0 1 0\n2 0 0 0 0 1 0 0 0 0 1 0\n1 0 0 0 0 1 0 0 0 0 1 0\n",
+    )
+    .unwrap();
+    let e = build_error("scaled pose");
+    assert!(e.contains("07.txt:2:") && e.contains("not a rotation"), "{e}");
+    std::fs::remove_file(dir.path().join("dataset/poses/07.txt")).unwrap();
+    // times.txt: `nan`, `inf`, empty.
+    for (text, line) in [("0\nnan\n0.2\n", 2), ("0\n0.1\ninf\n", 3)] {
+        std::fs::write(seq.join("times.txt"), text).unwrap();
+        let e = build_error(text);
+        assert!(e.contains(&format!("times.txt:{line}:")) && e.contains("is not a time"), "{text}: {e}");
+    }
+    std::fs::write(seq.join("times.txt"), "\n").unwrap();
+    let e = build_error("empty times");
+    assert!(e.contains("times.txt: no frame"), "{e}");
+    std::fs::write(seq.join("times.txt"), "0.000000e+00\n1.036300e-01\n2.072600e-01\n").unwrap();
+    // A zero or negative focal length.
+    let calib = std::fs::read_to_string(seq.join("calib.txt")).unwrap();
+    for bad in ["0 0 607.1928", "-718.856 0 607.1928"] {
+        std::fs::write(seq.join("calib.txt"), calib.replacen(&format!("{fx} 0 607.1928"), bad, 1)).unwrap();
+        let e = build_error(bad);
+        assert!(e.contains("calib.txt:1:") && e.contains("P0: fx") && e.contains("must be positive"), "{bad}: {e}");
+    }
+    std::fs::write(seq.join("calib.txt"), &calib).unwrap();
+    // Left and right images of different sizes.
+    png(&seq.join("image_1/000001.png"), 32, 24, false);
+    let (report, _) = run(&graph).unwrap();
+    assert_eq!(report.status, RunStatus::Failed);
+    assert!(report.failures[0].error.contains("image_1/000001.png: 32x24 but"), "{:?}", report.failures);
 }
 
 // --- issue 29: sizes that change, masks that are missing or of another size --------------

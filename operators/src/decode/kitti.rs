@@ -84,6 +84,14 @@ fn numbers(path: &Path, line: usize, text: &str) -> Result<Vec<f64>, OpError> {
         .collect()
 }
 
+/// The line of `calib.txt` that defines `key` (1-based; 0 when absent).
+fn calib_line(path: &Path, key: &str) -> usize {
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|t| t.lines().position(|l| l.split_once(':').is_some_and(|(k, _)| k.trim() == key)))
+        .map_or(0, |i| i + 1)
+}
+
 /// `P0`..`P3` from `calib.txt`.
 fn read_calib(path: &Path) -> Result<[[f64; 12]; 4], OpError> {
     let text = std::fs::read_to_string(path).map_err(|source| OpError::Io { path: path.to_path_buf(), source })?;
@@ -109,6 +117,16 @@ fn read_poses(path: &Path) -> Result<Vec<Isometry3<f64>>, OpError> {
             return Err(input(path, i + 1, format!("expected 12 numbers (a 3×4 matrix), found {}", v.len())));
         };
         let r = Matrix3::new(r00, r01, r02, r10, r11, r12, r20, r21, r22);
+        // A pose's 3x3 part must be a rotation (orthonormal, determinant +1), to the
+        // precision the benchmark writes (about 6 significant digits).
+        let off = (r.transpose() * r - Matrix3::identity()).abs().max();
+        if off > 1e-3 || (r.determinant() - 1.0).abs() > 1e-3 {
+            return Err(input(
+                path,
+                i + 1,
+                format!("the 3x3 part is not a rotation (|R^T R - I| {off:.2e}, det {:.6})", r.determinant()),
+            ));
+        }
         let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_eps(
             &r,
             f64::EPSILON,
@@ -140,6 +158,15 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         return Err(OpError::Input(format!("{}: needs P{li} and P{ri}", calib_path.display())));
     }
     let fx = pl[0];
+    // Focal lengths and principal points must be positive, as the TUM reader requires.
+    for (name, p) in [(format!("P{li}"), &pl), (format!("P{ri}"), &pr)] {
+        let line = calib_line(&calib_path, &name);
+        for (what, v) in [("fx", p[0]), ("fy", p[5]), ("cx", p[2]), ("cy", p[6])] {
+            if v.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                return Err(input(&calib_path, line, format!("{name}: {what} = {v} must be positive")));
+            }
+        }
+    }
     // P = K [I | t] with K's fx on the diagonal: t_x = P[3] / fx relative to camera 0.
     let baseline = (pl[3] - pr[3]) / fx;
     let left_offset = Vector3::new(pl[3] / fx, pl[7] / fx, pl[11]);
@@ -147,12 +174,19 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         std::fs::read_to_string(&times_path).map_err(|source| OpError::Io { path: times_path.clone(), source })?;
     let mut times = Vec::new();
     for (i, line) in times_text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty()) {
-        let t: f64 =
-            line.trim().parse().map_err(|_| input(&times_path, i + 1, format!("`{}` is not a time", line.trim())))?;
+        let t: f64 = line
+            .trim()
+            .parse()
+            .ok()
+            .filter(|t: &f64| t.is_finite())
+            .ok_or_else(|| input(&times_path, i + 1, format!("`{}` is not a time", line.trim())))?;
         if times.last().is_some_and(|p| t <= *p) {
             return Err(input(&times_path, i + 1, "times must increase"));
         }
         times.push(t);
+    }
+    if times.is_empty() {
+        return Err(OpError::Input(format!("{}: no frame (the file has no time)", times_path.display())));
     }
     if c.frames > 0 {
         times.truncate(c.frames as usize);
@@ -215,8 +249,21 @@ impl Source for Kitti {
     fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
         let Some(&stamp) = self.times.get(seq as usize) else { return Ok(None) };
         let name = format!("{seq:06}.png");
-        let left = load_rgb(&self.dir.join(&self.dirs.0).join(&name)).map_err(OpError::Input)?;
-        let right = load_rgb(&self.dir.join(&self.dirs.1).join(&name)).map_err(OpError::Input)?;
+        let (left_path, right_path) =
+            (self.dir.join(&self.dirs.0).join(&name), self.dir.join(&self.dirs.1).join(&name));
+        let left = load_rgb(&left_path).map_err(OpError::Input)?;
+        let right = load_rgb(&right_path).map_err(OpError::Input)?;
+        if (left.width, left.height) != (right.width, right.height) {
+            return Err(OpError::Input(format!(
+                "{}: {}x{} but {} is {}x{}",
+                right_path.display(),
+                right.width,
+                right.height,
+                left_path.display(),
+                left.width,
+                left.height
+            )));
+        }
         let header = Header { seq, stamp, frame_id: self.frame_id.clone() };
         let info = CameraInfo { width: left.width, height: left.height, ..self.info.clone() };
         let mut out = Outputs::new()
