@@ -457,3 +457,33 @@ fn box_to_mask_gives_each_listed_class_its_own_id() {
         assert!(mask.classes.iter().all(|&c| c == 0 || c == 2), "a pixel of a class no box had");
     }
 }
+
+#[test]
+fn a_misspelt_class_name_stops_the_run_before_it_starts() {
+    // issue 29, defect 7: `persn` would switch semantic culling off without a word.
+    for (node, wiring) in [
+        (
+            "people",
+            "people: { op: box_to_mask, in: { detections: boxes.detections, depth: camera.depth }, params: { classes: persn } }",
+        ),
+        (
+            "cull",
+            "flow: { op: lk_flow, in: { image: camera.rgb } }\n  cull: { op: cull, in: { tracks: flow.tracks, mask: camera.gt_mask }, params: { mode: mask, classes: persn } }",
+        ),
+        (
+            "map",
+            "map: { op: octomap, in: { depth: camera.depth, camera_info: camera.camera_info, pose: camera.gt_pose }, params: { dynamic_classes: 'person,persn' } }",
+        ),
+    ] {
+        let text = format!(
+            "name: t\noracle: true\nnodes:\n  camera: {{ op: synth, params: {{ frames: 2 }} }}\n  boxes: {{ op: oracle_boxes, in: {{ mask: camera.gt_mask }} }}\n  {wiring}\n"
+        );
+        let g = common::graph(&text);
+        let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+        let err = rt.block_on(runtime::run(&g, RunOptions::default(), Vec::new())).unwrap_err().to_string();
+        assert!(
+            err.contains(node) && err.contains("`persn`") && err.contains("did you mean `person`?"),
+            "{node}: {err}"
+        );
+    }
+}

@@ -326,7 +326,7 @@ pub const CULL: OpSpec = OpSpec {
             values.retain(|(n, _)| n != name.trim());
             values.push((name.trim().to_owned(), v));
         }
-        let classes = c.classes.split(',').map(|s| s.trim().to_owned()).filter(|s| !s.is_empty()).collect();
+        let classes = crate::inference::known_classes("classes", &c.classes)?;
         Ok(Instance::Transform(Box::new(CullOp {
             config: c,
             values,

@@ -54,7 +54,11 @@ pub const BOX_TO_MASK: OpSpec = OpSpec {
     ],
     cpu_heavy: false,
     ground_truth_outputs: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(BoxToMask { config: p.parse()? }))),
+    build: |p: &Params| {
+        let config: Config = p.parse()?;
+        super::known_classes("classes", &config.classes)?;
+        Ok(Instance::Transform(Box::new(BoxToMask { config })))
+    },
 };
 
 struct BoxToMask {

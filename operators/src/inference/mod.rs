@@ -4,11 +4,13 @@
 //! segmentation frames: which frames go to inference).
 
 mod box_mask;
+mod classes;
 mod detect;
 mod gate;
 mod runner;
 
 pub use box_mask::BOX_TO_MASK;
+pub use classes::known_classes;
 pub use detect::{COCO_NAMES, DETECT, YOLOX_NANO};
 pub use gate::KEYFRAME_GATE;
 pub use runner::{BACKENDS, Runner};

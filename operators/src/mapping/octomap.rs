@@ -118,6 +118,7 @@ pub const OCTOMAP: OpSpec = OpSpec {
     ground_truth_outputs: None,
     build: |p: &Params| {
         let c: Config = p.parse()?;
+        crate::inference::known_classes("dynamic_classes", &c.dynamic_classes)?;
         let params = TreeParams {
             resolution: c.resolution,
             prob_hit: c.prob_hit,
