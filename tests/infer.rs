@@ -452,3 +452,29 @@ fn yolox_finds_the_photo_textured_synthetic_people() {
     assert!(visible >= 20, "{visible}");
     assert!(recall >= 0.5, "{recall}");
 }
+
+#[test]
+fn a_detector_of_the_other_family_is_refused_at_load() {
+    // issue 29, defect 1: FastestDet read as YOLOX gave boxes of negative size and scores of
+    // 229; YOLOX-nano read as FastestDet found nothing. Both are errors naming the model, the
+    // decoder and the shapes, on the command line and in a graph.
+    let img = frontend::ch7()[0].clone();
+    for (model, decoder, shapes) in [
+        (fastestdet(), "yolox", "1 x 85 x 22 x 22 but the Yolox decoder reads 1 x 2541 x (5 + classes)"),
+        (yolox(), "fastestdet", "1 x 3549 x 85 but the FastestDet decoder reads 1 x (5 + classes) x 26 x 26"),
+    ] {
+        let out =
+            common::bin().args(["infer", "--decoder", decoder, "--model"]).arg(&model).arg(&img).output().unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{err}");
+        assert!(err.contains(&model.display().to_string()) && err.contains(shapes), "{err}");
+        let text = format!(
+            "name: t\nnodes:\n  camera: {{ op: synth, params: {{ frames: 1 }} }}\n  det: {{ op: detect, in: {{ image: camera.rgb }}, params: {{ model: '{}', decoder: {decoder} }} }}\n",
+            model.display()
+        );
+        let g = common::graph(&text);
+        let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+        let e = rt.block_on(dynaflow_engine::runtime::run(&g, Default::default(), Vec::new())).unwrap_err().to_string();
+        assert!(e.contains("det") && e.contains(shapes), "{e}");
+    }
+}

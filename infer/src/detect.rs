@@ -163,6 +163,44 @@ pub enum Decoder {
     FastestDet,
 }
 
+/// The decoder's contract on the model's first output, checked where the model declares its
+/// dimensions (a symbolic one passes): YOLOX `1 x N x (5 + classes)` with N the cells of its
+/// three strides (8, 16, 32) for the input side; FastestDet `1 x (5 + classes) x G x G` with
+/// G a sixteenth of the side. A model of the other family decodes to garbage (negative boxes,
+/// scores far outside 0..1), so it is refused here, naming the decoder and the shapes.
+fn check_output(model: &crate::onnx::Model, decoder: Decoder, side: usize) -> Result<(), String> {
+    let out = model.outputs.first().ok_or("the model has no output")?;
+    let dims = &out.shape;
+    let fits = |want: &[Option<usize>]| {
+        dims.len() == want.len()
+            && dims.iter().zip(want).all(|(d, w)| match (d, w) {
+                (Some(d), Some(w)) => usize::try_from(*d).is_ok_and(|d| d == *w),
+                (Some(d), None) => *d > 5,
+                _ => true,
+            })
+    };
+    let (ok, contract) = match decoder {
+        Decoder::Yolox => {
+            let cells: usize = [8, 16, 32].iter().map(|s| (side / s) * (side / s)).sum();
+            (fits(&[Some(1), Some(cells), None]), format!("1 x {cells} x (5 + classes)"))
+        }
+        Decoder::FastestDet => {
+            let g = side / 16;
+            (fits(&[Some(1), None, Some(g), Some(g)]), format!("1 x (5 + classes) x {g} x {g}"))
+        }
+    };
+    if ok {
+        Ok(())
+    } else {
+        let shape: Vec<String> = dims.iter().map(|d| d.map_or_else(|| "?".to_owned(), |d| d.to_string())).collect();
+        Err(format!(
+            "the model's output `{}` is {} but the {decoder:?} decoder reads {contract} for a {side}x{side} input: is this a model of the other family? (choose the decoder with `decoder:` / `--decoder`)",
+            out.name,
+            shape.join(" x ")
+        ))
+    }
+}
+
 /// A loaded detector: the model, its square input side, the decoding.
 #[derive(Clone, Debug)]
 pub struct Detector {
@@ -187,6 +225,7 @@ impl Detector {
                 ));
             }
         };
+        check_output(&model, decoder, side)?;
         Ok(Self { input_name: input.name.clone(), model, side, decoder })
     }
 

@@ -76,7 +76,12 @@ pub const DETECT: OpSpec = OpSpec {
             onnx::load_with_bytes(&p.resolve_path(&c.model)).map_err(|e| OpError::Input(e.to_string()))?
         };
         let decoder = if c.decoder == "fastestdet" { Decoder::FastestDet } else { Decoder::Yolox };
-        let detector = Detector::new(model, decoder).map_err(OpError::Input)?;
+        let which = if c.model.is_empty() {
+            "the embedded YOLOX-nano".to_owned()
+        } else {
+            p.resolve_path(&c.model).display().to_string()
+        };
+        let detector = Detector::new(model, decoder).map_err(|e| OpError::Input(format!("{which}: {e}")))?;
         let names: Vec<Arc<str>> = COCO_NAMES.lines().map(Arc::from).collect();
         let (runner, backend) = Runner::new(&bytes, detector.model(), &c.backend).map_err(OpError::Input)?;
         Ok(Instance::Transform(Box::new(Detect { config: c, detector, names, runner, backend })))
