@@ -385,6 +385,7 @@ fn constants_table_lists_every_default() {
         "detect.model",
         "detect.decoder",
         "detect.backend",
+        "detect.allow_software",
         "orb_extract.distribution",
         "octomap.dynamic_classes",
         "octomap.color",

@@ -367,19 +367,27 @@ fn wgpu_backend_gives_the_cpu_detections_and_falls_back_with_a_warning() {
     assert!(same(&reference, &cpu), "{reference:?} vs {cpu:?}");
     // Where an adapter exists, `--backend wgpu` must run on it: a fallback to the CPU would
     // compare the CPU with itself.
+    let mut software = false;
     let adapter = common::peers::peer_runs("gpu", "infer: `--backend wgpu` detections vs the CPU's", || {
-        dynaflow_gpu::Gpu::new().map(|_| ()).map_err(|e| e.to_string())
+        software = dynaflow_gpu::Gpu::new().map_err(|e| e.to_string())?.software;
+        Ok(())
     });
     if adapter {
+        // A software adapter (CI's lavapipe) counts as no GPU unless allowed.
+        if software {
+            let (_, err) = classes("wgpu", &[]);
+            assert!(err.contains("is a software renderer on the CPU") && err.contains("running on the CPU"), "{err}");
+        }
         // YOLOX-nano: every op has a kernel; the same detections and scores (to 1e-3) as the CPU.
-        let (gpu, err) = classes("wgpu", &[]);
+        let (gpu, err) = classes("wgpu", &["--allow-software"]);
         assert!(!err.contains("running on the CPU"), "an adapter exists, yet wgpu fell back: {err}");
         assert!(same(&gpu, &cpu), "{gpu:?} vs {cpu:?}: {err}");
         // FastestDet too (its Pad, AveragePool, channel-split Gather and Softmax included).
         let model = fastestdet();
         let fd = ["--decoder", "fastestdet", "--model", model.to_str().unwrap()];
         let (cpu, _) = classes("cpu", &fd);
-        let (gpu, err) = classes("wgpu", &fd);
+        let fd_gpu = ["--decoder", "fastestdet", "--allow-software", "--model", model.to_str().unwrap()];
+        let (gpu, err) = classes("wgpu", &fd_gpu);
         assert!(!err.contains("running on the CPU"), "an adapter exists, yet wgpu fell back: {err}");
         assert!(same(&gpu, &cpu), "{gpu:?} vs {cpu:?}: {err}");
     }
@@ -402,7 +410,7 @@ fn an_unsupported_op_is_named_on_every_backend() {
     let img = frontend::ch7()[0].clone();
     for (backend, says) in [("reference", "unsupported ONNX op `Softmay`"), ("cpu", "Softmay"), ("wgpu", "Softmay")] {
         let out = common::bin()
-            .args(["infer", "--decoder", "fastestdet", "--backend", backend, "--model"])
+            .args(["infer", "--decoder", "fastestdet", "--allow-software", "--backend", backend, "--model"])
             .arg(&model)
             .arg(&img)
             .output()

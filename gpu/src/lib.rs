@@ -51,6 +51,8 @@ pub struct Gpu {
     pub queue: wgpu::Queue,
     /// Adapter name and backend, for reports.
     pub adapter: String,
+    /// The adapter is a software renderer on the CPU (Mesa's llvmpipe/lavapipe, WARP).
+    pub software: bool,
 }
 
 impl Gpu {
@@ -70,6 +72,7 @@ impl Gpu {
         .map_err(|_| GpuError::NoAdapter)?;
         let info = adapter.get_info();
         let name = format!("{} ({:?})", info.name, info.backend);
+        let software = info.device_type == wgpu::DeviceType::Cpu;
         let limits = adapter.limits();
         let (device, queue) = futures::executor::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
             label: Some("dynaflow"),
@@ -83,7 +86,7 @@ impl Gpu {
             ..wgpu::DeviceDescriptor::default()
         }))
         .map_err(|e| GpuError::Device { adapter: name.clone(), message: e.to_string() })?;
-        Ok(Self { device, queue, adapter: name })
+        Ok(Self { device, queue, adapter: name, software })
     }
 
     /// A storage buffer holding `data`.

@@ -32,6 +32,10 @@ pub struct InferArgs {
     /// NMS overlap threshold.
     #[arg(long, default_value_t = 0.45)]
     pub iou: f32,
+    /// With `--backend wgpu`, use a software adapter (Mesa's lavapipe, WARP) too; without it
+    /// such an adapter counts as no GPU and the model runs on the CPU (rten).
+    #[arg(long)]
+    pub allow_software: bool,
 }
 
 /// Exit 0 with one JSON object per image, 2 on a bad model or image.
@@ -49,7 +53,7 @@ pub fn infer(args: &InferArgs) -> u8 {
     let decoder = if args.decoder == "fastestdet" { Decoder::FastestDet } else { Decoder::Yolox };
     // Without an adapter (or for a model it cannot plan) `wgpu` warns and runs on the CPU.
     let ready = loaded.map_err(|e| e.to_string()).and_then(|(m, bytes)| {
-        let (runner, _) = Runner::new(&bytes, &m, &args.backend)?;
+        let (runner, _) = Runner::new(&bytes, &m, &args.backend, args.allow_software)?;
         let which =
             args.model.as_ref().map_or_else(|| "the embedded YOLOX-nano".to_owned(), |p| p.display().to_string());
         Ok((Detector::new(m, decoder).map_err(|e| format!("{which}: {e}"))?, runner))

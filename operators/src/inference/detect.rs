@@ -24,6 +24,7 @@ struct Config {
     backend: String,
     score_threshold: f64,
     nms_iou: f64,
+    allow_software: bool,
 }
 
 pub const DETECT: OpSpec = OpSpec {
@@ -64,6 +65,12 @@ pub const DETECT: OpSpec = OpSpec {
             default: Default::Float(0.45),
             doc: "overlap above which a lower-scored box of the same class is suppressed (YOLOX: 0.45)",
         },
+        ParamSpec {
+            name: "allow_software",
+            ty: ParamType::Bool,
+            default: Default::Bool(false),
+            doc: "`wgpu`: use a software adapter (Mesa's lavapipe, WARP) too; otherwise such an adapter counts as no GPU and the model runs on the CPU (rten, about 40x faster than lavapipe on the same cores)",
+        },
     ],
     cpu_heavy: true,
     ground_truth_outputs: None,
@@ -83,7 +90,8 @@ pub const DETECT: OpSpec = OpSpec {
         };
         let detector = Detector::new(model, decoder).map_err(|e| OpError::Input(format!("{which}: {e}")))?;
         let names: Vec<Arc<str>> = COCO_NAMES.lines().map(Arc::from).collect();
-        let (runner, backend) = Runner::new(&bytes, detector.model(), &c.backend).map_err(OpError::Input)?;
+        let (runner, backend) =
+            Runner::new(&bytes, detector.model(), &c.backend, c.allow_software).map_err(OpError::Input)?;
         Ok(Instance::Transform(Box::new(Detect { config: c, detector, names, runner, backend })))
     },
 };

@@ -32,8 +32,10 @@ impl std::fmt::Debug for Runner {
 
 impl Runner {
     /// Load `model` (parsed from `bytes`) on `backend`; the runner and a description for
-    /// reports (which backend really runs, and why a fallback happened).
-    pub fn new(bytes: &[u8], model: &Model, backend: &str) -> Result<(Self, String), String> {
+    /// reports (which backend really runs, and why a fallback happened). A software adapter
+    /// (a renderer on the CPU, 40x slower than rten on the same cores) counts as no GPU unless
+    /// `allow_software` (the tests' lavapipe runs).
+    pub fn new(bytes: &[u8], model: &Model, backend: &str, allow_software: bool) -> Result<(Self, String), String> {
         match backend {
             "reference" => {
                 cpu::check_ops(model).map_err(|e| e.to_string())?;
@@ -42,11 +44,18 @@ impl Runner {
             "wgpu" => {
                 // Planning names an op without a kernel (with its node) and any shape it
                 // cannot take; without an adapter there is nothing to plan on.
-                let why = match Gpu::new().and_then(|gpu| GpuModel::new(gpu, model)) {
-                    Ok(m) => {
-                        let name = format!("wgpu: {}", m.adapter());
-                        return Ok((Runner::Gpu(Box::new(m)), name));
-                    }
+                let why = match Gpu::new() {
+                    Ok(gpu) if gpu.software && !allow_software => format!(
+                        "the only adapter, `{}`, is a software renderer on the CPU (allow it with `allow_software: true` / `--allow-software`)",
+                        gpu.adapter
+                    ),
+                    Ok(gpu) => match GpuModel::new(gpu, model) {
+                        Ok(m) => {
+                            let name = format!("wgpu: {}", m.adapter());
+                            return Ok((Runner::Gpu(Box::new(m)), name));
+                        }
+                        Err(e) => e.to_string(),
+                    },
                     Err(e) => e.to_string(),
                 };
                 tracing::warn!("backend `wgpu` unavailable ({why}); running on the CPU");
