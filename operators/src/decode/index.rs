@@ -6,9 +6,9 @@ use std::path::{Path, PathBuf};
 
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-/// A problem in an index file.
+/// A problem in an index file (`file:line: message`, or `file: message` for the whole file).
 #[derive(Debug, thiserror::Error)]
-#[error("{}:{line}: {message}", path.display())]
+#[error("{}{}: {message}", path.display(), if *line == 0 { String::new() } else { format!(":{line}") })]
 pub struct IndexError {
     /// The file.
     pub path: PathBuf,
@@ -26,6 +26,8 @@ fn bad(path: &Path, line: usize, message: impl Into<String>) -> IndexError {
 fn lines(path: &Path) -> Result<Vec<(usize, Vec<String>)>, IndexError> {
     let text = std::fs::read(path).map_err(|e| bad(path, 0, e.to_string()))?;
     let text = String::from_utf8(text).map_err(|_| bad(path, 0, "not a text file (invalid UTF-8)"))?;
+    // A UTF-8 byte-order mark (some editors write one) is not part of the first line.
+    let text = text.strip_prefix('\u{feff}').unwrap_or(&text);
     Ok(text
         .lines()
         .enumerate()
@@ -37,20 +39,33 @@ fn lines(path: &Path) -> Result<Vec<(usize, Vec<String>)>, IndexError> {
 }
 
 fn stamp(path: &Path, line: usize, field: &str) -> Result<f64, IndexError> {
+    number(path, line, field, "timestamp")
+}
+
+/// `field` as a finite number; the error names what it should have been (`what`).
+fn number(path: &Path, line: usize, field: &str, what: &str) -> Result<f64, IndexError> {
     field
         .parse::<f64>()
         .ok()
         .filter(|t| t.is_finite())
-        .ok_or_else(|| bad(path, line, format!("`{field}` is not a timestamp")))
+        .ok_or_else(|| bad(path, line, format!("`{field}` is not a finite number (the {what})")))
+}
+
+/// A timestamp for messages: six decimals, or scientific notation where that would print
+/// hundreds of digits.
+fn show(t: f64) -> String {
+    if t.abs() < 1e12 { format!("{t:.6}") } else { format!("{t:e}") }
 }
 
 fn check_order(path: &Path, prev: Option<(usize, f64)>, line: usize, t: f64) -> Result<(), IndexError> {
     match prev {
-        Some((pl, pt)) if t == pt => Err(bad(path, line, format!("duplicate timestamp {t:.6} (also on line {pl})"))),
+        Some((pl, pt)) if t == pt => {
+            Err(bad(path, line, format!("duplicate timestamp {} (also on line {pl})", show(t))))
+        }
         Some((pl, pt)) if t < pt => Err(bad(
             path,
             line,
-            format!("timestamp {t:.6} is earlier than {pt:.6} on line {pl}; timestamps must increase"),
+            format!("timestamp {} is earlier than {} on line {pl}; timestamps must increase", show(t), show(pt)),
         )),
         _ => Ok(()),
     }
@@ -88,7 +103,9 @@ pub fn read_trajectory(path: &Path) -> Result<Vec<(f64, Isometry3<f64>)>, IndexE
                 format!("expected `timestamp tx ty tz qx qy qz qw`, found {} fields", fields.len()),
             ));
         }
-        let v: Vec<f64> = fields.iter().map(|f| stamp(path, line, f)).collect::<Result<_, _>>()?;
+        const NAMES: [&str; 8] = ["timestamp", "tx", "ty", "tz", "qx", "qy", "qz", "qw"];
+        let v: Vec<f64> =
+            fields.iter().zip(NAMES).map(|(f, what)| number(path, line, f, what)).collect::<Result<_, _>>()?;
         // Official TUM ground truth holds equal stamps (100 Hz motion capture written with four
         // decimals): kept, as evo keeps them; only a stamp going back is an error.
         if prev.is_some_and(|(_, t)| t == v[0]) {
@@ -213,6 +230,33 @@ pub fn interpolate_pose(traj: &[(f64, Isometry3<f64>)], t: f64, slack: f64) -> O
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn messages_say_what_is_wrong_where() {
+        // issue 29, defect 10.
+        let dir = std::env::temp_dir().join(format!("dynaflow-index-msg-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = |name: &str, text: &str| {
+            let p = dir.join(name);
+            std::fs::write(&p, text).unwrap();
+            p
+        };
+        // A byte-order mark is accepted.
+        let p = file("bom.txt", "\u{feff}1.0 rgb/1.png\n2.0 rgb/2.png\n");
+        assert_eq!(read_index(&p).unwrap().len(), 2);
+        // A NaN in a pose field names the field, not a timestamp.
+        let p = file("nan.txt", "1.0 0 0 0 nan 0 0 1\n");
+        let e = read_trajectory(&p).unwrap_err().to_string();
+        assert!(e.ends_with("nan.txt:1: `nan` is not a finite number (the qx)"), "{e}");
+        // A whole-file problem has no line number.
+        let e = read_trajectory(&dir.join("absent.txt")).unwrap_err().to_string();
+        assert!(e.contains("absent.txt: ") && !e.contains(":0:"), "{e}");
+        // A huge timestamp is printed in scientific notation, not as 300 digits.
+        let p = file("huge.txt", "1e300 rgb/1.png\n1.0 rgb/2.png\n");
+        let e = read_index(&p).unwrap_err().to_string();
+        assert!(e.contains("earlier than 1e300") && e.len() < 200, "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn nearest_pose_is_evos_association() {
