@@ -20,23 +20,10 @@ use dynaflow_operators::synth::{Generator, SynthConfig};
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 /// Every `step`-th pixel of a depth image back-projected and placed in the world (pixels
-/// where `keep` says no are left out); the sensor origin.
+/// where `keep` says no are left out), as the `octomap` operator makes its scans: the scan
+/// (points, sensor origin, range) and the pixel index of each point.
 #[allow(clippy::too_many_arguments)]
 fn scan(
-    depth: &[f32],
-    w: usize,
-    k: [f64; 4],
-    pose: &Isometry3<f64>,
-    step: usize,
-    max_range: f64,
-    keep: impl Fn(usize) -> bool,
-) -> peer::Scan {
-    scan_pixels(depth, w, k, pose, step, max_range, keep).0
-}
-
-/// [`scan`], and the pixel index of each point (as the `octomap` operator makes its scans).
-#[allow(clippy::too_many_arguments)]
-fn scan_pixels(
     depth: &[f32],
     w: usize,
     k: [f64; 4],
@@ -73,8 +60,7 @@ fn coloured_scans(seed: u64, n: u64, every: u64) -> (Vec<peer::Scan>, Vec<Vec<[u
         .map(|k| {
             let f = g.frame(k * every, false);
             let kk = [c.fx, c.fy, c.cx, c.cy];
-            let (s, pixels) =
-                scan_pixels(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |i| f.class[i] == 0);
+            let (s, pixels) = scan(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |i| f.class[i] == 0);
             let colours = pixels.iter().map(|&i| [f.rgb[3 * i], f.rgb[3 * i + 1], f.rgb[3 * i + 2]]).collect();
             (s, colours)
         })
@@ -111,7 +97,7 @@ fn icl_scans() -> Vec<peer::Scan> {
             let img = image::open(dir.join(format!("depth/{}.png", i + 1))).unwrap().into_luma16();
             let w = img.width() as usize;
             let depth: Vec<f32> = img.as_raw().iter().map(|&d| f32::from(d) / 5000.0).collect();
-            scan(&depth, w, [481.2, -480.0, 319.5, 239.5], &pose, 4, -1.0, |_| true)
+            scan(&depth, w, [481.2, -480.0, 319.5, 239.5], &pose, 4, -1.0, |_| true).0
         })
         .collect()
 }
@@ -123,7 +109,7 @@ fn synthetic_scans(n: u64) -> Vec<peer::Scan> {
     (0..n)
         .map(|k| {
             let f = g.frame(k * 5, false);
-            scan(&f.depth, c.width as usize, [c.fx, c.fy, c.cx, c.cy], &f.world_from_cam, 4, 4.0, |_| true)
+            scan(&f.depth, c.width as usize, [c.fx, c.fy, c.cx, c.cy], &f.world_from_cam, 4, 4.0, |_| true).0
         })
         .collect()
 }
@@ -319,9 +305,9 @@ fn masked_people_leave_no_trace_and_unmasked_ones_leave_ghosts() {
     for k in 0..frames {
         let f = g.frame(k, false);
         let kk = [c.fx, c.fy, c.cx, c.cy];
-        let (p, o, r) = scan(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |i| f.class[i] == 0);
+        let ((p, o, r), _) = scan(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |i| f.class[i] == 0);
         masked.insert_scan(&p, None, o, r);
-        let (p, o, r) = scan(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |_| true);
+        let ((p, o, r), _) = scan(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |_| true);
         all.insert_scan(&p, None, o, r);
     }
     let swept = swept_volume(&g, frames, 0.05);

@@ -301,6 +301,9 @@ struct Scratch {
     free: KeyDedup,
     occupied: KeyDedup,
     labels: std::collections::HashMap<u64, Votes<4>, BuildHasherDefault<KeyHasher>>,
+    /// Each in-range end point's voxel and colour, in scan order (a semantic tree colours
+    /// them after the occupancy updates).
+    colours: Vec<(Key, [u8; 3])>,
     changes: Vec<(Key, bool)>,
 }
 
@@ -612,6 +615,7 @@ impl OcTree {
         s.free.reset(lo, dims);
         s.occupied.reset(lo, dims);
         s.labels.clear();
+        s.colours.clear();
         for (i, p) in points.iter().enumerate() {
             let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
             let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
@@ -624,6 +628,9 @@ impl OcTree {
                     s.occupied.insert(k);
                     if let Some(l) = labels.and_then(|l| l.get(i)) {
                         s.labels.entry(k.packed()).or_default().add(l);
+                        if self.semantic {
+                            s.colours.push((k, l.color));
+                        }
                     }
                 }
             } else {
@@ -655,17 +662,9 @@ impl OcTree {
                 s.changes.push((k, now));
             }
         }
-        if self.semantic
-            && let Some(labels) = labels
-        {
-            for (p, l) in points.iter().zip(labels) {
-                let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
-                let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                if (max_range < 0.0 || norm <= max_range)
-                    && let Some(k) = self.grid.key(*p)
-                {
-                    self.average_node_color(k, l.color);
-                }
+        if self.semantic {
+            for &(k, color) in &s.colours {
+                self.average_node_color(k, color);
             }
             for (&packed, votes) in &s.labels {
                 if let Some(n) = self.search_mut(unpack(packed)) {

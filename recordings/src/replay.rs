@@ -75,11 +75,12 @@ fn replayed_ground_truth(params: &Params) -> Vec<&'static str> {
         return Vec::new();
     };
     let Some(marked) = ground_truth_topics(&params.resolve_path(path)) else { return Vec::new() };
-    topics
-        .split(',')
-        .filter_map(|pair| pair.split_once('='))
-        .filter(|(_, topic)| marked.iter().any(|m| m == topic.trim()))
-        .filter_map(|(port, _)| OUTPUTS.iter().find(|p| p.name == port.trim()).map(|p| p.name))
+    // A malformed `topics` marks nothing here; building the operator reports it.
+    port_topics(topics)
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|(_, topic)| marked.contains(topic))
+        .map(|(port, _)| port)
         .collect()
 }
 
@@ -124,11 +125,10 @@ struct Config {
     topics: String,
 }
 
-fn build(params: &Params) -> Result<Instance, OpError> {
-    let c: Config = params.parse()?;
-    let path = params.resolve_path(&c.path);
+/// `topics`' `port=/topic` pairs, each port one of [`OUTPUTS`].
+fn port_topics(topics: &str) -> Result<Vec<(&'static str, String)>, OpError> {
     let mut wanted: Vec<(&'static str, String)> = Vec::new();
-    for pair in c.topics.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+    for pair in topics.split(',').map(str::trim).filter(|p| !p.is_empty()) {
         let (port, topic) = pair.split_once('=').ok_or_else(|| OpError::Config {
             key: "topics".into(),
             message: format!("`{pair}` is not `port=/topic`"),
@@ -143,6 +143,13 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         })?;
         wanted.push((spec.name, topic.trim().to_owned()));
     }
+    Ok(wanted)
+}
+
+fn build(params: &Params) -> Result<Instance, OpError> {
+    let c: Config = params.parse()?;
+    let path = params.resolve_path(&c.path);
+    let wanted = port_topics(&c.topics)?;
     let frames = read(&path, &wanted)?;
     Ok(Instance::Source(Box::new(Replay { frames, wanted })))
 }

@@ -27,7 +27,7 @@ pub fn ops(format: &Format) -> u8 {
                         p.name,
                         p.ty.name(),
                         if p.required { "" } else { " (optional)" },
-                        role(p)
+                        role(p).map_or_else(String::new, |r| format!(" ({r})"))
                     );
                 }
                 for p in op.outputs {
@@ -48,12 +48,13 @@ pub fn ops(format: &Format) -> u8 {
     EXIT_OK
 }
 
-/// How ground truth on an input counts (see graph-spec.md, "Oracles").
-fn role(p: &PortSpec) -> &'static str {
+/// How ground truth on an input counts (see graph-spec.md, "Oracles"); `None` for a decision
+/// input, the default.
+fn role(p: &PortSpec) -> Option<&'static str> {
     match p.role {
-        InputRole::Decision => "",
-        InputRole::Statistics => " (statistics only)",
-        InputRole::Evaluation => " (evaluation only)",
+        InputRole::Decision => None,
+        InputRole::Statistics => Some("statistics only"),
+        InputRole::Evaluation => Some("evaluation only"),
     }
 }
 
@@ -95,11 +96,7 @@ fn markdown(ops: &[&OpSpec]) -> String {
                     p.name,
                     p.ty.name(),
                     if p.required { "yes" } else { "no" },
-                    match p.role {
-                        InputRole::Decision => "",
-                        InputRole::Statistics => "*statistics only*: ",
-                        InputRole::Evaluation => "*evaluation only*: ",
-                    },
+                    role(p).map_or_else(String::new, |r| format!("*{r}*: ")),
                     p.doc
                 ));
             }

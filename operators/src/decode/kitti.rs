@@ -160,9 +160,9 @@ fn build(params: &Params) -> Result<Instance, OpError> {
     let fx = pl[0];
     // Focal lengths and principal points must be positive, as the TUM reader requires.
     for (name, p) in [(format!("P{li}"), &pl), (format!("P{ri}"), &pr)] {
-        let line = calib_line(&calib_path, &name);
         for (what, v) in [("fx", p[0]), ("fy", p[5]), ("cx", p[2]), ("cy", p[6])] {
             if v.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                let line = calib_line(&calib_path, &name);
                 return Err(input(&calib_path, line, format!("{name}: {what} = {v} must be positive")));
             }
         }
