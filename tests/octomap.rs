@@ -117,7 +117,7 @@ fn synthetic_scans(n: u64) -> Vec<peer::Scan> {
 fn ours(scans: &[peer::Scan]) -> OcTree {
     let mut t = OcTree::new(Params::default(), false).unwrap();
     for (pts, origin, range) in scans {
-        t.insert_scan(pts, None, *origin, *range);
+        t.insert_scan(pts, None, *origin, *range).expect("within the memory budget");
     }
     t
 }
@@ -196,7 +196,7 @@ fn our_color_tree_equals_octomaps_color_octree() {
     for (s, c) in scans.iter().zip(&colours) {
         let labels: Vec<dynaflow_octomap::Label> =
             c.iter().map(|&color| dynaflow_octomap::Label { color, class: 0 }).collect();
-        t.insert_scan(&s.0, Some(&labels), s.1, s.2);
+        t.insert_scan(&s.0, Some(&labels), s.1, s.2).expect("within the memory budget");
     }
     let theirs = std::fs::read(dir.path().join("color.ot")).unwrap();
     let ours = ot_bytes(&t);
@@ -306,9 +306,9 @@ fn masked_people_leave_no_trace_and_unmasked_ones_leave_ghosts() {
         let f = g.frame(k, false);
         let kk = [c.fx, c.fy, c.cx, c.cy];
         let ((p, o, r), _) = scan(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |i| f.class[i] == 0);
-        masked.insert_scan(&p, None, o, r);
+        masked.insert_scan(&p, None, o, r).expect("within the memory budget");
         let ((p, o, r), _) = scan(&f.depth, c.width as usize, kk, &f.world_from_cam, 4, 4.0, |_| true);
-        all.insert_scan(&p, None, o, r);
+        all.insert_scan(&p, None, o, r).expect("within the memory budget");
     }
     let swept = swept_volume(&g, frames, 0.05);
     let ghosts = |t: &OcTree| swept.iter().filter(|&&k| t.search(k).is_some_and(|n| t.is_occupied(n))).count();
@@ -334,7 +334,7 @@ fn octree_command_summarises_plots_and_refuses_corrupt_files() {
     let dir = common::TempDir::new("octree-cli");
     let mut t = OcTree::new(Params::default(), false).unwrap();
     for (p, o, r) in icl_scans().iter().take(2) {
-        t.insert_scan(p, None, *o, *r);
+        t.insert_scan(p, None, *o, *r).expect("within the memory budget");
     }
     let (ot, bt) = (dir.path().join("t.ot"), dir.path().join("t.bt"));
     dynaflow_octomap::write_ot(&t, &ot).unwrap();
@@ -358,4 +358,33 @@ fn octree_command_summarises_plots_and_refuses_corrupt_files() {
         assert_eq!(out.status.code(), Some(2), "{}: {err}", bad.display());
         assert!(err.contains(&bad.display().to_string()) && !err.contains("panicked"), "{err}");
     }
+}
+
+#[test]
+fn a_resolution_too_fine_for_the_memory_budget_ends_the_run_with_an_error_and_valid_files() {
+    // Issue 29 defect 2: `resolution: 0.001` (inside its documented range) made one frame take
+    // gigabytes and three abort on allocation (exit 134, no summary, an MCAP without footer).
+    // Now the first frame is refused on the default 4 GiB budget before its nodes are
+    // allocated: exit 1, the error says what it needed and what to change, the summary names
+    // the node, the map of the frames before is written and the MCAP is complete.
+    let dir = common::TempDir::new("octomap-budget");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "mcap", "--frames", "3", "--set", "map.resolution=0.001", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/octomap.yaml"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("frame 0") && err.contains("over the 4096 MiB memory budget"), "{err}");
+    assert!(err.contains("raise `resolution` or `subsample`"), "{err}");
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("octomap.summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["status"], "failed");
+    assert_eq!(summary["failures"][0]["node"], "map");
+    // The (empty) map is a valid OctoMap file; the recording reads to its end.
+    let tree = read(&dir.path().join("octomap.map.ot")).unwrap();
+    assert_eq!(tree.size(), 0);
+    let rec = dynaflow_recordings::diff::read_mcap(&dir.path().join("octomap.mcap")).unwrap();
+    assert!(!rec.topics.is_empty());
 }

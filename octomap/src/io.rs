@@ -404,7 +404,8 @@ mod tests {
             (0..30).flat_map(|i| (0..30).map(move |j| [1.5, -0.7 + i as f32 * 0.05, -0.7 + j as f32 * 0.05])).collect();
         let labels: Vec<crate::Label> =
             (0..wall.len()).map(|i| crate::Label { color: [i as u8, 7, 200], class: 3 }).collect();
-        t.insert_scan(&wall, semantic.then_some(labels.as_slice()), [0.0, 0.1, 0.2], -1.0);
+        t.insert_scan(&wall, semantic.then_some(labels.as_slice()), [0.0, 0.1, 0.2], -1.0)
+            .expect("within the memory budget");
         t
     }
 

@@ -39,11 +39,24 @@ pub struct Params {
     pub clamp_max: f64,
     /// Occupied at or above this probability (0.5).
     pub occupancy: f64,
+    /// Memory budget in bytes for the tree's nodes plus one scan's scratch: a scan that would
+    /// take them past it is refused before anything changes ([`ScanError`]), so no
+    /// resolution or range reaches an allocation failure (default 4 GiB; a resource bound, not
+    /// an OctoMap parameter).
+    pub max_memory_bytes: u64,
 }
 
 impl Default for Params {
     fn default() -> Self {
-        Self { resolution: 0.05, prob_hit: 0.7, prob_miss: 0.4, clamp_min: 0.1192, clamp_max: 0.971, occupancy: 0.5 }
+        Self {
+            resolution: 0.05,
+            prob_hit: 0.7,
+            prob_miss: 0.4,
+            clamp_min: 0.1192,
+            clamp_max: 0.971,
+            occupancy: 0.5,
+            max_memory_bytes: 4 << 30,
+        }
     }
 }
 
@@ -57,6 +70,9 @@ impl Params {
         if !(p(self.prob_hit) && p(self.prob_miss) && p(self.clamp_min) && p(self.clamp_max) && p(self.occupancy)) {
             return Err("probabilities must lie strictly between 0 and 1".into());
         }
+        if self.max_memory_bytes == 0 {
+            return Err("the memory budget must be positive".into());
+        }
         if self.prob_hit <= 0.5 || self.prob_miss >= 0.5 || self.clamp_min >= self.clamp_max {
             return Err(format!(
                 "need prob_hit > 0.5 > prob_miss and clamp_min < clamp_max (got {}, {}, {}, {})",
@@ -66,6 +82,49 @@ impl Params {
         Ok(())
     }
 }
+
+/// Why a scan was not inserted; the tree is as it was before the call.
+#[derive(Clone, Debug, PartialEq)]
+pub enum ScanError {
+    /// The scan would take the tree's nodes plus its own scratch past
+    /// [`Params::max_memory_bytes`].
+    OverBudget {
+        /// Upper bound on the voxels its rays cross (visits, before de-duplication).
+        voxels: u64,
+        /// Bytes the tree's nodes hold now.
+        tree_bytes: u64,
+        /// Bytes the scan needs: scratch, plus (when known) the nodes it would add.
+        scan_bytes: u64,
+        /// The budget.
+        budget: u64,
+    },
+    /// The system refused memory within the budget.
+    Alloc {
+        /// Bytes asked for.
+        bytes: u64,
+    },
+}
+
+impl std::fmt::Display for ScanError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mb = |b: u64| b as f64 / (1u64 << 20) as f64;
+        match self {
+            Self::OverBudget { voxels, tree_bytes, scan_bytes, budget } => write!(
+                f,
+                "the scan's rays cross up to {voxels} voxels and need {:.0} MiB on top of the map's {:.0} MiB, over the {:.0} MiB memory budget",
+                mb(*scan_bytes),
+                mb(*tree_bytes),
+                mb(*budget)
+            ),
+            Self::Alloc { bytes } => write!(f, "the system refused {:.0} MiB for the scan", mb(*bytes)),
+        }
+    }
+}
+
+impl std::error::Error for ScanError {}
+
+/// Bytes of one block of eight nodes.
+const BLOCK_BYTES: u64 = std::mem::size_of::<[Node; 8]>() as u64;
 
 /// No child block.
 pub(crate) const NONE: u32 = u32::MAX;
@@ -247,8 +306,7 @@ impl KeyDedup {
         }
         self.list.clear();
         self.outside.clear();
-        let cells = dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).filter(|&c| c <= 1 << 27);
-        match cells {
+        match Self::dense_cells(dims) {
             Some(c) => {
                 if self.bits.len() < c.div_ceil(64) {
                     self.bits.resize(c.div_ceil(64), 0);
@@ -258,6 +316,11 @@ impl KeyDedup {
             }
             None => self.dims = [0; 3],
         }
+    }
+
+    /// The bitmap's cells for a box of `dims` keys, if it gets one (up to 2^27 bits, 16 MB).
+    fn dense_cells(dims: [usize; 3]) -> Option<usize> {
+        dims.iter().try_fold(1usize, |a, &d| a.checked_mul(d)).filter(|&c| c <= 1 << 27)
     }
 
     #[inline]
@@ -307,6 +370,26 @@ struct Scratch {
     changes: Vec<(Key, bool)>,
 }
 
+impl Scratch {
+    /// Room (after the resets) for a scan of `visits` voxel visits and `points` end points, so that nothing
+    /// grows while it runs: an allocation failure is an error, not an abort.
+    fn reserve(&mut self, visits: u64, points: usize, dense: bool) -> Result<(), ScanError> {
+        let visits = usize::try_from(visits).unwrap_or(usize::MAX);
+        let fail = |n: usize, each: usize| ScanError::Alloc { bytes: (n as u64).saturating_mul(each as u64) };
+        self.free.list.try_reserve(visits).map_err(|_| fail(visits, 8))?;
+        self.occupied.list.try_reserve(points).map_err(|_| fail(points, 8))?;
+        if !dense {
+            self.free.outside.try_reserve(visits).map_err(|_| fail(visits, 16))?;
+            self.occupied.outside.try_reserve(points).map_err(|_| fail(points, 16))?;
+        }
+        // (The label table is left to size itself: it is per point, so bounded by the image,
+        // and sized ahead it would spread over more memory than the scan's distinct voxels.)
+        self.colours.try_reserve(points).map_err(|_| fail(points, 8))?;
+        self.changes.try_reserve(visits.saturating_add(points)).map_err(|_| fail(visits, 8))?;
+        Ok(())
+    }
+}
+
 /// A probabilistic occupancy octree with OctoMap's semantics.
 #[derive(Clone)]
 pub struct OcTree {
@@ -322,6 +405,10 @@ pub struct OcTree {
     root: Node,
     blocks: Vec<[Node; 8]>,
     free_blocks: Vec<u32>,
+    /// Blocks handed out so far (new or reused), and given back by pruning: what
+    /// [`OcTree::new_blocks`] predicts, checked in the tests.
+    allocated: u64,
+    released: u64,
     scratch: Scratch,
 }
 
@@ -347,6 +434,8 @@ impl OcTree {
             root: Node::ABSENT,
             blocks: Vec::new(),
             free_blocks: Vec::new(),
+            allocated: 0,
+            released: 0,
             scratch: Scratch::default(),
         })
     }
@@ -404,6 +493,7 @@ impl OcTree {
     }
 
     fn alloc(&mut self) -> u32 {
+        self.allocated += 1;
         if let Some(b) = self.free_blocks.pop() {
             self.blocks[b as usize] = [Node::ABSENT; 8];
             return b;
@@ -597,6 +687,7 @@ impl OcTree {
         }
         *self.node_mut(at) = merged;
         self.free_blocks.push(b);
+        self.released += 1;
         true
     }
 
@@ -608,14 +699,46 @@ impl OcTree {
     /// the node holding each end point as OctoMap's ColorOcTree does after an insertion
     /// (`averageNodeColor`, what octomap_server calls), and gives it the most frequent class
     /// of the scan's points in it. Points are world coordinates.
-    pub fn insert_scan(&mut self, points: &[[f32; 3]], labels: Option<&[Label]>, origin: [f32; 3], max_range: f64) {
+    ///
+    /// The scan is refused, the tree untouched, when it would take the tree's nodes plus its
+    /// own scratch past [`Params::max_memory_bytes`]: first on a bound of the voxels its rays
+    /// cross (the key distance of each ray, before any work), then on the blocks of nodes its
+    /// distinct voxels would add, counted exactly on the tree before it changes.
+    pub fn insert_scan(
+        &mut self,
+        points: &[[f32; 3]],
+        labels: Option<&[Label]>,
+        origin: [f32; 3],
+        max_range: f64,
+    ) -> Result<(), ScanError> {
+        let budget = self.params.max_memory_bytes;
+        let tree_bytes = self.memory_bytes() as u64;
+        let voxels = self.scan_voxels(points, origin, max_range);
         let mut s = std::mem::take(&mut self.scratch);
+        s.changes.clear();
         // The scan's bounding box in keys: the sensor's range around it, or the points'.
         let (lo, dims) = self.scan_box(points, origin, max_range);
+        // Scratch, per voxel visit at most: a key in the list and a change (16 bytes), a hash
+        // entry with the table's slack (24 more) when the box is too large for the bitmap; per
+        // point: its key, hash entry, label votes with slack and colour (168); both bitmaps.
+        let dense = KeyDedup::dense_cells(dims).is_some();
+        let per_visit = if dense { 16 } else { 40 };
+        let scratch = voxels.saturating_mul(per_visit)
+            + (points.len() as u64).saturating_mul(168)
+            + 2 * KeyDedup::dense_cells(dims).map_or(0, |c| c.div_ceil(8) as u64);
+        let over = |scan_bytes: u64| ScanError::OverBudget { voxels, tree_bytes, scan_bytes, budget };
+        if tree_bytes.saturating_add(scratch) > budget {
+            self.scratch = s;
+            return Err(over(scratch));
+        }
         s.free.reset(lo, dims);
         s.occupied.reset(lo, dims);
         s.labels.clear();
         s.colours.clear();
+        if let Err(e) = s.reserve(voxels, points.len(), dense) {
+            self.scratch = s;
+            return Err(e);
+        }
         for (i, p) in points.iter().enumerate() {
             let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
             let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
@@ -647,6 +770,31 @@ impl OcTree {
         // Depth-first order: consecutive updates share their path down the tree.
         s.free.list.sort_unstable();
         s.occupied.list.sort_unstable();
+        // The nodes the scan adds. Quick: the distinct nodes of its paths, as if the tree were
+        // empty, the arena left to grow as a vector does (doubling, so at most twice what it
+        // holds). Else the exact count on the tree as it is, and the arena grown to fit it
+        // before any update.
+        let (len, capacity) = (self.blocks.len() as u64, self.blocks.capacity() as u64);
+        let quick = self.new_blocks(&s.free.list, &s.occupied.list, false);
+        let doubled = capacity.max(len.saturating_add(quick).saturating_mul(2));
+        if doubled.saturating_mul(BLOCK_BYTES).saturating_add(scratch) > budget {
+            let blocks = self.new_blocks(&s.free.list, &s.occupied.list, true);
+            let need = blocks.saturating_sub(self.free_blocks.len() as u64);
+            // (The arena's capacity already fits: the first check counted it.)
+            if (len + need) * BLOCK_BYTES + scratch > budget {
+                self.scratch = s;
+                return Err(over(scratch + blocks * BLOCK_BYTES));
+            }
+            if len + need > capacity {
+                // Grow as a vector would (doubling), but never past the budget.
+                let cap_max = (budget.saturating_sub(scratch) / BLOCK_BYTES).max(len + need);
+                let target = (capacity * 2).clamp(len + need, cap_max);
+                if self.blocks.try_reserve_exact((target - len) as usize).is_err() {
+                    self.scratch = s;
+                    return Err(ScanError::Alloc { bytes: (target - len) * BLOCK_BYTES });
+                }
+            }
+        }
         s.changes.clear();
         for &m in &s.free.list {
             let k = unmorton(m);
@@ -673,6 +821,99 @@ impl OcTree {
             }
         }
         self.scratch = s;
+        Ok(())
+    }
+
+    /// An upper bound on the voxel visits of a scan's rays: a 3-D DDA steps one key along one
+    /// axis at a time, so a ray visits at most its key distance plus one.
+    fn scan_voxels(&self, points: &[[f32; 3]], origin: [f32; 3], max_range: f64) -> u64 {
+        let Some(o) = self.grid.key(origin) else { return 0 };
+        let mut total = 0u64;
+        for p in points {
+            let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+            let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+            let end = if max_range < 0.0 || norm <= max_range {
+                *p
+            } else {
+                let r = (max_range / norm) as f32;
+                [origin[0] + d[0] * r, origin[1] + d[1] * r, origin[2] + d[2] * r]
+            };
+            if let Some(e) = self.grid.key(end) {
+                let dist: u64 = (0..3).map(|a| u64::from(o.0[a].abs_diff(e.0[a]))).sum();
+                total = total.saturating_add(dist + 1);
+            }
+        }
+        total
+    }
+
+    /// The blocks of eight nodes that updating these voxels (two lists in Morton order, free
+    /// and occupied) adds to the tree as it is: each voxel, in Morton order over both lists,
+    /// needs a block under every node of its path from the first one without children
+    /// (unknown space, or a pruned node that expands) down, less those the voxel before it
+    /// already added on their shared path. Exact as a bound on the live blocks: a block more
+    /// is only ever taken under a node this scan pruned, which gave one back.
+    ///
+    /// With `on_tree` false, the tree is not read and every path counts from the root: the
+    /// distinct nodes of the scan's paths, a bound that costs no search.
+    fn new_blocks(&self, free: &[u64], occupied: &[u64], on_tree: bool) -> u64 {
+        let (mut i, mut j) = (0, 0);
+        let mut total = 0u64;
+        let mut prev: Option<(u64, u32)> = None;
+        loop {
+            let m = match (free.get(i), occupied.get(j)) {
+                (Some(&a), Some(&b)) if a == b => {
+                    i += 1;
+                    j += 1;
+                    a
+                }
+                (Some(&a), Some(&b)) if a < b => {
+                    i += 1;
+                    a
+                }
+                (_, Some(&b)) => {
+                    j += 1;
+                    b
+                }
+                (Some(&a), None) => {
+                    i += 1;
+                    a
+                }
+                (None, None) => break,
+            };
+            let first = if on_tree { self.first_childless(unmorton(m)) } else { 0 };
+            let mut n = DEPTH - first;
+            if let Some((pm, pfirst)) = prev {
+                // Nodes at depths 0..=shared lie on both paths.
+                let shared = ((m ^ pm).leading_zeros() - 16) / 3;
+                let lo = first.max(pfirst);
+                let hi = shared.min(DEPTH - 1);
+                if hi >= lo {
+                    n -= hi - lo + 1;
+                }
+            }
+            total += u64::from(n);
+            prev = Some((m, first));
+        }
+        total
+    }
+
+    /// The depth of the first node on `key`'s path that would need a block of children (the
+    /// root is depth 0; `DEPTH`: none, the voxel exists).
+    fn first_childless(&self, key: Key) -> u32 {
+        if !self.root.exists() {
+            return 0;
+        }
+        let mut n = &self.root;
+        for (depth, level) in (0..DEPTH).rev().enumerate() {
+            if !n.has_children() {
+                return depth as u32;
+            }
+            match self.child(n, key.child_index(level)) {
+                Some(c) => n = c,
+                None => return depth as u32 + 1,
+            }
+        }
+        DEPTH
     }
 
     /// Keys `lo .. lo + dims` covering a scan: its range around the origin, or its points.
@@ -891,7 +1132,7 @@ mod tests {
         let mut t = tree();
         let wall: Vec<[f32; 3]> =
             (0..20).flat_map(|i| (0..20).map(move |j| [2.0, -0.5 + i as f32 * 0.05, -0.5 + j as f32 * 0.05])).collect();
-        t.insert_scan(&wall, None, [0.01, 0.01, 0.01], -1.0);
+        t.insert_scan(&wall, None, [0.01, 0.01, 0.01], -1.0).unwrap();
         assert!(t.occupancy_at([2.0, 0.0, 0.0]).unwrap() > 0.5);
         assert!(t.occupancy_at([1.0, 0.0, 0.0]).unwrap() < 0.5);
         assert!(t.occupancy_at([3.0, 0.0, 0.0]).is_none(), "behind the wall is unknown");
@@ -903,12 +1144,12 @@ mod tests {
         let occupied_now = t.last_changes().iter().filter(|c| c.1).count();
         assert_eq!(occupied_now, t.occupied_leaves().iter().map(|l| (l.size as usize).pow(3)).sum::<usize>());
         // The same scan again changes nothing.
-        t.insert_scan(&wall, None, [0.01, 0.01, 0.01], -1.0);
+        t.insert_scan(&wall, None, [0.01, 0.01, 0.01], -1.0).unwrap();
         assert!(t.last_changes().is_empty());
         assert!(matches!(t.cast_ray([0.01, 0.01, 0.01], [0.0, 0.0, -1.0], -1.0), RayHit::Unknown(_)));
         // Beyond max range: the ray is cleared to the range, nothing is marked.
         let mut u = tree();
-        u.insert_scan(&wall, None, [0.01, 0.01, 0.01], 1.0);
+        u.insert_scan(&wall, None, [0.01, 0.01, 0.01], 1.0).unwrap();
         assert!(u.occupancy_at([2.0, 0.0, 0.0]).is_none());
         assert!(u.occupancy_at([0.9, 0.0, 0.0]).unwrap() < 0.5);
     }
@@ -922,7 +1163,7 @@ mod tests {
             Label { color: [30, 40, 50], class: 5 },
             Label { color: [200, 0, 0], class: 1 },
         ];
-        t.insert_scan(&pts, Some(&labels), [0.0, 0.0, 0.0], -1.0);
+        t.insert_scan(&pts, Some(&labels), [0.0, 0.0, 0.0], -1.0).unwrap();
         let k = t.grid().key([1.0, 0.0, 0.0]).unwrap();
         let n = t.search(k).unwrap();
         assert_eq!((n.color, n.class, n.color_set()), ([20, 30, 40], 5, true));
@@ -937,6 +1178,59 @@ mod tests {
         // The eight children of one node are consecutive.
         assert_eq!(morton(Key([1, 1, 1])), 7);
         assert!(morton(Key([1, 1, 1])) < morton(Key([2, 0, 0])));
+    }
+
+    /// A fan of rays from the origin to a wall `at` metres away.
+    fn fan(at: f32, n: usize) -> Vec<[f32; 3]> {
+        (0..n).flat_map(|i| (0..n).map(move |j| [at, -0.5 + i as f32 / n as f32, -0.4 + j as f32 / n as f32])).collect()
+    }
+
+    #[test]
+    fn the_blocks_a_scan_adds_are_counted_exactly_before_it_runs() {
+        let mut t = tree();
+        for (scan, origin) in [(fan(2.0, 30), [0.01f32, 0.02, 0.03]), (fan(3.0, 25), [0.3, -0.2, 0.1])] {
+            // The count the budget uses, on the tree as it is (the scan's sorted key lists).
+            let mut probe = t.clone();
+            probe.insert_scan(&scan, None, origin, -1.0).unwrap();
+            let (free, occupied) = (probe.scratch.free.list.clone(), probe.scratch.occupied.list.clone());
+            let predicted = t.new_blocks(&free, &occupied, true);
+            assert!(predicted <= t.new_blocks(&free, &occupied, false), "the quick bound bounds");
+            let (allocated, released) = (t.allocated, t.released);
+            t.insert_scan(&scan, None, origin, -1.0).unwrap();
+            let (used, pruned) = (t.allocated - allocated, t.released - released);
+            // Every predicted block is taken; more only under nodes the scan pruned.
+            assert!(
+                predicted <= used && used <= predicted + pruned,
+                "used {used}, pruned {pruned}, predicted {predicted}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_scan_over_the_memory_budget_is_refused_and_changes_nothing() {
+        let params = Params { max_memory_bytes: 1 << 20, ..Params::default() };
+        let mut t = OcTree::new(params, false).unwrap();
+        t.insert_scan(&fan(2.0, 10), None, [0.0, 0.0, 0.0], -1.0).unwrap();
+        let (leaves, size, bytes) = (t.leaves(), t.size(), t.memory_bytes());
+        assert!(!t.last_changes().is_empty());
+        // 1 mm voxels over 2 m rays: far past 1 MiB, refused before any work (the visit bound).
+        let mut fine = OcTree::new(Params { resolution: 0.001, ..params }, false).unwrap();
+        let err = fine.insert_scan(&fan(2.0, 40), None, [0.0, 0.0, 0.0], -1.0).unwrap_err();
+        let ScanError::OverBudget { voxels, scan_bytes, budget, .. } = err.clone() else { panic!("{err}") };
+        assert!(voxels >= 1600 * 2000 && scan_bytes > budget, "{err}");
+        assert!(err.to_string().contains("over the 1 MiB memory budget"), "{err}");
+        assert_eq!(fine.size(), 0);
+        // Within the visit bound but not the nodes: refused after the walk, the tree as it was.
+        let err = t.insert_scan(&fan(4.0, 60), None, [0.0, 0.0, 0.0], -1.0).unwrap_err();
+        assert!(matches!(err, ScanError::OverBudget { .. }), "{err}");
+        assert_eq!((t.leaves(), t.size(), t.memory_bytes()), (leaves, size, bytes));
+        assert!(t.last_changes().is_empty(), "a refused scan changed nothing");
+        // The arena never grows past the budget while scans fit.
+        let mut u = OcTree::new(Params { max_memory_bytes: 8 << 20, ..Params::default() }, false).unwrap();
+        for i in 0..40 {
+            let _ = u.insert_scan(&fan(1.0 + 0.1 * i as f32, 40), None, [0.1 * i as f32, 0.0, 0.0], -1.0);
+            assert!(u.memory_bytes() as u64 <= 8 << 20);
+        }
     }
 
     #[test]

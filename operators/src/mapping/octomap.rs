@@ -22,6 +22,7 @@ struct Config {
     dynamic_classes: String,
     color: String,
     snapshot_every: u64,
+    max_memory_mb: u64,
 }
 
 pub const OCTOMAP: OpSpec = OpSpec {
@@ -113,6 +114,12 @@ pub const OCTOMAP: OpSpec = OpSpec {
             default: Default::Int(30),
             doc: "frames between full-map outputs on `map` (0: only the last frame's)",
         },
+        ParamSpec {
+            name: "max_memory_mb",
+            ty: ParamType::Int { min: 16, max: 1_048_576 },
+            default: Default::Int(4096),
+            doc: "memory budget in MiB for the map's nodes plus one scan's scratch: a frame that would take them past it (a tiny `resolution` over a long `max_range`) ends the run with an error naming its need, before anything is allocated; the map of the frames before is written (a resource bound, not an OctoMap parameter)",
+        },
     ],
     cpu_heavy: true,
     ground_truth_outputs: None,
@@ -125,6 +132,7 @@ pub const OCTOMAP: OpSpec = OpSpec {
             prob_miss: c.prob_miss,
             clamp_min: c.clamp_min,
             clamp_max: c.clamp_max,
+            max_memory_bytes: c.max_memory_mb << 20,
             ..TreeParams::default()
         };
         let tree = OcTree::new(params, true).map_err(OpError::Input)?;
@@ -247,7 +255,15 @@ impl Operator for Octomap {
         let t = iso.translation.vector;
         let origin = [t.x as f32, t.y as f32, t.z as f32];
         let started = Instant::now();
-        self.tree.insert_scan(&points, Some(&labels), origin, self.config.max_range);
+        self.tree.insert_scan(&points, Some(&labels), origin, self.config.max_range).map_err(|e| {
+            OpError::Input(format!(
+                "frame {} ({} rays at resolution {} m, max_range {} m) refused: {e}; raise `resolution` or `subsample`, lower `max_range`, or raise `max_memory_mb`",
+                msg.header.seq,
+                points.len(),
+                self.config.resolution,
+                self.config.max_range
+            ))
+        })?;
         self.insert_ms.push(started.elapsed().as_secs_f64() * 1e3);
         self.frames += 1;
         let (mut occupied, mut freed) = (Vec::new(), Vec::new());
