@@ -350,3 +350,39 @@ fn an_official_style_tum_file_with_repeated_stamps_reads_and_evaluates_as_evo() 
         assert!((a - b).abs() <= 1e-6 * b.abs().max(1.0), "{key}: ours {a}, evo {b}");
     }
 }
+
+#[test]
+fn a_motionless_estimate_under_sim3_is_called_motionless_not_too_few() {
+    // Issue 29 defect 10: `--align sim3` on an estimate that never moves said "50 matched
+    // poses are too few to align (3 needed)". Now it says why no scale fits and what to use;
+    // SE(3) and no alignment still evaluate it (a constant estimate has a well-defined ATE:
+    // the ground truth's spread about the point it is moved onto).
+    let dir = common::TempDir::new("eval-motionless");
+    let gt = ground_truth(50, 10.0);
+    let still: Vec<_> =
+        gt.iter().map(|(t, p)| (*t, Isometry3::from_parts(Translation3::new(1.0, 2.0, 3.0), p.rotation))).collect();
+    let (g, e) = (dir.path().join("gt.txt"), dir.path().join("est.txt"));
+    write_tum(&g, &gt);
+    write_tum(&e, &still);
+    let eval = |align: &str| {
+        let out = common::bin().args(["eval", "--align", align, "--gt"]).arg(&g).arg("--est").arg(&e).output().unwrap();
+        (
+            out.status.code(),
+            String::from_utf8_lossy(&out.stdout).into_owned(),
+            String::from_utf8_lossy(&out.stderr).into_owned(),
+        )
+    };
+    let (code, _, err) = eval("sim3");
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("the estimate does not move: its 50 matched positions"), "{err}");
+    assert!(err.contains("`--align se3`") && !err.contains("too few"), "{err}");
+    // Under SE(3) the ATE is the ground truth's spread about its centroid.
+    let (code, out, err) = eval("se3");
+    assert_eq!(code, Some(0), "{err}");
+    let centroid = gt.iter().map(|p| p.1.translation.vector).sum::<Vector3<f64>>() / gt.len() as f64;
+    let rmse =
+        (gt.iter().map(|p| (p.1.translation.vector - centroid).norm_squared()).sum::<f64>() / gt.len() as f64).sqrt();
+    let said: f64 =
+        out.lines().find(|l| l.starts_with("ATE")).unwrap().split_whitespace().nth(1).unwrap().parse().unwrap();
+    assert!((said - rmse).abs() < 1e-5, "ATE {said} vs the spread {rmse}");
+}

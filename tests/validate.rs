@@ -158,6 +158,53 @@ fn bad_set_override_points_at_the_node() {
 }
 
 #[test]
+fn a_set_value_error_names_the_flag_it_came_from() {
+    // Issue 29 defect 10: a `--set` value's error pointed at the YAML node and read as if the
+    // file held the value. Now every error on an overridden value names the flag, at the node
+    // it overrides: validation errors (range, type, unknown key) and an operator refusing the
+    // value when it is built (a misspelt class), which before had no location at all.
+    let graph = common::repo().join("graphs/octomap.yaml");
+    let text = std::fs::read_to_string(&graph).unwrap();
+    let at = text.find("  map:").unwrap() + 2;
+    let (line, col) = line_col(&text, at);
+    let cases = [
+        ("map.resolution=0.0001", "error[param-range]", "param `resolution` = 0.0001 is out of range"),
+        ("map.resolution=abc", "error[param-type]", "param `resolution` expects number"),
+        ("map.resolutio=0.1", "error[unknown-param]", "did you mean `resolution`?"),
+        ("map.dynamic_classes=persn", "error[param-value]", "did you mean `person`?"),
+    ];
+    for (set, code, says) in cases {
+        let out = common::bin()
+            .args(["run", "--no-progress", "--record", "none", "--frames", "1", "--set", set, "--out"])
+            .arg(std::env::temp_dir().join("dynaflow-set-origin"))
+            .arg(&graph)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{set}: {stderr}");
+        let first = stderr.lines().next().unwrap_or_default();
+        let want = format!("octomap.yaml:{line}:{col}: {code}: `--set {set}`: node `map`: ");
+        assert!(first.contains(&want) && first.contains(says), "{set}: wanted `{want}` … `{says}` in\n{stderr}");
+    }
+    // A value written in the file is reported as the file's, with no flag named.
+    let dir = common::TempDir::new("set-origin");
+    let bad = dir.path().join("g.yaml");
+    std::fs::write(&bad, text.replace("dynamic_classes: \"\"", "dynamic_classes: persn")).unwrap();
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--frames", "1", "--variant", "ghosts", "--out"])
+        .arg(dir.path())
+        .arg(&bad)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("error[param-value]: node `map`: param `dynamic_classes`") && !stderr.contains("--set"),
+        "{stderr}"
+    );
+}
+
+#[test]
 fn unused_outputs_are_warnings() {
     let text = "name: w\nnodes:\n  camera: { op: testing.test_pattern, record: { image: none } }\n  p: { op: passthrough, in: { input: camera.tick } }\n";
     let loaded = load_str("w.yaml", text, None, &dynaflow::registry(), &LoadRequest::default());

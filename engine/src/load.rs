@@ -153,8 +153,10 @@ pub fn load_str(
         if let Some(over) = &req.source {
             diags.extend(apply_source(&mut spec, registry, over));
         }
-        diags.extend(spec::apply_overrides(&mut spec, &req.overrides));
-        let (g, d) = spec::validate(&spec, registry, &cx);
+        let (d, origins) = spec::apply_overrides(&mut spec, &req.overrides);
+        diags.extend(d);
+        let (g, mut d) = spec::validate(&spec, registry, &cx);
+        origins.attribute(&mut d);
         diags.extend(d);
         graph = g;
         if req.all_variants {

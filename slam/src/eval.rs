@@ -84,6 +84,17 @@ pub enum EvalError {
         /// Poses needed.
         needed: usize,
     },
+    /// The estimate's matched positions do not spread, so no Sim(3) scale fits them (evo:
+    /// "degenerate covariance rank").
+    #[error(
+        "the estimate does not move: its {matched} matched positions lie within {spread:.1e} m of one point, so no Sim(3) scale can be fitted to them; evaluate it with `--align se3` or `--align none`"
+    )]
+    Motionless {
+        /// Poses matched.
+        matched: usize,
+        /// Largest distance of a matched position from their mean, metres.
+        spread: f64,
+    },
 }
 
 /// Everything `dynaflow eval` reports.
@@ -243,7 +254,14 @@ pub fn evaluate_with(
             if ig.len() < needed {
                 return Err(EvalError::TooFew { matched: ig.len(), needed });
             }
-            umeyama(&ep, &gp, align == Align::Sim3).ok_or(EvalError::TooFew { matched: ig.len(), needed })?
+            let mean = ep.iter().sum::<Vector3<f64>>() / ep.len() as f64;
+            let spread = ep.iter().map(|p| (p - mean).norm()).fold(0.0, f64::max);
+            // A scale needs motion: spread at rounding level of the positions is none.
+            let motionless = spread <= 1e-9 * mean.norm().max(1.0);
+            if align == Align::Sim3 && motionless {
+                return Err(EvalError::Motionless { matched: ig.len(), spread });
+            }
+            umeyama(&ep, &gp, align == Align::Sim3).ok_or(EvalError::Motionless { matched: ig.len(), spread })?
         }
     };
     // The aligned estimate: positions c R p + t, orientations R q (evo's `align`).

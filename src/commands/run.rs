@@ -13,6 +13,23 @@ use dynaflow_recordings::{EncodeCache, ImageCodec, LiveSink, McapSink, MessageLo
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, RunArgs};
 
+/// A run that could not start, as a located diagnostic where an operator refused one of its
+/// parameters: at the parameter in the file (or its node, for a default), naming the `--set`
+/// flag that gave the value if one did.
+fn build_error(loaded: &dynaflow_engine::Loaded, req: &LoadRequest, e: &runtime::RunError) -> String {
+    use dynaflow_engine::diag::Diagnostic;
+    use dynaflow_engine::op::OpError;
+    let runtime::RunError::Build { node, source: OpError::Config { key, message } } = e else {
+        return format!("error: {e}");
+    };
+    let spec = loaded.spec.as_ref().and_then(|s| s.nodes.iter().find(|n| &n.id == node));
+    let span = spec.map(|n| n.params.iter().find(|(k, _)| &k.text == key).map_or(n.id_span, |(k, _)| k.span));
+    let set = req.overrides.iter().rev().find(|o| &o.node == node && &o.param == key);
+    let from = set.map_or_else(String::new, |o| format!("`--set {}`: ", o.text));
+    let d = Diagnostic::error("param-value", span, format!("{from}node `{node}`: param `{key}`: {message}"));
+    loaded.source.plain(&d)
+}
+
 pub fn run(args: &RunArgs) -> u8 {
     let mut overrides = Vec::new();
     for s in &args.set {
@@ -44,7 +61,10 @@ pub fn run(args: &RunArgs) -> u8 {
         },
     };
     let req = LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source };
-    let Some(graph) = super::load_and_report(&args.graph, &req).and_then(|l| l.graph) else {
+    let Some(loaded) = super::load_and_report(&args.graph, &req) else {
+        return EXIT_BAD_INPUT;
+    };
+    let Some(graph) = loaded.graph.clone() else {
         return EXIT_BAD_INPUT;
     };
     if let Err(e) = std::fs::create_dir_all(&args.out) {
@@ -133,7 +153,7 @@ pub fn run(args: &RunArgs) -> u8 {
     let report = match result {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("error: {e}");
+            eprintln!("{}", build_error(&loaded, &req, &e));
             return EXIT_BAD_INPUT;
         }
     };

@@ -45,7 +45,7 @@ mod variant;
 pub use parse::parse_graph;
 pub use resolved::{ResolvedEdge, ResolvedGraph, ResolvedInput, ResolvedNode, ResolvedOutput};
 pub use validate::{ResolveContext, validate};
-pub use variant::{Override, apply_overrides, apply_variant};
+pub use variant::{Override, OverrideOrigins, apply_overrides, apply_variant};
 
 use crate::yaml::{Key, Span, Yaml};
 

@@ -97,11 +97,30 @@ pub fn apply_variant(spec: &GraphSpec, name: &str) -> Result<(GraphSpec, Vec<Dia
     Ok((out, diags))
 }
 
-/// Apply `--set` overrides. The value's span is moved onto the node id so diagnostics point
-/// at the node being overridden.
-pub fn apply_overrides(spec: &mut GraphSpec, overrides: &[Override]) -> Vec<Diagnostic> {
+/// Where each `--set` value stands in for the file: diagnostics at its `marker` span belong
+/// at `at` (the overridden node's id) and say which flag they came from.
+#[derive(Clone, Debug, Default)]
+pub struct OverrideOrigins(Vec<(yaml::Span, yaml::Span, String)>);
+
+impl OverrideOrigins {
+    /// Move diagnostics on an override's value onto its node, naming the flag.
+    pub fn attribute(&self, diags: &mut [Diagnostic]) {
+        for d in diags {
+            if let Some((_, at, text)) = self.0.iter().find(|(m, _, _)| Some(*m) == d.span) {
+                d.span = Some(*at);
+                d.message = format!("`--set {text}`: {}", d.message);
+            }
+        }
+    }
+}
+
+/// Apply `--set` overrides. Each value (and its key) gets a span of its own past the end of
+/// the file, so the diagnostics validation gives on it can be told apart and moved onto the
+/// overridden node with the flag named ([`OverrideOrigins::attribute`]).
+pub fn apply_overrides(spec: &mut GraphSpec, overrides: &[Override]) -> (Vec<Diagnostic>, OverrideOrigins) {
     let mut diags = Vec::new();
-    for o in overrides {
+    let mut origins = OverrideOrigins::default();
+    for (i, o) in overrides.iter().enumerate() {
         let known: Vec<String> = spec.nodes.iter().map(|n| n.id.clone()).collect();
         let Some(node) = spec.nodes.iter_mut().find(|n| n.id == o.node) else {
             diags.push(
@@ -110,11 +129,12 @@ pub fn apply_overrides(spec: &mut GraphSpec, overrides: &[Override]) -> Vec<Diag
             );
             continue;
         };
-        let span = node.id_span;
-        let value = respan(&o.value, span);
-        merge_params(&mut node.params, &[(Key { text: o.param.clone(), span }, value)]);
+        let marker = yaml::Span::new(usize::MAX - i, 0);
+        origins.0.push((marker, node.id_span, o.text.clone()));
+        let value = respan(&o.value, marker);
+        merge_params(&mut node.params, &[(Key { text: o.param.clone(), span: marker }, value)]);
     }
-    diags
+    (diags, origins)
 }
 
 fn respan(v: &Yaml, span: yaml::Span) -> Yaml {
