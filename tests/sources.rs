@@ -368,7 +368,7 @@ fn a_frame_of_another_size_or_a_missing_or_mismatched_mask_is_an_error() {
     png(&d.path().join("rgb/2.png"), 320, 240, false);
     png(&d.path().join("depth/2.png"), 320, 240, true);
     let e = run_failure(d.path(), fr2);
-    assert!(e.contains("rgb/2.png: 320x240 but the sequence's first frame is 640x480"), "{e}");
+    assert!(e.contains("rgb/2.png: 320x240 but the sequence's first frame (rgb/1.png) is 640x480"), "{e}");
     // A `mask/` folder without the second frame's mask.
     let d = broken_copy("mask-missing");
     png(&d.path().join("mask/1.png"), 640, 480, false);
@@ -388,5 +388,9 @@ fn a_frame_of_another_size_or_a_missing_or_mismatched_mask_is_an_error() {
     );
     let (report, _) = run(&yaml).unwrap();
     assert_eq!(report.status, RunStatus::Failed);
-    assert!(report.failures[0].error.contains("b.png: 32x24 but the first image is 64x48"), "{:?}", report.failures);
+    assert!(
+        report.failures[0].error.contains("b.png: 32x24 but the first image (a.png) is 64x48"),
+        "{:?}",
+        report.failures
+    );
 }

@@ -166,33 +166,33 @@ type Frames = BTreeMap<u64, BTreeMap<&'static str, Stored>>;
 
 fn read(path: &Path, wanted: &[(&'static str, String)]) -> Result<Frames, OpError> {
     let buf = std::fs::read(path).map_err(|source| OpError::Io { path: path.to_path_buf(), source })?;
-    let opts = enumset::EnumSet::only(mcap::read::Options::IgnoreEndMagic);
-    let stream = mcap::MessageStream::new_with_options(&buf, opts)
-        .map_err(|e| OpError::Input(format!("{}: {e}", path.display())))?;
     let mut frames = Frames::new();
     let mut seen: Vec<String> = Vec::new();
-    for message in stream {
-        // A killed run's recording ends mid-chunk: replay what is complete.
-        let Ok(message) = message else { break };
-        let topic = &message.channel.topic;
+    // A killed run's recording ends mid-chunk, corruption later in the file ends it too:
+    // replay what is complete before (the bounded pass never reserves what a corrupt size
+    // claims).
+    crate::mcap::scan::scan(&buf, |event| {
+        let crate::mcap::scan::Event::Message { channel, schema, header, data } = event else { return Ok(()) };
+        let topic = &channel.topic;
         if !seen.contains(topic) {
             seen.push(topic.clone());
         }
         for (port, _) in wanted.iter().filter(|(_, t)| t == topic) {
-            let bad = |e: String| OpError::Input(format!("{}: {topic}: {e}", path.display()));
-            let (seq, stored) = if message.channel.message_encoding == "protobuf" {
-                let payload: Value = crate::mcap::proto::payload_of(&message.data)
+            let (seq, stored) = if channel.message_encoding == "protobuf" {
+                let payload: Value = crate::mcap::proto::payload_of(data)
                     .and_then(|p| serde_json::from_slice(p).map_err(|e| e.to_string()))
-                    .map_err(bad)?;
-                let raw = message.channel.schema.as_ref().is_some_and(|s| s.name == "foxglove.RawImage");
-                (payload["seq"].as_u64(), Stored::Proto { raw, data: message.data.to_vec() })
+                    .map_err(|e| format!("{topic}: {e}"))?;
+                let raw = schema == "foxglove.RawImage";
+                (payload["seq"].as_u64(), Stored::Proto { raw, data: data.to_vec() })
             } else {
-                let v: Value = serde_json::from_slice(&message.data).map_err(|e| bad(e.to_string()))?;
+                let v: Value = serde_json::from_slice(data).map_err(|e| format!("{topic}: {e}"))?;
                 (v["dynaflow"]["seq"].as_u64(), Stored::Json(v))
             };
-            frames.entry(seq.unwrap_or(u64::from(message.sequence))).or_default().insert(port, stored);
+            frames.entry(seq.unwrap_or(u64::from(header.sequence))).or_default().insert(port, stored);
         }
-    }
+        Ok(())
+    })
+    .map_err(|e| OpError::Input(format!("{}: {e}", path.display())))?;
     for (port, topic) in wanted {
         if !seen.contains(topic) {
             return Err(OpError::Config {

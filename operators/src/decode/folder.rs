@@ -165,11 +165,13 @@ impl Source for Folder {
         if let Some((w, h)) = self.size
             && (w, h) != (img.width, img.height)
         {
+            let first = self.images.first().and_then(|p| p.file_name()).map(|n| n.to_string_lossy().into_owned());
             return Err(OpError::Input(format!(
-                "{}: {}x{} but the first image is {w}x{h}",
+                "{}: {}x{} but the first image ({}) is {w}x{h}",
                 path.display(),
                 img.width,
-                img.height
+                img.height,
+                first.unwrap_or_default()
             )));
         }
         self.size = Some((img.width, img.height));

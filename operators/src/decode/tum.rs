@@ -167,7 +167,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
     }
     Ok(Instance::Source(Box::new(TumSource {
         masks: dir.join("mask").is_dir(),
-        size: std::cell::Cell::new(None),
+        size: std::cell::RefCell::new(None),
         dir,
         frames,
         gt,
@@ -183,8 +183,8 @@ struct TumSource {
     dir: PathBuf,
     /// Whether the folder has `mask/` (written by `dynaflow synth`): then every frame has one.
     masks: bool,
-    /// The first frame's size.
-    size: std::cell::Cell<Option<(u32, u32)>>,
+    /// The first frame's size and colour file.
+    size: std::cell::RefCell<Option<((u32, u32), String)>>,
     frames: Vec<Associated>,
     gt: Option<Vec<(f64, Isometry3<f64>)>>,
     intrinsics: Intrinsics,
@@ -200,12 +200,17 @@ impl TumSource {
         let depth = load_depth(&self.dir.join(&f.depth), self.factor)?;
         let rgb_size = (rgb.width, rgb.height);
         // Every frame of a sequence has the first frame's size (the intrinsics are the first's).
-        if let Some((w, h)) = self.size.get()
-            && (w, h) != rgb_size
+        if let Some(((w, h), first)) = self.size.borrow().as_ref()
+            && (*w, *h) != rgb_size
         {
-            return Err(format!("{}: {}x{} but the sequence's first frame is {w}x{h}", f.rgb, rgb.width, rgb.height));
+            return Err(format!(
+                "{}: {}x{} but the sequence's first frame ({first}) is {w}x{h}",
+                f.rgb, rgb.width, rgb.height
+            ));
         }
-        self.size.set(Some(rgb_size));
+        if self.size.borrow().is_none() {
+            *self.size.borrow_mut() = Some((rgb_size, f.rgb.clone()));
+        }
         if (rgb.width, rgb.height) != (depth.width, depth.height) {
             return Err(format!(
                 "{}: {}x{} but {} is {}x{}",

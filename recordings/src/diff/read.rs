@@ -39,14 +39,6 @@ impl Recording {
     }
 }
 
-/// Largest record the reader accepts, inside chunks too: a record (or a decompressed chunk)
-/// may exceed its file through compression, but never absurdly. A corrupt length field then
-/// fails as "record too large" instead of asking the allocator for exabytes.
-fn record_length_limit(file_len: usize) -> usize {
-    const MIB: usize = 1 << 20;
-    file_len.saturating_mul(256).clamp(16 * MIB, 1024 * MIB)
-}
-
 /// Read a dynaflow MCAP file. A truncated file (killed run) is read up to its last complete
 /// record and flagged; a file that is not MCAP at all, or corrupt, is an error naming it.
 pub fn read_mcap(path: &Path) -> Result<Recording, DiffError> {
@@ -60,84 +52,41 @@ pub fn read_mcap(path: &Path) -> Result<Recording, DiffError> {
 
 /// [`read_mcap`] on bytes already in memory; `path` names them in errors.
 pub fn read_mcap_bytes(path: &Path, buf: &[u8]) -> Result<Recording, DiffError> {
-    use mcap::records::Record;
-    use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
-
+    use crate::mcap::scan::{End, Event, scan};
     let bad = |message: String| DiffError::BadInput { path: path.to_path_buf(), message };
-    if !buf.starts_with(mcap::MAGIC) {
-        return Err(bad("not an MCAP file (bad magic)".into()));
-    }
     let mut rec = Recording { path: path.to_path_buf(), ..Recording::default() };
-    // One bounded pass over every record, chunks flattened (mcap's `MessageStream` sets no
-    // record length limit inside chunks, so one flipped bit could abort the process).
-    let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default()
-            .with_skip_end_magic(true)
-            .with_record_length_limit(record_length_limit(buf.len())),
-    );
-    let mut channels: BTreeMap<u16, mcap::records::Channel> = BTreeMap::new();
-    let mut schemas: BTreeMap<u16, String> = BTreeMap::new();
-    let mut rest: &[u8] = buf;
-    while let Some(event) = reader.next_event() {
-        let record = match event {
-            Ok(LinearReadEvent::ReadRequest(need)) => {
-                let n = need.min(rest.len());
-                reader.insert(n).copy_from_slice(rest.get(..n).unwrap_or_default());
-                reader.notify_read(n);
-                rest = rest.get(n..).unwrap_or_default();
-                continue;
-            }
-            Ok(LinearReadEvent::Record { data, opcode }) => mcap::parse_record(opcode, data),
-            Err(e) => Err(e),
-        };
-        let record = match record {
-            Ok(r) => r,
-            // A killed run ends mid-record: everything before is good.
-            Err(mcap::McapError::UnexpectedEof) if rest.is_empty() => {
-                rec.truncated = true;
-                break;
-            }
-            Err(e) if rec.topics.is_empty() && channels.is_empty() => return Err(bad(format!("corrupt MCAP: {e}"))),
-            // Corrupt further in: keep what came before, flagged like a cut-off file.
-            Err(_) => {
-                rec.truncated = true;
-                break;
-            }
-        };
-        match record {
-            Record::Metadata(m) if m.name == "dynaflow" => rec.metadata = m.metadata,
-            Record::Schema { header, .. } => {
-                schemas.insert(header.id, header.name);
-            }
-            Record::Channel(c) => {
-                channels.insert(c.id, c);
-            }
-            Record::Message { header, data } => {
-                let channel = channels.get(&header.channel_id).ok_or_else(|| {
-                    bad(format!("message {} on unknown channel {}", header.sequence, header.channel_id))
-                })?;
-                let topic = rec.topics.entry(channel.topic.clone()).or_insert_with(|| Topic {
-                    schema: schemas.get(&channel.schema_id).cloned().unwrap_or_default(),
+    let mut metadata = BTreeMap::new();
+    let mut topics: BTreeMap<String, Topic> = BTreeMap::new();
+    let end = scan(buf, |event| {
+        match event {
+            Event::Metadata(m) if m.name == "dynaflow" => metadata = m.metadata,
+            Event::Metadata(_) => {}
+            Event::Message { channel, schema, header, data } => {
+                let topic = topics.entry(channel.topic.clone()).or_insert_with(|| Topic {
+                    schema: schema.to_owned(),
                     ty: channel.metadata.get("dynaflow.type").cloned().unwrap_or_default(),
                     frames: BTreeMap::new(),
                 });
                 let payload = if channel.message_encoding == "protobuf" {
                     // Images, depth and masks: the payload rides in an undeclared field.
-                    let bytes = crate::mcap::proto::payload_of(&data).map_err(|e| {
-                        bad(format!("message {} on {} is not protobuf: {e}", header.sequence, channel.topic))
+                    let bytes = crate::mcap::proto::payload_of(data).map_err(|e| {
+                        format!("message {} on {} is not protobuf: {e}", header.sequence, channel.topic)
                     })?;
                     serde_json::from_slice(bytes).unwrap_or(Value::Null)
                 } else {
-                    let value: Value = serde_json::from_slice(&data).map_err(|e| {
-                        bad(format!("message {} on {} is not JSON: {e}", header.sequence, channel.topic))
-                    })?;
+                    let value: Value = serde_json::from_slice(data)
+                        .map_err(|e| format!("message {} on {} is not JSON: {e}", header.sequence, channel.topic))?;
                     value.get("dynaflow").cloned().unwrap_or(Value::Null)
                 };
                 let seq = payload.get("seq").and_then(Value::as_u64).unwrap_or(u64::from(header.sequence));
                 topic.frames.insert(seq, payload);
             }
-            _ => {}
         }
-    }
+        Ok(())
+    })
+    .map_err(bad)?;
+    rec.truncated = end == End::Truncated;
+    rec.metadata = metadata;
+    rec.topics = topics;
     Ok(rec)
 }

@@ -10,6 +10,7 @@
 //! protobuf image schemas and wire format).
 
 pub mod proto;
+pub mod scan;
 pub mod schemas;
 
 use std::collections::{BTreeMap, HashMap};
