@@ -151,7 +151,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
     let path = params.resolve_path(&c.path);
     let wanted = port_topics(&c.topics)?;
     let frames = read(&path, &wanted)?;
-    Ok(Instance::Source(Box::new(Replay { frames, wanted })))
+    Ok(Instance::Source(Box::new(Replay { path, frames, wanted })))
 }
 
 /// A recorded message: Foxglove JSON (with its `dynaflow` payload), or a protobuf image
@@ -205,6 +205,8 @@ fn read(path: &Path, wanted: &[(&'static str, String)]) -> Result<Frames, OpErro
 }
 
 struct Replay {
+    /// The recording, for errors.
+    path: std::path::PathBuf,
     frames: Frames,
     wanted: Vec<(&'static str, String)>,
 }
@@ -504,7 +506,8 @@ impl Source for Replay {
             for (port, stored) in ports {
                 let ty = OUTPUTS.iter().find(|p| p.name == *port).map_or(PortType::Any, |p| p.ty);
                 let topic = self.wanted.iter().find(|(p, _)| p == port).map_or("", |(_, t)| t.as_str());
-                let (p, body) = decode(ty, stored).map_err(|e| OpError::Input(format!("{topic} frame {seq}: {e}")))?;
+                let (p, body) = decode(ty, stored)
+                    .map_err(|e| OpError::Input(format!("{}: {topic} frame {seq}: {e}", self.path.display())))?;
                 let header = Header {
                     seq,
                     stamp: p["stamp"].as_f64().unwrap_or(0.0),
