@@ -83,16 +83,10 @@ fn not_finite(body: &Body) -> Option<String> {
     }
 }
 
-thread_local! {
-    /// Cases refused so far on this test's thread.
-    static REFUSED: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
-}
-
 /// Judge one case; `Err` says what was wrong.
 fn judge(case: &Case, ended: Ended) -> Result<(), String> {
     match ended {
         Ended::Refused(msg) => {
-            REFUSED.with(|r| r.set(r.get() + 1));
             if matches!(case.expect, Expect::Frames(_)) {
                 return Err(format!("refused where it should run: {msg}"));
             }
@@ -208,10 +202,43 @@ fn synth_folder(dir: &Path) -> PathBuf {
     seq
 }
 
-fn report(reader: &str, failures: &[String], cases: usize) {
-    let refused = REFUSED.with(std::cell::Cell::take);
-    eprintln!("{reader}: {cases} cases, {refused} refused naming the file, {} completed", cases - refused);
-    assert!(failures.is_empty(), "{reader}: {} of {cases} cases wrong:\n{}", failures.len(), failures.join("\n"));
+/// One reader's cases: each run and judged, the wrong ones kept, and a tally printed.
+struct Fuzz {
+    reader: &'static str,
+    cases: usize,
+    refused: usize,
+    failures: Vec<String>,
+}
+
+impl Fuzz {
+    fn new(reader: &'static str) -> Self {
+        Self { reader, cases: 0, refused: 0, failures: Vec::new() }
+    }
+
+    /// Run `yaml` and judge case `i` on what `node.port` put out.
+    fn check(&mut self, i: usize, case: &Case, yaml: &str, node: &str, port: &str) {
+        let ended = run(yaml, node, port);
+        self.cases += 1;
+        self.refused += usize::from(matches!(ended, Ended::Refused(_)));
+        if let Err(e) = judge(case, ended) {
+            self.failures.push(format!("case {i} ({}): {e}", case.what));
+        }
+    }
+
+    fn report(&self) {
+        let (reader, cases) = (self.reader, self.cases);
+        eprintln!(
+            "{reader}: {cases} cases, {} refused naming the file, {} completed",
+            self.refused,
+            cases - self.refused
+        );
+        assert!(
+            self.failures.is_empty(),
+            "{reader}: {} of {cases} cases wrong:\n{}",
+            self.failures.len(),
+            self.failures.join("\n")
+        );
+    }
 }
 
 #[test]
@@ -219,7 +246,7 @@ fn tum_reader_refuses_or_reads_correctly_every_corruption() {
     let dir = common::TempDir::new("fuzz-tum");
     let valid = synth_folder(dir.path());
     let mut rng = common::Rng::new(29);
-    let (mut failures, cases) = (Vec::new(), 60);
+    let (mut fuzz, cases) = (Fuzz::new("tum_rgbd"), 60);
     for i in 0..cases {
         let seq = dir.path().join(format!("case{i}"));
         copy_dir(&valid, &seq);
@@ -287,11 +314,9 @@ fn tum_reader_refuses_or_reads_correctly_every_corruption() {
             }
         };
         let yaml = format!("name: fuzz\nnodes:\n  cam: {{ op: tum_rgbd, params: {{ path: '{}' }} }}\n", seq.display());
-        if let Err(e) = judge(&case, run(&yaml, "cam", "rgb")) {
-            failures.push(format!("case {i} ({}): {e}", case.what));
-        }
+        fuzz.check(i, &case, &yaml, "cam", "rgb");
     }
-    report("tum_rgbd", &failures, cases);
+    fuzz.report();
 }
 
 /// A KITTI odometry sequence (`dataset/sequences/07` and `dataset/poses/07.txt`) from the
@@ -329,7 +354,7 @@ fn kitti_reader_refuses_or_reads_correctly_every_corruption() {
     let synth = synth_folder(dir.path());
     let valid = kitti_folder(dir.path(), &synth);
     let mut rng = common::Rng::new(2929);
-    let (mut failures, cases) = (Vec::new(), 50);
+    let (mut fuzz, cases) = (Fuzz::new("kitti_odometry"), 50);
     for i in 0..cases {
         let root = dir.path().join(format!("case{i}"));
         copy_dir(&valid, &root);
@@ -398,11 +423,9 @@ fn kitti_reader_refuses_or_reads_correctly_every_corruption() {
         };
         let yaml =
             format!("name: fuzz\nnodes:\n  cam: {{ op: kitti_odometry, params: {{ path: '{}' }} }}\n", seq.display());
-        if let Err(e) = judge(&case, run(&yaml, "cam", "left")) {
-            failures.push(format!("case {i} ({}): {e}", case.what));
-        }
+        fuzz.check(i, &case, &yaml, "cam", "left");
     }
-    report("kitti_odometry", &failures, cases);
+    fuzz.report();
 }
 
 #[test]
@@ -410,7 +433,7 @@ fn image_folder_reader_refuses_or_reads_correctly_every_corruption() {
     let dir = common::TempDir::new("fuzz-folder");
     let synth = synth_folder(dir.path());
     let mut rng = common::Rng::new(292929);
-    let (mut failures, cases) = (Vec::new(), 30);
+    let (mut fuzz, cases) = (Fuzz::new("image_folder"), 30);
     for i in 0..cases {
         let folder = dir.path().join(format!("case{i}"));
         copy_dir(&synth.join("rgb"), &folder);
@@ -444,11 +467,9 @@ fn image_folder_reader_refuses_or_reads_correctly_every_corruption() {
             "name: fuzz\nnodes:\n  cam: {{ op: image_folder, params: {{ path: '{}', intrinsics: fr3 }} }}\n",
             folder.display()
         );
-        if let Err(e) = judge(&case, run(&yaml, "cam", "rgb")) {
-            failures.push(format!("case {i} ({}): {e}", case.what));
-        }
+        fuzz.check(i, &case, &yaml, "cam", "rgb");
     }
-    report("image_folder", &failures, cases);
+    fuzz.report();
 }
 
 #[test]
@@ -477,7 +498,7 @@ fn mcap_replay_refuses_or_reads_correctly_every_corruption() {
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     let valid = std::fs::read(dir.path().join("default.mcap")).unwrap();
     let mut rng = common::Rng::new(29_292_929);
-    let (mut failures, cases) = (Vec::new(), 40);
+    let (mut fuzz, cases) = (Fuzz::new("mcap_replay"), 40);
     for i in 0..cases {
         let path = dir.path().join(format!("case{i}.mcap"));
         let mut bytes = valid.clone();
@@ -499,9 +520,7 @@ fn mcap_replay_refuses_or_reads_correctly_every_corruption() {
             "name: fuzz\nnodes:\n  src: {{ op: mcap_replay, params: {{ path: '{}', topics: 'rgb=/camera/rgb,depth=/camera/depth,pose=/camera/gt_pose,camera_info=/camera/camera_info' }} }}\n",
             path.display()
         );
-        if let Err(e) = judge(&case, run(&yaml, "src", "rgb")) {
-            failures.push(format!("case {i} ({}): {e}", case.what));
-        }
+        fuzz.check(i, &case, &yaml, "src", "rgb");
     }
-    report("mcap_replay", &failures, cases);
+    fuzz.report();
 }

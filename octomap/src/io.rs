@@ -13,7 +13,7 @@
 use std::path::Path;
 
 use crate::key::DEPTH;
-use crate::tree::{COLOR_SET, EXISTS, NONE, Node, OcTree, Params};
+use crate::tree::{EXISTS, NONE, Node, OcTree, Params};
 
 const OT_HEADER: &str = "# Octomap OcTree file";
 const BT_HEADER: &str = "# Octomap OcTree binary file";
@@ -215,9 +215,6 @@ fn read_full(r: &mut Reader<'_>, color: bool, depth: u32, nodes: &mut Vec<Raw>) 
     if color {
         let c = r.take(3)?;
         node.color = [c[0], c[1], c[2]];
-        if node.color != [255; 3] {
-            node.flags |= COLOR_SET;
-        }
     }
     let bits = r.take(1)?[0];
     let me = nodes.len();

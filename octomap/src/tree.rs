@@ -130,8 +130,6 @@ const BLOCK_BYTES: u64 = std::mem::size_of::<[Node; 8]>() as u64;
 pub(crate) const NONE: u32 = u32::MAX;
 /// The node exists (a child slot may be empty: unknown space).
 pub(crate) const EXISTS: u8 = 1;
-/// A colour was observed (OctoMap's `isColorSet`).
-pub(crate) const COLOR_SET: u8 = 2;
 
 /// One node.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -266,6 +264,21 @@ fn morton(k: Key) -> u64 {
         (x | (x << 2)) & 0x0009_2492_4924_9249
     }
     spread(k.0[0]) | (spread(k.0[1]) << 1) | (spread(k.0[2]) << 2)
+}
+
+/// Where the free-space ray of scan point `p` ends, and whether `p` is within `max_range`
+/// (any when negative): the point itself, or the point at `max_range` along the ray, computed
+/// as OctoMap's `computeUpdate` does (`f32` direction scaled by the range).
+fn ray_end(origin: [f32; 3], p: [f32; 3], max_range: f64) -> ([f32; 3], bool) {
+    let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
+    let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    if max_range < 0.0 || norm <= max_range {
+        return (p, true);
+    }
+    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let dir = [d[0] / len, d[1] / len, d[2] / len];
+    let r = max_range as f32;
+    ([origin[0] + dir[0] * r, origin[1] + dir[1] * r, origin[2] + dir[2] * r], false)
 }
 
 /// The key [`Key::packed`] made.
@@ -539,7 +552,6 @@ impl OcTree {
             } else {
                 n.color = color;
             }
-            n.flags |= COLOR_SET;
         }
     }
 
@@ -639,7 +651,6 @@ impl OcTree {
         if semantic && let Some(l) = label {
             leaf.color = l.color;
             leaf.class = l.class;
-            leaf.flags |= COLOR_SET;
         }
         // Up: prune, or take the children's maximum, until a node comes out as it was.
         for depth in (0..DEPTH as usize).rev() {
@@ -721,11 +732,12 @@ impl OcTree {
         // Scratch, per voxel visit at most: a key in the list and a change (16 bytes), a hash
         // entry with the table's slack (24 more) when the box is too large for the bitmap; per
         // point: its key, hash entry, label votes with slack and colour (168); both bitmaps.
-        let dense = KeyDedup::dense_cells(dims).is_some();
+        let dense_cells = KeyDedup::dense_cells(dims);
+        let dense = dense_cells.is_some();
         let per_visit = if dense { 16 } else { 40 };
         let scratch = voxels.saturating_mul(per_visit)
             + (points.len() as u64).saturating_mul(168)
-            + 2 * KeyDedup::dense_cells(dims).map_or(0, |c| c.div_ceil(8) as u64);
+            + 2 * dense_cells.map_or(0, |c| c.div_ceil(8) as u64);
         let over = |scan_bytes: u64| ScanError::OverBudget { voxels, tree_bytes, scan_bytes, budget };
         if tree_bytes.saturating_add(scratch) > budget {
             self.scratch = s;
@@ -740,31 +752,19 @@ impl OcTree {
             return Err(e);
         }
         for (i, p) in points.iter().enumerate() {
-            let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
-            let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            if max_range < 0.0 || norm <= max_range {
-                let free = &mut s.free;
-                self.grid.ray_walk(origin, *p, |k| {
-                    free.insert(k);
-                });
-                if let Some(k) = self.grid.key(*p) {
-                    s.occupied.insert(k);
-                    if let Some(l) = labels.and_then(|l| l.get(i)) {
-                        s.labels.entry(k.packed()).or_default().add(l);
-                        if self.semantic {
-                            s.colours.push((k, l.color));
-                        }
+            let (end, in_range) = ray_end(origin, *p, max_range);
+            let free = &mut s.free;
+            self.grid.ray_walk(origin, end, |k| {
+                free.insert(k);
+            });
+            if in_range && let Some(k) = self.grid.key(*p) {
+                s.occupied.insert(k);
+                if let Some(l) = labels.and_then(|l| l.get(i)) {
+                    s.labels.entry(k.packed()).or_default().add(l);
+                    if self.semantic {
+                        s.colours.push((k, l.color));
                     }
                 }
-            } else {
-                let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                let dir = [d[0] / len, d[1] / len, d[2] / len];
-                let r = max_range as f32;
-                let end = [origin[0] + dir[0] * r, origin[1] + dir[1] * r, origin[2] + dir[2] * r];
-                let free = &mut s.free;
-                self.grid.ray_walk(origin, end, |k| {
-                    free.insert(k);
-                });
             }
         }
         // Depth-first order: consecutive updates share their path down the tree.
@@ -795,7 +795,6 @@ impl OcTree {
                 }
             }
         }
-        s.changes.clear();
         for &m in &s.free.list {
             let k = unmorton(m);
             if !s.occupied.contains(k)
@@ -830,15 +829,7 @@ impl OcTree {
         let Some(o) = self.grid.key(origin) else { return 0 };
         let mut total = 0u64;
         for p in points {
-            let d = [p[0] - origin[0], p[1] - origin[1], p[2] - origin[2]];
-            let norm = f64::from(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-            let end = if max_range < 0.0 || norm <= max_range {
-                *p
-            } else {
-                let r = (max_range / norm) as f32;
-                [origin[0] + d[0] * r, origin[1] + d[1] * r, origin[2] + d[2] * r]
-            };
-            if let Some(e) = self.grid.key(end) {
+            if let Some(e) = self.grid.key(ray_end(origin, *p, max_range).0) {
                 let dist: u64 = (0..3).map(|a| u64::from(o.0[a].abs_diff(e.0[a]))).sum();
                 total = total.saturating_add(dist + 1);
             }

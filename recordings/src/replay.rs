@@ -92,8 +92,11 @@ pub fn ground_truth_topics(path: &Path) -> Option<Vec<String>> {
     use mcap::sans_io::{LinearReadEvent, LinearReader, LinearReaderOptions};
     use std::io::Read as _;
     let mut file = std::fs::File::open(path).ok()?;
+    let len = usize::try_from(file.metadata().ok()?.len()).unwrap_or(usize::MAX);
     let mut reader = LinearReader::new_with_options(
-        LinearReaderOptions::default().with_skip_end_magic(true).with_record_length_limit(64 << 20),
+        LinearReaderOptions::default()
+            .with_skip_end_magic(true)
+            .with_record_length_limit(crate::mcap::scan::record_length_limit(len)),
     );
     while let Some(event) = reader.next_event() {
         match event.ok()? {

@@ -61,10 +61,11 @@ pub fn run(args: &RunArgs) -> u8 {
         },
     };
     let req = LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source };
-    let Some(loaded) = super::load_and_report(&args.graph, &req) else {
+    let Some(mut loaded) = super::load_and_report(&args.graph, &req) else {
         return EXIT_BAD_INPUT;
     };
-    let Some(graph) = loaded.graph.clone() else {
+    // The graph runs; the rest of the load stays for locating a build error.
+    let Some(graph) = loaded.graph.take() else {
         return EXIT_BAD_INPUT;
     };
     if let Err(e) = std::fs::create_dir_all(&args.out) {

@@ -10,7 +10,7 @@ use dynaflow_engine::op::{
 };
 
 use super::intrinsics::{Intrinsics, read_calibration};
-use super::png::{load_depth, load_rgb};
+use super::png::{load_depth, load_rgb, same_size};
 
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -189,17 +189,8 @@ impl Source for Folder {
         let mut out = Outputs::new().with("camera_info", header.clone(), Body::CameraInfo(info));
         if let Some(d) = self.depth.as_ref().and_then(|d| d.get(seq as usize)) {
             let depth = load_depth(d, self.factor).map_err(OpError::Input)?;
-            if (depth.width, depth.height) != (img.width, img.height) {
-                return Err(OpError::Input(format!(
-                    "{}: {}x{} but {} is {}x{}",
-                    d.display(),
-                    depth.width,
-                    depth.height,
-                    path.display(),
-                    img.width,
-                    img.height
-                )));
-            }
+            same_size(d.display(), (depth.width, depth.height), path.display(), (img.width, img.height))
+                .map_err(OpError::Input)?;
             out.push("depth", header.clone(), Body::Depth(depth));
         }
         out.push("rgb", header, Body::Image(img));

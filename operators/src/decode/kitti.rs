@@ -10,7 +10,7 @@ use dynaflow_engine::op::{
 };
 use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
-use super::png::load_rgb;
+use super::png::{load_rgb, same_size};
 
 #[derive(Debug, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -253,17 +253,8 @@ impl Source for Kitti {
             (self.dir.join(&self.dirs.0).join(&name), self.dir.join(&self.dirs.1).join(&name));
         let left = load_rgb(&left_path).map_err(OpError::Input)?;
         let right = load_rgb(&right_path).map_err(OpError::Input)?;
-        if (left.width, left.height) != (right.width, right.height) {
-            return Err(OpError::Input(format!(
-                "{}: {}x{} but {} is {}x{}",
-                right_path.display(),
-                right.width,
-                right.height,
-                left_path.display(),
-                left.width,
-                left.height
-            )));
-        }
+        same_size(right_path.display(), (right.width, right.height), left_path.display(), (left.width, left.height))
+            .map_err(OpError::Input)?;
         let header = Header { seq, stamp, frame_id: self.frame_id.clone() };
         let info = CameraInfo { width: left.width, height: left.height, ..self.info.clone() };
         let mut out = Outputs::new()

@@ -46,3 +46,17 @@ pub fn load_depth(path: &Path, factor: f64) -> Result<DepthImage, String> {
         )),
     }
 }
+
+/// `a` (of `a_size`) must cover `b` (of `b_size`) pixel for pixel: a depth, mask or second
+/// camera image read at another image's coordinates. The error names both files and sizes.
+pub(crate) fn same_size(
+    a: impl std::fmt::Display,
+    a_size: (u32, u32),
+    b: impl std::fmt::Display,
+    b_size: (u32, u32),
+) -> Result<(), String> {
+    if a_size == b_size {
+        return Ok(());
+    }
+    Err(format!("{a}: {}x{} but {b} is {}x{}", a_size.0, a_size.1, b_size.0, b_size.1))
+}

@@ -11,7 +11,7 @@ use nalgebra::Isometry3;
 
 use super::index::{Associated, associate, nearest_pose, read_index, read_trajectory};
 use super::intrinsics::{Intrinsics, preset_for_folder, read_calibration};
-use super::png::{load_depth, load_rgb};
+use super::png::{load_depth, load_rgb, same_size};
 
 /// Ground truth may end this long before/after a frame and still be used (TUM's mocap runs at
 /// 100 Hz; its ends can miss the first or last frame by a few ms).
@@ -200,23 +200,17 @@ impl TumSource {
         let depth = load_depth(&self.dir.join(&f.depth), self.factor)?;
         let rgb_size = (rgb.width, rgb.height);
         // Every frame of a sequence has the first frame's size (the intrinsics are the first's).
-        if let Some(((w, h), first)) = self.size.borrow().as_ref()
-            && (*w, *h) != rgb_size
         {
-            return Err(format!(
-                "{}: {}x{} but the sequence's first frame ({first}) is {w}x{h}",
-                f.rgb, rgb.width, rgb.height
-            ));
+            let mut first = self.size.borrow_mut();
+            let ((w, h), name) = first.get_or_insert_with(|| (rgb_size, f.rgb.clone()));
+            if (*w, *h) != rgb_size {
+                return Err(format!(
+                    "{}: {}x{} but the sequence's first frame ({name}) is {w}x{h}",
+                    f.rgb, rgb.width, rgb.height
+                ));
+            }
         }
-        if self.size.borrow().is_none() {
-            *self.size.borrow_mut() = Some((rgb_size, f.rgb.clone()));
-        }
-        if (rgb.width, rgb.height) != (depth.width, depth.height) {
-            return Err(format!(
-                "{}: {}x{} but {} is {}x{}",
-                f.depth, depth.width, depth.height, f.rgb, rgb.width, rgb.height
-            ));
-        }
+        same_size(&f.depth, (depth.width, depth.height), &f.rgb, rgb_size)?;
         let header = Header { seq, stamp: f.rgb_stamp, frame_id: self.frame_id.clone() };
         let k = &self.intrinsics;
         let info = CameraInfo {
@@ -250,17 +244,7 @@ impl TumSource {
             if classes.format != dynaflow_engine::msg::PixelFormat::Gray8 {
                 return Err(format!("{}: expected an 8-bit grey class mask", mask_path.display()));
             }
-            if (classes.width, classes.height) != (rgb_size.0, rgb_size.1) {
-                return Err(format!(
-                    "{}: {}x{} but {} is {}x{}",
-                    mask_path.display(),
-                    classes.width,
-                    classes.height,
-                    f.rgb,
-                    rgb_size.0,
-                    rgb_size.1
-                ));
-            }
+            same_size(mask_path.display(), (classes.width, classes.height), &f.rgb, rgb_size)?;
             let mask = dynaflow_engine::msg::SegmentationMask {
                 width: classes.width,
                 height: classes.height,
