@@ -8,8 +8,8 @@
 //! masks.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
-use dynaflow_operators::culling::rules::{self, LabelledBox};
-use dynaflow_operators::synth::{Generator, Motion, SynthConfig};
+use dynaflow_culling::{self as rules, LabelledBox};
+use dynaflow_datasets::synth::{Generator, Motion, SynthConfig};
 use dynaflow_vision::GrayImage;
 use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid, seed_corners};
 use dynaflow_vision::geometry::RansacConfig;
@@ -106,7 +106,7 @@ fn main() {
             let flow_f = rules::flow_consistency(&d_all, 1.0);
             // Depth check against a key frame 10 frames back (a walking person moves about
             // 0.3 m in that time; frame to frame only 3 cm, below the depth noise).
-            let camera = rules::Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
+            let camera = rules::Pinhole::new(k.fx, k.fy, k.cx, k.cy);
             let key_f = f.saturating_sub(10);
             let key = g.frame(key_f, false);
             let kimg = GrayImage::from_rgb8(w, h, &key.rgb).unwrap();
@@ -125,8 +125,10 @@ fn main() {
                 .iter()
                 .map(|p| {
                     let z = at(&key.depth, p[0], p[1]);
-                    (z > 0.0)
-                        .then(|| cur_from_world * (key.world_from_cam * rules::back_project(camera, *p, f64::from(z))))
+                    (z > 0.0).then(|| {
+                        cur_from_world
+                            * (key.world_from_cam * camera.unproject([f64::from(p[0]), f64::from(p[1])], f64::from(z)))
+                    })
                 })
                 .collect();
             let depth = rules::depth_consistency(&predicted, camera, |x, y| at(&next.depth, x, y), 0.1);

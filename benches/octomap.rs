@@ -11,8 +11,8 @@ mod peer;
 
 use std::time::Instant;
 
+use dynaflow_datasets::synth::{Generator, SynthConfig};
 use dynaflow_octomap::{OcTree, Params};
-use dynaflow_operators::synth::{Generator, SynthConfig};
 use nalgebra::Point3;
 
 fn main() {

@@ -8,8 +8,9 @@
 use std::path::Path;
 use std::time::Instant;
 
-use dynaflow_operators::decode::{associate, load_depth, load_rgb, read_index};
-use dynaflow_operators::synth::{Generator, SynthConfig, WriteOptions, write_tum};
+use dynaflow_datasets::png::{load_depth, load_rgb};
+use dynaflow_datasets::synth::{Generator, SynthConfig, WriteOptions, write_tum};
+use dynaflow_datasets::tum::{associate, read_index};
 
 fn main() {
     let frames: u64 = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(120);

@@ -374,14 +374,19 @@ fn constants_table_lists_every_default() {
                 serde_json::Value::Bool(b) => {
                     assert!(value.contains(&b.to_string()), "{row}: {op}.{name} is {b} in the code")
                 }
+                serde_json::Value::Array(items) if !items.is_empty() => {
+                    for item in items {
+                        let item = item.as_str().unwrap_or_else(|| panic!("{row}: {op}.{name} lists {item}"));
+                        assert!(value.contains(item), "{row}: {op}.{name} lists `{item}` in the code");
+                    }
+                }
                 other => panic!("{row}: {op}.{name} has default {other}"),
             }
         }
     }
     // Parameters that choose a mode, a file or an output, not a tuned number.
     let not_constants = [
-        "cull.mode",
-        "cull.values",
+        "cull_semantic_prior.values",
         "detect.model",
         "detect.decoder",
         "detect.backend",
@@ -393,7 +398,12 @@ fn constants_table_lists_every_default() {
         "local_map.baseline",
     ];
     for op in [
-        "cull",
+        "cull_epipolar",
+        "cull_epipolar_adaptive",
+        "cull_mask",
+        "cull_semantic_prior",
+        "cull_flow",
+        "cull_depth",
         "fundamental_ransac",
         "homography_prosac",
         "combine_labels",
@@ -413,6 +423,28 @@ fn constants_table_lists_every_default() {
             assert!(
                 listed.contains(&key) || not_constants.contains(&key.as_str()),
                 "{key} is missing from docs/constants.md"
+            );
+        }
+    }
+}
+
+#[test]
+fn the_libraries_build_without_the_engine_gpu_inference_or_an_async_runtime() {
+    // Issue 30: a user generates or reads a sequence, or culls points, without the engine,
+    // wgpu, rten or tokio.
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    for krate in ["dynaflow-datasets", "dynaflow-culling", "dynaflow-msg", "dynaflow-vision"] {
+        let out = std::process::Command::new(&cargo)
+            .args(["tree", "--offline", "-e", "normal", "--prefix", "none", "-p", krate])
+            .current_dir(common::repo())
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "{krate}: {}", String::from_utf8_lossy(&out.stderr));
+        let tree = String::from_utf8_lossy(&out.stdout);
+        for forbidden in ["dynaflow-engine", "wgpu", "rten", "tokio"] {
+            assert!(
+                !tree.lines().any(|l| l.starts_with(&format!("{forbidden} "))),
+                "{krate} depends on {forbidden}:\n{tree}"
             );
         }
     }

@@ -124,8 +124,8 @@ fn labels_are_recorded_with_reason_and_score() {
 
 #[test]
 fn box_to_mask_recovers_the_people_from_their_boxes_and_depth() {
-    use dynaflow_operators::culling::rules::{box_depth_mask, instance_boxes};
-    use dynaflow_operators::synth::{Generator, SynthConfig};
+    use dynaflow_culling::{box_depth_mask, instance_boxes};
+    use dynaflow_datasets::synth::{Generator, SynthConfig};
     let g = Generator::new(SynthConfig::default());
     let (mut inter, mut union, mut frames, mut ours_n, mut truth_n) = (0usize, 0usize, 0, 0usize, 0usize);
     for k in (0..300).step_by(25) {

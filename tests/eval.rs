@@ -10,7 +10,7 @@ mod frontend;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use dynaflow_operators::decode::read_trajectory;
+use dynaflow_datasets::tum::read_trajectory;
 use dynaflow_slam::eval::{Align, Evaluation, RpeDelta, Stats, evaluate_with};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
@@ -222,7 +222,7 @@ fn the_ate_a_run_prints_on_a_tum_folder_is_evos() {
     let Some(python) = frontend::python_with("evo", "evo", "eval: a run's printed ATE vs evo_ape on the folder") else {
         return;
     };
-    use dynaflow_operators::synth::Motion;
+    use dynaflow_datasets::synth::Motion;
     let dir = common::TempDir::new("eval-run-tum");
     let seq = dir.path().join("rgbd_dataset_freiburg3_synthetic");
     let o = common::bin()

@@ -459,16 +459,18 @@ fn box_to_mask_gives_each_listed_class_its_own_id() {
 }
 
 #[test]
-fn a_misspelt_class_name_stops_the_run_before_it_starts() {
-    // issue 29, defect 7: `persn` would switch semantic culling off without a word.
+fn a_misspelt_class_name_is_a_located_error_with_a_suggestion() {
+    // issue 29, defect 7: `persn` would switch semantic culling off without a word; issue 30:
+    // class lists are typed, so the graph is refused where it names the class, in either the
+    // list or the older comma-separated form.
     for (node, wiring) in [
         (
             "people",
-            "people: { op: box_to_mask, in: { detections: boxes.detections, depth: camera.depth }, params: { classes: persn } }",
+            "people: { op: box_to_mask, in: { detections: boxes.detections, depth: camera.depth }, params: { classes: [persn] } }",
         ),
         (
             "cull",
-            "flow: { op: lk_flow, in: { image: camera.rgb } }\n  cull: { op: cull, in: { tracks: flow.tracks, mask: camera.gt_mask }, params: { mode: mask, classes: persn } }",
+            "flow: { op: lk_flow, in: { image: camera.rgb } }\n  cull: { op: cull_mask, in: { tracks: flow.tracks, mask: camera.gt_mask }, params: { classes: persn } }",
         ),
         (
             "map",
@@ -478,12 +480,14 @@ fn a_misspelt_class_name_stops_the_run_before_it_starts() {
         let text = format!(
             "name: t\noracle: true\nnodes:\n  camera: {{ op: synth, params: {{ frames: 2 }} }}\n  boxes: {{ op: oracle_boxes, in: {{ mask: camera.gt_mask }} }}\n  {wiring}\n"
         );
-        let g = common::graph(&text);
-        let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
-        let err = rt.block_on(runtime::run(&g, RunOptions::default(), Vec::new())).unwrap_err().to_string();
-        assert!(
-            err.contains(node) && err.contains("`persn`") && err.contains("did you mean `person`?"),
-            "{node}: {err}"
-        );
+        let loaded = load_str("t.yaml", &text, None, &dynaflow::registry(), &LoadRequest::default());
+        assert!(loaded.graph.is_none(), "{node}: a misspelt class validated");
+        let d = loaded.diagnostics.iter().find(|d| d.message.contains("`persn`")).expect(node);
+        assert_eq!(d.code, "param-value", "{node}: {d:?}");
+        assert!(d.message.contains(&format!("node `{node}`")), "{node}: {d:?}");
+        assert_eq!(d.hint.as_deref(), Some("did you mean `person`?"), "{node}: {d:?}");
+        // The span is the misspelt item itself, inside the list.
+        let span = d.span.expect("located");
+        assert_eq!(&text[span.offset..span.offset + span.len], "persn", "{node}: {d:?}");
     }
 }

@@ -424,8 +424,8 @@ fn an_unsupported_op_is_named_on_every_backend() {
 
 #[test]
 fn yolox_finds_the_photo_textured_synthetic_people() {
+    use dynaflow_datasets::synth::{Generator, SynthConfig};
     use dynaflow_infer::detect::{Decoder, Detector};
-    use dynaflow_operators::synth::{Generator, SynthConfig};
     let detector = Detector::new(load(&yolox()).unwrap(), Decoder::Yolox).unwrap();
     let rten = RtenModel::load(std::fs::read(yolox()).unwrap()).unwrap();
     let g = Generator::new(SynthConfig::default());

@@ -14,9 +14,9 @@ use std::collections::HashSet;
 use std::path::Path;
 use std::process::Command;
 
+use dynaflow_datasets::synth::{Generator, SynthConfig};
 use dynaflow_octomap::io::{bt_bytes, ot_bytes};
 use dynaflow_octomap::{Key, OcTree, Params, read};
-use dynaflow_operators::synth::{Generator, SynthConfig};
 use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 /// Every `step`-th pixel of a depth image back-projected and placed in the world (pixels

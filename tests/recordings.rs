@@ -695,3 +695,64 @@ fn no_viewer_is_a_clear_message_and_the_run_completes() {
     assert_eq!(out.status.code(), Some(0), "{stderr}");
     assert!(stderr.contains("pip install rerun-sdk==0.36.3"), "{stderr}");
 }
+
+/// Every `Points2D` position logged on `entity` in an `.rrd` file, by `frame`.
+fn rrd_points(path: &Path, entity: &str) -> std::collections::BTreeMap<i64, Vec<[f32; 2]>> {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::{Chunk, LogMsg};
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let positions = rerun::Points2D::descriptor_positions().component;
+    let mut out = std::collections::BTreeMap::new();
+    for msg in DecoderApp::decode_lazy(file) {
+        let LogMsg::ArrowMsg(_, arrow) = msg.unwrap() else { continue };
+        let chunk = Chunk::from_arrow_msg(&arrow).unwrap();
+        if chunk.entity_path().to_string() != entity {
+            continue;
+        }
+        let frames = chunk.iter_component_indices("frame".into(), positions).map(|(t, _)| t.as_i64());
+        for (frame, points) in frames.zip(chunk.iter_component::<rerun::components::Position2D>(positions)) {
+            out.insert(frame, points.iter().map(|p| [p.x(), p.y()]).collect());
+        }
+    }
+    out
+}
+
+#[test]
+fn every_label_in_the_rrd_is_drawn_at_its_own_track() {
+    // Issue 30: the default graph records five point sets per frame (keypoints, tracks and
+    // three label sets); a label was drawn at whichever set the recorder saw last. Now each
+    // label carries its pixel: read the `.rrd` back and check every label's position against
+    // the track it labels (the MCAP of the same run gives the tracks and the labels' indices).
+    let dir = common::TempDir::new("rrd-labels");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--frames", "5", "--record", "rrd,mcap", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/default.yaml"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let rec = read_mcap(&dir.path().join("default.mcap")).unwrap();
+    let tracks = &rec.topics["/flow/tracks"];
+    let mut checked = 0;
+    for node in ["semantic", "geometric", "combined"] {
+        let drawn = rrd_points(&dir.path().join("default.rrd"), &format!("/{node}/labels"));
+        let labels = &rec.topics[&format!("/{node}/labels")];
+        assert!(!labels.frames.is_empty(), "{node}: no labels recorded");
+        for (seq, frame) in &labels.frames {
+            let cur = tracks.frames[seq]["data"]["cur"].as_array().unwrap();
+            let want: Vec<[f32; 2]> = frame["data"]["index"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|i| {
+                    let p = &cur[i.as_u64().unwrap() as usize];
+                    [p[0].as_f64().unwrap() as f32, p[1].as_f64().unwrap() as f32]
+                })
+                .collect();
+            let got = drawn.get(&(*seq as i64)).unwrap_or_else(|| panic!("{node}: frame {seq} not in the rrd"));
+            assert_eq!(got, &want, "{node}: frame {seq}: labels not at their tracks");
+            checked += want.len();
+        }
+    }
+    assert!(checked > 100, "only {checked} labels checked");
+}

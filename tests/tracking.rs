@@ -10,7 +10,7 @@ mod frontend;
 
 use std::path::Path;
 
-use dynaflow_operators::decode::read_trajectory;
+use dynaflow_datasets::tum::read_trajectory;
 use dynaflow_slam::eval::{Align, evaluate};
 
 /// Run a variant; return the summary's ATE RMSE and the trajectory file's.
@@ -81,8 +81,8 @@ fn walking_people_pull_the_baseline_off_and_masks_keep_them_out() {
 }
 
 /// ICL-NUIM intrinsics used by slambook2 for these frames (note the negative fy).
-const ICL: dynaflow_vision::geometry::Camera =
-    dynaflow_vision::geometry::Camera { fx: 481.2, fy: -480.0, cx: 319.5, cy: 239.5 };
+const ICL: dynaflow_vision::camera::Pinhole =
+    dynaflow_vision::camera::Pinhole { fx: 481.2, fy: -480.0, cx: 319.5, cy: 239.5 };
 
 #[test]
 fn relative_poses_on_the_slambook2_frames_match_the_given_ones() {

@@ -74,6 +74,43 @@ fn ill_typed_and_out_of_range_params() {
 }
 
 #[test]
+fn typed_enum_list_map_and_format_params_and_wired_inputs() {
+    // Issue 30: every value of a typed parameter (an enum, each item of a list, each key and
+    // value of a map, a format of its own) is checked where it is written; a rule's wired
+    // input must be connected; a retired operator names its replacement; a variant that
+    // swaps a node's operator is checked against the new one.
+    check(
+        "typed_params.yaml",
+        &[
+            (4, 53, "param-value", "`zigzag` is not one of `static`, `xyz`"),
+            (6, 107, "param-value", "param `classes[1]`: `persn`"),
+            (7, 116, "param-value", "param `values` key `chiar`"),
+            (7, 133, "param-type", "param `values.cup` expects number in 0..=1"),
+            (9, 3, "missing-input", "required input `pose` (pose) is not connected"),
+            (10, 14, "unknown-op", "`mask` -> `cull_mask`"),
+            (11, 55, "param-value", "param `intrinsics`: expected `fr1`"),
+            (14, 83, "param-value", "variant `flow_rule`: node `people`: param `motion_model`: `affine`"),
+        ],
+    );
+}
+
+#[test]
+fn every_default_is_a_valid_value_of_its_parameter() {
+    // Each operator's defaults, written into a graph as values, pass its own validation: a
+    // typed default out of its declared range, or of the wrong shape, is caught here.
+    let registry = dynaflow::registry();
+    for op in registry.iter() {
+        let params: serde_json::Map<String, serde_json::Value> =
+            op.params.iter().filter_map(|p| Some((p.name.to_owned(), p.default.to_json()?))).collect();
+        let text =
+            format!("name: t\nnodes:\n  n: {{ op: {}, params: {} }}\n", op.name, serde_json::Value::Object(params));
+        let loaded = load_str("t.yaml", &text, None, &registry, &LoadRequest::default());
+        let bad: Vec<_> = loaded.diagnostics.iter().filter(|d| d.code.starts_with("param-")).collect();
+        assert!(bad.is_empty(), "{}: {bad:#?}\n{text}", op.name);
+    }
+}
+
+#[test]
 fn type_mismatched_edge() {
     check("type_mismatch.yaml", &[(6, 14, "port-type-mismatch", "outputs of that type: `camera.tick`")]);
 }
@@ -199,7 +236,7 @@ fn a_set_value_error_names_the_flag_it_came_from() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2), "{stderr}");
     assert!(
-        stderr.contains("error[param-value]: node `map`: param `dynamic_classes`") && !stderr.contains("--set"),
+        stderr.contains("error[param-value]: node `map`: param `dynamic_classes[0]`") && !stderr.contains("--set"),
         "{stderr}"
     );
 }
@@ -346,8 +383,8 @@ fn a_variant_that_decides_with_ground_truth_must_declare_it() {
         "undeclared_oracle.yaml",
         &[
             (
-                10,
-                49,
+                11,
+                61,
                 "undeclared-oracle",
                 "variant `gt_masks` decides with ground truth but does not declare `oracle: true`: cull/mask <- camera.gt_mask",
             ),
@@ -358,8 +395,8 @@ fn a_variant_that_decides_with_ground_truth_must_declare_it() {
                 "undeclared-oracle",
                 "variant `gt_boxes` decides with ground truth but does not declare `oracle: true`: boxes/mask <- camera.gt_mask",
             ),
-            (13, 31, "undeclared-oracle", "cull/detections <- boxes.detections (from camera.gt_mask)"),
-            (18, 30, "undeclared-oracle", "cull/key_frame <- stats.stats (from camera.gt_mask)"),
+            (14, 31, "undeclared-oracle", "cull/detections <- boxes.detections (from camera.gt_mask)"),
+            (19, 30, "undeclared-oracle", "cull/key_frame <- stats.stats (from camera.gt_mask)"),
         ],
     );
 }

@@ -10,11 +10,11 @@
 
 pub mod diag;
 mod load;
-pub mod msg;
 pub mod op;
 pub mod runtime;
 pub mod sink;
 pub mod spec;
 pub mod yaml;
 
+pub use dynaflow_msg as msg;
 pub use load::{LoadRequest, Loaded, SourceOverride, load, load_str};

@@ -53,6 +53,29 @@ pub struct RunInfo {
     /// The ports that carry ground truth (`node/port`): emitted by a ground-truth output or
     /// derived from one.
     pub ground_truth_ports: std::collections::BTreeSet<String>,
+    /// The camera each pose stream is seen through: pose port (`node/port`) -> camera-info
+    /// port, the node's own camera-info output (a source's ground truth) or what feeds its
+    /// camera-info input (a tracker's estimate). Poses of a node with neither have none.
+    pub cameras: BTreeMap<String, String>,
+}
+
+/// For each pose output of `graph`, the camera-info port it is seen through (see
+/// [`RunInfo::cameras`]).
+fn pose_cameras(graph: &ResolvedGraph) -> BTreeMap<String, String> {
+    let mut out = BTreeMap::new();
+    for n in &graph.nodes {
+        let own = n.outputs.iter().find(|o| o.ty == PortType::CameraInfo).map(|o| format!("{}/{}", n.id, o.name));
+        let fed = n.inputs.iter().filter(|i| i.ty == PortType::CameraInfo).find_map(|i| {
+            let e = graph.edges.get(i.edge?)?;
+            let from = graph.nodes.get(e.from_node)?;
+            Some(format!("{}/{}", from.id, from.outputs.get(e.from_port)?.name))
+        });
+        let Some(camera) = own.or(fed) else { continue };
+        for o in n.outputs.iter().filter(|o| o.ty == PortType::Pose) {
+            out.insert(format!("{}/{}", n.id, o.name), camera.clone());
+        }
+    }
+    out
 }
 
 impl RunInfo {
@@ -82,6 +105,7 @@ impl RunInfo {
                 .iter()
                 .flat_map(|n| n.outputs.iter().filter(|o| o.ground_truth).map(move |o| format!("{}/{}", n.id, o.name)))
                 .collect(),
+            cameras: pose_cameras(graph),
         }
     }
 }

@@ -73,6 +73,11 @@ impl Yaml {
         Self { kind: YamlKind::Scalar { text: text.into(), quoted: false }, span }
     }
 
+    /// A quoted scalar (always a string), e.g. a mapping key checked as a value.
+    pub fn quoted(text: impl Into<String>, span: Span) -> Self {
+        Self { kind: YamlKind::Scalar { text: text.into(), quoted: true }, span }
+    }
+
     /// Look up a key of a mapping.
     pub fn get(&self, key: &str) -> Option<&Yaml> {
         match &self.kind {

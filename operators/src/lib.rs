@@ -1,8 +1,9 @@
-//! dynaflow's operators, one module per family. [`registry`] returns all of them.
+//! dynaflow's operators, one module per family, each a thin wrapper over a library crate.
+//! [`registry`] returns all of them.
 //!
-//! Families: `synth` (the semi-synthetic dynamic RGB-D generator), `util` (test sources,
+//! Families: `synth_op` (the `synth` source over `dynaflow-datasets`' generator), `util` (test sources,
 //! pass-through, gating, fault injection: the pieces used to exercise the engine), `decode`
-//! (dataset readers), `frontend` (ORB, descriptor matching, LK flow over `dynaflow-vision`),
+//! (the dataset readers over `dynaflow-datasets`), `frontend` (ORB, descriptor matching, LK flow over `dynaflow-vision`),
 //! `culling` (fundamental-matrix RANSAC, the seed papers' culling rules, an oracle for boxes),
 //! `tracking` (PnP + BA over `dynaflow-slam`), `inference` (detectors over `dynaflow-infer` and
 //! `dynaflow-gpu`), `mapping` (OctoMap over `dynaflow-octomap`).
@@ -12,7 +13,7 @@ pub mod decode;
 mod frontend;
 pub mod inference;
 pub mod mapping;
-pub mod synth;
+mod synth_op;
 pub mod tracking;
 mod util;
 
@@ -22,7 +23,7 @@ use dynaflow_engine::op::Registry;
 pub fn registry() -> Registry {
     let mut r = Registry::new();
     util::register(&mut r);
-    r.register(synth::SYNTH);
+    r.register(synth_op::SYNTH);
     r.register(decode::TUM_RGBD);
     r.register(decode::IMAGE_FOLDER);
     r.register(decode::KITTI_ODOMETRY);
@@ -31,7 +32,13 @@ pub fn registry() -> Registry {
     r.register(frontend::LK_FLOW);
     r.register(culling::FUNDAMENTAL_RANSAC);
     r.register(culling::HOMOGRAPHY_PROSAC);
-    r.register(culling::CULL);
+    r.register(culling::CULL_EPIPOLAR);
+    r.register(culling::CULL_EPIPOLAR_ADAPTIVE);
+    r.register(culling::CULL_MASK);
+    r.register(culling::CULL_SEMANTIC_PRIOR);
+    r.register(culling::CULL_FLOW);
+    r.register(culling::CULL_DEPTH);
+    r.retire("cull", culling::CULL_MIGRATION);
     r.register(culling::COMBINE_LABELS);
     r.register(culling::ORACLE_BOXES);
     r.register(tracking::PNP_TRACK);

@@ -103,6 +103,7 @@ fn data(body: &Body) -> Value {
             "dynamic": l.labels.iter().map(|l| l.dynamic).collect::<Vec<_>>(),
             "reason": l.labels.iter().map(|l| l.reason).collect::<Vec<_>>(),
             "score": l.labels.iter().map(|l| l.score).collect::<Vec<_>>(),
+            "at": l.labels.iter().map(|l| l.at).collect::<Vec<_>>(),
         }),
         Body::Detections(d) => json!({
             "bbox": d.detections.iter().map(|d| d.bbox).collect::<Vec<_>>(),

@@ -20,7 +20,7 @@ use dynaflow_engine::msg::{
     Track, Tracks, Trajectory,
 };
 use dynaflow_engine::op::{
-    Context, Default, Instance, OpError, OpKind, OpSpec, Outputs, ParamSpec, ParamType, Params, PortSpec, Source,
+    Context, Instance, OpError, OpKind, OpSpec, Outputs, Param, ParamMap, ParamType, Params, PortSpec, Source,
 };
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use serde_json::Value;
@@ -47,19 +47,11 @@ const OUTPUTS: &[PortSpec] = &[
 pub const MCAP_REPLAY: OpSpec = OpSpec {
     name: "mcap_replay",
     family: "recordings",
-    doc: "Replays topics of a dynaflow MCAP recording as ports, keeping frame numbers and stamps, so a user re-runs only the late part of a graph on recorded intermediates. `topics` maps ports to topics, e.g. `pose=/track/pose,keypoints=/orb/keypoints`.",
+    doc: "Replays topics of a dynaflow MCAP recording as ports, keeping frame numbers and stamps, so a user re-runs only the late part of a graph on recorded intermediates. `topics` maps ports to topics, e.g. `{ pose: /track/pose, keypoints: /orb/keypoints }`.",
     kind: OpKind::Source,
     inputs: &[],
     outputs: OUTPUTS,
-    params: &[
-        ParamSpec { name: "path", ty: ParamType::Path, default: Default::Required, doc: "the `.mcap` recording" },
-        ParamSpec {
-            name: "topics",
-            ty: ParamType::Str,
-            default: Default::Required,
-            doc: "`port=/node/port` pairs, comma-separated",
-        },
-    ],
+    params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: Some(replayed_ground_truth),
     build,
@@ -69,19 +61,9 @@ pub const MCAP_REPLAY: OpSpec = OpSpec {
 /// `ground_truth_topics`), so validation follows them as it followed the original ports. A
 /// file that cannot be read marks nothing here; building the operator then reports it.
 fn replayed_ground_truth(params: &Params) -> Vec<&'static str> {
-    let (Some(path), Some(topics)) =
-        (params.get("path").and_then(Value::as_str), params.get("topics").and_then(Value::as_str))
-    else {
-        return Vec::new();
-    };
-    let Some(marked) = ground_truth_topics(&params.resolve_path(path)) else { return Vec::new() };
-    // A malformed `topics` marks nothing here; building the operator reports it.
-    port_topics(topics)
-        .unwrap_or_default()
-        .into_iter()
-        .filter(|(_, topic)| marked.contains(topic))
-        .map(|(port, _)| port)
-        .collect()
+    let Ok(c) = Config::from_params(params) else { return Vec::new() };
+    let Some(marked) = ground_truth_topics(&c.path) else { return Vec::new() };
+    c.topics.0.into_iter().filter(|(_, topic)| marked.contains(topic)).map(|(port, _)| port.0).collect()
 }
 
 /// The `ground_truth_topics` of a dynaflow MCAP recording's provenance, read from the start
@@ -121,38 +103,49 @@ pub fn ground_truth_topics(path: &Path) -> Option<Vec<String>> {
     None
 }
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Config {
-    path: String,
-    topics: String,
+/// The names of [`OUTPUTS`].
+const PORT_NAMES: [&str; OUTPUTS.len()] = {
+    let mut names = [""; OUTPUTS.len()];
+    let mut i = 0;
+    while i < OUTPUTS.len() {
+        names[i] = OUTPUTS[i].name;
+        i += 1;
+    }
+    names
+};
+
+/// One of the replay ports, as a `topics` key.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ReplayPort(&'static str);
+
+impl Param for ReplayPort {
+    const TYPE: ParamType = ParamType::Enum { values: &PORT_NAMES };
+    fn from_json(value: &Value, _: &Params) -> Result<Self, String> {
+        let name = value.as_str().unwrap_or_default();
+        PORT_NAMES
+            .iter()
+            .find(|p| **p == name)
+            .map(|p| ReplayPort(p))
+            .ok_or_else(|| format!("no output port {value}; ports: {}", PORT_NAMES.join(", ")))
+    }
+    fn to_json(&self) -> Value {
+        self.0.into()
+    }
 }
 
-/// `topics`' `port=/topic` pairs, each port one of [`OUTPUTS`].
-fn port_topics(topics: &str) -> Result<Vec<(&'static str, String)>, OpError> {
-    let mut wanted: Vec<(&'static str, String)> = Vec::new();
-    for pair in topics.split(',').map(str::trim).filter(|p| !p.is_empty()) {
-        let (port, topic) = pair.split_once('=').ok_or_else(|| OpError::Config {
-            key: "topics".into(),
-            message: format!("`{pair}` is not `port=/topic`"),
-        })?;
-        let spec = OUTPUTS.iter().find(|p| p.name == port.trim()).ok_or_else(|| OpError::Config {
-            key: "topics".into(),
-            message: format!(
-                "no output port `{}`; ports: {}",
-                port.trim(),
-                OUTPUTS.iter().map(|p| p.name).collect::<Vec<_>>().join(", ")
-            ),
-        })?;
-        wanted.push((spec.name, topic.trim().to_owned()));
+dynaflow_engine::params! {
+    struct Config {
+        /// the `.mcap` recording
+        path: std::path::PathBuf,
+        /// the topic each port replays, e.g. `{ pose: /track/pose, keypoints: /orb/keypoints }` (or the older `pose=/track/pose,keypoints=/orb/keypoints`)
+        topics: ParamMap<ReplayPort, String>,
     }
-    Ok(wanted)
 }
 
 fn build(params: &Params) -> Result<Instance, OpError> {
-    let c: Config = params.parse()?;
-    let path = params.resolve_path(&c.path);
-    let wanted = port_topics(&c.topics)?;
+    let c = Config::from_params(params)?;
+    let path = c.path;
+    let wanted: Vec<(&'static str, String)> = c.topics.0.into_iter().map(|(port, topic)| (port.0, topic)).collect();
     let frames = read(&path, &wanted)?;
     Ok(Instance::Source(Box::new(Replay { path, frames, wanted })))
 }
@@ -471,6 +464,8 @@ fn decode_json(ty: PortType, v: &Value) -> Result<Body, String> {
                     dynamic: d["dynamic"][i].as_bool().unwrap_or(false),
                     reason: reason(&d["reason"][i]),
                     score: d["score"][i].as_f64().unwrap_or(0.0) as f32,
+                    // Recordings made before labels carried their pixel: unknown.
+                    at: std::array::from_fn(|k| d["at"][i][k].as_f64().map_or(f32::NAN, |v| v as f32)),
                 })
                 .collect();
             Body::PointLabels(PointLabels { labels })

@@ -4,7 +4,8 @@
 //! m free poses (m is small in a local window) and back-substitutes 3x3 blocks for the
 //! points. Poses use the same left SE(3) perturbation as motion-only BA.
 
-use dynaflow_vision::geometry::{CHI2_2DOF_95, CHI2_3DOF_95, Camera, PoseObservation, compose, observation_jacobian};
+use dynaflow_vision::camera::Pinhole;
+use dynaflow_vision::geometry::{CHI2_2DOF_95, CHI2_3DOF_95, PoseObservation, compose, observation_jacobian};
 use nalgebra::{DMatrix, DVector, Isometry3, Matrix3, Point3, SMatrix, Vector3, Vector6};
 
 /// A pose taking part in the adjustment.
@@ -48,7 +49,7 @@ pub fn chi2_bound(depth: Option<f64>, bf: f64) -> f64 {
 }
 
 /// Squared whitened error of an observation, `None` behind the camera.
-pub fn chi2(cam: &Camera, bf: f64, pose: &Isometry3<f64>, point: &Point3<f64>, o: &BaObservation) -> Option<f64> {
+pub fn chi2(cam: &Pinhole, bf: f64, pose: &Isometry3<f64>, point: &Point3<f64>, o: &BaObservation) -> Option<f64> {
     let po = PoseObservation { point: *point, uv: o.uv, sigma: o.sigma, depth: o.depth };
     let (r, _) = observation_jacobian(cam, bf, &(pose * point), &po)?;
     Some(r.norm_squared() / (o.sigma * o.sigma))
@@ -63,7 +64,7 @@ fn huber(e2: f64, bound: f64) -> (f64, f64) {
 /// with `active[i]` true. Deterministic; never panics on degenerate input (a step that cannot be
 /// solved raises the damping, and the adjustment stops after `iterations`).
 pub fn bundle_adjust(
-    cam: &Camera,
+    cam: &Pinhole,
     bf: f64,
     poses: &mut [BaPose],
     points: &mut [Point3<f64>],
@@ -224,8 +225,8 @@ mod tests {
     use dynaflow_vision::geometry::{SplitMix64, exp_se3};
     use nalgebra::{Translation3, UnitQuaternion};
 
-    fn cam() -> Camera {
-        Camera { fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5 }
+    fn cam() -> Pinhole {
+        Pinhole { fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5 }
     }
 
     /// Five poses along a line looking at a cloud; exact observations.

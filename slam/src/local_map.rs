@@ -12,7 +12,7 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use dynaflow_vision::geometry::Camera;
+use dynaflow_vision::camera::Pinhole;
 use nalgebra::Point3;
 
 use crate::ba::{BaObservation, BaPose, BaReport, bundle_adjust, chi2, chi2_bound};
@@ -59,7 +59,7 @@ struct Mp {
 #[derive(Debug)]
 pub struct LocalMapper {
     config: LocalMapConfig,
-    cam: Camera,
+    cam: Pinhole,
     map_id: u32,
     kfs: BTreeMap<u64, Kf>,
     points: BTreeMap<u64, Mp>,
@@ -68,7 +68,7 @@ pub struct LocalMapper {
 
 impl LocalMapper {
     /// An empty map.
-    pub fn new(config: LocalMapConfig, cam: Camera) -> Self {
+    pub fn new(config: LocalMapConfig, cam: Pinhole) -> Self {
         Self { config, cam, map_id: 0, kfs: BTreeMap::new(), points: BTreeMap::new(), last: BaReport::default() }
     }
 

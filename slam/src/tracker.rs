@@ -20,7 +20,8 @@
 
 use std::collections::{BTreeMap, BTreeSet};
 
-use dynaflow_vision::geometry::{Camera, PoseObservation, SplitMix64, optimize_pose, p3p_ransac, renormalised};
+use dynaflow_vision::camera::Pinhole;
+use dynaflow_vision::geometry::{PoseObservation, SplitMix64, optimize_pose, p3p_ransac, renormalised};
 use dynaflow_vision::matching::{GridIndex, MatchConfig, hamming, match_brute_force};
 use nalgebra::{Isometry3, Point3};
 
@@ -136,7 +137,7 @@ struct TPoint {
 #[derive(Debug)]
 pub struct Tracker {
     config: TrackerConfig,
-    cam: Camera,
+    cam: Pinhole,
     width: f64,
     height: f64,
     rng: SplitMix64,
@@ -158,7 +159,7 @@ pub struct Tracker {
 
 impl Tracker {
     /// A tracker for images `width` x `height` from camera `cam`; `seed` drives RANSAC.
-    pub fn new(config: TrackerConfig, cam: Camera, width: usize, height: usize, seed: u64) -> Self {
+    pub fn new(config: TrackerConfig, cam: Pinhole, width: usize, height: usize, seed: u64) -> Self {
         Self {
             config,
             cam,

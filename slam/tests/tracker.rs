@@ -5,10 +5,11 @@
 
 use dynaflow_slam::eval::{Align, evaluate};
 use dynaflow_slam::{Feature, LocalMapConfig, LocalMapper, TrackState, Tracker, TrackerConfig};
-use dynaflow_vision::geometry::{Camera, SplitMix64};
+use dynaflow_vision::camera::Pinhole;
+use dynaflow_vision::geometry::SplitMix64;
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion};
 
-const CAM: Camera = Camera { fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5 };
+const CAM: Pinhole = Pinhole { fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5 };
 
 struct World {
     points: Vec<(Point3<f64>, [u8; 32])>,

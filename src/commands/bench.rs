@@ -379,7 +379,7 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
 fn plots(jobs: &[Job], rows: &[Row], out: &Path) -> Result<(), String> {
     for (j, r) in jobs.iter().zip(rows) {
         let Some((gt, est)) = &r.trajectory else { continue };
-        let read = |p: &Path| dynaflow_operators::decode::read_trajectory(p).map_err(|e| e.to_string());
+        let read = |p: &Path| dynaflow_datasets::tum::read_trajectory(p).map_err(|e| e.to_string());
         let e = evaluate(&read(gt)?, &read(est)?, 0.01, Align::Se3, 1).map_err(|e| e.to_string())?;
         let oracle = if r.oracle { " (oracle)" } else { "" };
         let title =

@@ -3,7 +3,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use dynaflow_operators::decode::read_trajectory;
+use dynaflow_datasets::tum::read_trajectory;
 use dynaflow_slam::eval::{Align, RpeDelta, Stats, evaluate_with};
 
 use crate::{EXIT_BAD_INPUT, EXIT_OK};

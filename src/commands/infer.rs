@@ -3,9 +3,9 @@
 use std::io::Write;
 use std::path::PathBuf;
 
-use dynaflow_infer::detect::{Decoder, Detector};
+use dynaflow_infer::detect::Detector;
 use dynaflow_infer::onnx;
-use dynaflow_operators::inference::{COCO_NAMES, Runner, YOLOX_NANO};
+use dynaflow_operators::inference::{Backend, COCO_NAMES, DecoderName, Runner, YOLOX_NANO};
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
@@ -19,13 +19,13 @@ pub struct InferArgs {
     #[arg(long)]
     pub model: Option<PathBuf>,
     /// Output decoding of the model.
-    #[arg(long, default_value = "yolox", value_parser = ["yolox", "fastestdet"])]
-    pub decoder: String,
+    #[arg(long, default_value = "yolox", value_parser = names(DecoderName::NAMES, DecoderName::from_name))]
+    pub decoder: DecoderName,
     /// Where the model runs: `cpu` (rten), `wgpu` (our GPU executor; falls back to `cpu`
     /// with a warning without an adapter or for a model it cannot plan) or `reference` (plain
     /// loops; slow).
-    #[arg(long, default_value = "cpu", value_parser = ["cpu", "wgpu", "reference"])]
-    pub backend: String,
+    #[arg(long, default_value = "cpu", value_parser = names(Backend::NAMES, Backend::from_name))]
+    pub backend: Backend,
     /// Score threshold.
     #[arg(long, default_value_t = 0.3)]
     pub score: f32,
@@ -36,6 +36,16 @@ pub struct InferArgs {
     /// such an adapter counts as no GPU and the model runs on the CPU (rten).
     #[arg(long)]
     pub allow_software: bool,
+}
+
+/// A clap parser for the names of a graph parameter's enum, so the flag and the parameter
+/// take the same values.
+fn names<T: Clone + Send + Sync + 'static>(
+    names: &'static [&'static str],
+    from: fn(&str) -> Option<T>,
+) -> impl clap::builder::TypedValueParser<Value = T> {
+    use clap::builder::TypedValueParser as _;
+    clap::builder::PossibleValuesParser::new(names).try_map(move |s: String| from(&s).ok_or("unknown name"))
 }
 
 /// Exit 0 with one JSON object per image, 2 on a bad model or image.
@@ -50,10 +60,10 @@ pub fn infer(args: &InferArgs) -> u8 {
             return EXIT_BAD_INPUT;
         }
     }
-    let decoder = if args.decoder == "fastestdet" { Decoder::FastestDet } else { Decoder::Yolox };
+    let decoder = args.decoder.decoder();
     // Without an adapter (or for a model it cannot plan) `wgpu` warns and runs on the CPU.
     let ready = loaded.map_err(|e| e.to_string()).and_then(|(m, bytes)| {
-        let (runner, _) = Runner::new(&bytes, &m, &args.backend, args.allow_software)?;
+        let (runner, _) = Runner::new(&bytes, &m, args.backend, args.allow_software)?;
         let which =
             args.model.as_ref().map_or_else(|| "the embedded YOLOX-nano".to_owned(), |p| p.display().to_string());
         Ok((Detector::new(m, decoder).map_err(|e| format!("{which}: {e}"))?, runner))

@@ -26,7 +26,7 @@ pub fn ops(format: &Format) -> u8 {
                         "  in  {:<14} {:<12}{}{}",
                         p.name,
                         p.ty.name(),
-                        if p.required { "" } else { " (optional)" },
+                        presence(p).map_or_else(String::new, |r| format!(" ({r})")),
                         role(p).map_or_else(String::new, |r| format!(" ({r})"))
                     );
                 }
@@ -55,6 +55,15 @@ fn role(p: &PortSpec) -> Option<&'static str> {
         InputRole::Decision => None,
         InputRole::Statistics => Some("statistics only"),
         InputRole::Evaluation => Some("evaluation only"),
+    }
+}
+
+/// Whether an input may be left out: `None` for a required one.
+fn presence(p: &PortSpec) -> Option<&'static str> {
+    match (p.required, p.wired) {
+        (true, _) => None,
+        (false, true) => Some("wired, may be empty in a frame"),
+        (false, false) => Some("optional"),
     }
 }
 
@@ -95,7 +104,7 @@ fn markdown(ops: &[&OpSpec]) -> String {
                     "| `{}` | {} | {} | {}{} |\n",
                     p.name,
                     p.ty.name(),
-                    if p.required { "yes" } else { "no" },
+                    presence(p).map_or("yes", |_| if p.wired { "wired" } else { "no" }),
                     role(p).map_or_else(String::new, |r| format!("*{r}*: ")),
                     p.doc
                 ));

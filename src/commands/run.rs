@@ -139,7 +139,9 @@ pub fn run(args: &RunArgs) -> u8 {
     };
     let show_progress = !args.no_progress && std::io::stderr().is_terminal();
     let result = rt.block_on(async {
-        runtime::stop_on_signals(options.stop.clone());
+        // A second signal aborts at once: the CLI owns the exit code (130, as a shell reports
+        // a SIGINT).
+        runtime::stop_on_signals(options.stop.clone(), || std::process::exit(i32::from(EXIT_INTERRUPTED)));
         let progress = show_progress.then(|| spawn_progress(&options));
         let result = runtime::run(&graph, options.clone(), sinks).await;
         if let Some((bar, task)) = progress {

@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 use std::time::Instant;
 
-use dynaflow_operators::synth::{Generator, Motion, PeopleMode, SynthConfig, WriteOptions, scaled_fr3, write_tum};
+use dynaflow_datasets::synth::{Generator, Motion, PeopleMode, SynthConfig, WriteOptions, scaled_fr3, write_tum};
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use dynaflow_operators::synth::{Generator, SynthConfig};
+use dynaflow_datasets::synth::{Generator, SynthConfig};
 use dynaflow_vision::GrayImage;
 use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid, seed_corners};
 use dynaflow_vision::matching::{MatchConfig, match_brute_force};
@@ -120,8 +120,8 @@ pub fn fundamental_cases() -> Vec<Correspondences> {
 
 /// 3-D points of the real ch7 pair's first frame (ORB matches back-projected with its depth,
 /// TUM fr2 intrinsics, depth / 5000 = metres) and their pixels in the second frame.
-pub fn ch7_pnp() -> (Vec<nalgebra::Point3<f64>>, Vec<[f64; 2]>, dynaflow_vision::geometry::Camera) {
-    let cam = dynaflow_vision::geometry::Camera { fx: 520.9, fy: 521.0, cx: 325.1, cy: 249.7 };
+pub fn ch7_pnp() -> (Vec<nalgebra::Point3<f64>>, Vec<[f64; 2]>, dynaflow_vision::camera::Pinhole) {
+    let cam = dynaflow_vision::camera::Pinhole { fx: 520.9, fy: 521.0, cx: 325.1, cy: 249.7 };
     let [a, b] = ch7();
     let (ga, gb) = (load_gray(&a), load_gray(&b));
     let (_, _, prev, cur) = our_matches(&ga, &gb, Distribution::Harris, &cross_check_only());

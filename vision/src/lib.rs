@@ -1,6 +1,7 @@
 //! dynaflow's geometric front-end: ORB features, descriptor matching and pyramidal
 //! Lucas-Kanade optical flow, as plain functions and structs on grey image buffers.
 //!
+//! - [`camera`]: the camera model (pinhole projection and unprojection, lens distortion).
 //! - [`image`]: the grey image buffer, RGB conversion, resampling.
 //! - [`orb`]: ORB-SLAM-style extraction (pyramid, FAST per cell, quadtree distribution,
 //!   intensity-centroid orientation, rotated BRIEF with the learned pattern).
@@ -14,6 +15,7 @@
 //! No engine, tokio or image-codec dependency (nalgebra for the small linear algebra): a user can call it directly, and the
 //! benchmarks call exactly what dynaflow's operators call.
 
+pub mod camera;
 pub mod flow;
 pub mod geometry;
 pub mod image;

@@ -4,6 +4,7 @@
 //! `params` the resolved parameter values handed to constructors, and `registry` the lookup
 //! table from op name to declaration. The traits below are what an operator author implements.
 
+mod declare;
 mod params;
 mod registry;
 mod spec;
@@ -13,6 +14,7 @@ use std::sync::Arc;
 
 use rand_chacha::ChaCha8Rng;
 
+pub use declare::{In, Out, Param, ParamMap, Seeded, doc_line, ranged};
 pub use params::Params;
 pub use registry::Registry;
 pub use spec::{Default, InputRole, Instance, OpKind, OpSpec, ParamSpec, ParamType, PortSpec};
@@ -85,13 +87,17 @@ impl Inputs {
     pub fn new(seq: u64, ports: Vec<(&'static str, Option<Arc<Message>>)>) -> Self {
         Self { seq, ports }
     }
-    /// The message on `port`, if present this frame.
-    pub fn get(&self, port: &str) -> Option<&Arc<Message>> {
-        self.ports.iter().find(|(p, _)| *p == port).and_then(|(_, m)| m.as_ref())
-    }
-    /// The message on `port`, or an error naming it.
-    pub fn require(&self, port: &str) -> Result<&Arc<Message>, OpError> {
-        self.get(port).ok_or_else(|| OpError::Input(format!("input `{port}` is absent at frame {}", self.seq)))
+    /// The message on `port`, if present this frame; a port the node does not declare is an
+    /// operator bug ([`OpError::Contract`]), never "absent". Operators read through their
+    /// [`In`] handles.
+    pub fn declared(&self, port: &str) -> Result<Option<&Arc<Message>>, OpError> {
+        match self.ports.iter().find(|(p, _)| *p == port) {
+            Some((_, m)) => Ok(m.as_ref()),
+            None => Err(OpError::Contract(format!(
+                "read of input `{port}`, which the operator does not declare (it declares {})",
+                self.ports.iter().map(|(p, _)| format!("`{p}`")).collect::<Vec<_>>().join(", ")
+            ))),
+        }
     }
     /// A header for outputs derived from these inputs: that of the first present input.
     pub fn header(&self) -> Option<&Header> {

@@ -2,9 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::de::DeserializeOwned;
-
-use super::OpError;
+use super::{OpError, Param};
 
 /// A node's parameters after validation: every declared key present (defaults filled in),
 /// relative paths resolved against the graph file's folder.
@@ -20,12 +18,11 @@ impl Params {
         Self { values, base_dir }
     }
 
-    /// Deserialize into an operator's typed config. The error names the offending key.
-    pub fn parse<T: DeserializeOwned>(&self) -> Result<T, OpError> {
-        serde_json::from_value(serde_json::Value::Object(self.values.clone())).map_err(|e| OpError::Config {
-            key: e.to_string().split('`').nth(1).unwrap_or("?").to_owned(),
-            message: e.to_string(),
-        })
+    /// The value of `key` as `T`; an error names the key. A key validation left unset (a
+    /// seeded parameter without a value) reads as JSON `null`.
+    pub fn value<T: Param>(&self, key: &str) -> Result<T, OpError> {
+        let v = self.values.get(key).unwrap_or(&serde_json::Value::Null);
+        T::from_json(v, self).map_err(|message| OpError::Config { key: key.to_owned(), message })
     }
 
     /// The raw value of `key`.

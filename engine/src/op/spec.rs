@@ -36,6 +36,9 @@ pub struct PortSpec {
     pub ty: PortType,
     /// Inputs only: whether the node fires without it. An absent required input skips the frame.
     pub required: bool,
+    /// Inputs only: whether the graph must wire it (required inputs always must; a `wired`
+    /// optional input may carry nothing in a frame, but a node without it is a graph error).
+    pub wired: bool,
     /// Outputs only: the output has the type of what is wired into this input (`ty` is `Any`).
     pub same_as: Option<&'static str>,
     /// Inputs only: what the data is used for.
@@ -49,7 +52,7 @@ pub struct PortSpec {
 
 impl PortSpec {
     const fn new(name: &'static str, ty: PortType, required: bool, doc: &'static str) -> Self {
-        Self { name, ty, required, same_as: None, role: InputRole::Decision, ground_truth: false, doc }
+        Self { name, ty, required, wired: required, same_as: None, role: InputRole::Decision, ground_truth: false, doc }
     }
     /// A required input.
     pub const fn input(name: &'static str, ty: PortType, doc: &'static str) -> Self {
@@ -110,6 +113,27 @@ pub enum ParamType {
     },
     /// A file or folder path (relative paths resolve against the graph file's folder).
     Path,
+    /// A string in a format of its own (e.g. camera intrinsics), checked by `check` where
+    /// the graph writes it.
+    Text {
+        /// The format, for docs and errors.
+        what: &'static str,
+        /// `Err(why)` when the text is not in the format.
+        #[serde(skip)]
+        check: fn(&str) -> Result<(), String>,
+    },
+    /// A list: a YAML sequence (or one comma-separated string), each item of type `item`.
+    List {
+        /// The items' type.
+        item: &'static ParamType,
+    },
+    /// A map: a YAML mapping (or one string of comma-separated `key=value` pairs).
+    Map {
+        /// The keys' type.
+        key: &'static ParamType,
+        /// The values' type.
+        value: &'static ParamType,
+    },
 }
 
 impl ParamType {
@@ -117,46 +141,50 @@ impl ParamType {
     pub fn describe(&self) -> String {
         match self {
             ParamType::Bool => "boolean".into(),
+            ParamType::Int { min: i64::MIN, max: i64::MAX } => "integer".into(),
             ParamType::Int { min, max } => format!("integer in {min}..={max}"),
+            ParamType::Float { min, max } if *min == f64::MIN && *max == f64::MAX => "finite number".into(),
             ParamType::Float { min, max } => format!("number in {min}..={max}"),
             ParamType::Str => "string".into(),
+            ParamType::Enum { values } if values.len() > 12 => {
+                format!("one of {} names (`{}`, `{}`, ...)", values.len(), values[0], values[1])
+            }
             ParamType::Enum { values } => {
                 format!("one of {}", values.iter().map(|v| format!("`{v}`")).collect::<Vec<_>>().join(", "))
             }
             ParamType::Path => "path".into(),
+            ParamType::Text { what, .. } => (*what).to_owned(),
+            ParamType::List { item } => format!("list of ({})", item.describe()),
+            ParamType::Map { key, value } => format!("map of ({}) to ({})", key.describe(), value.describe()),
         }
     }
 }
 
 /// A parameter's default.
-#[derive(Clone, Copy, Debug, serde::Serialize)]
-#[serde(untagged)]
+#[derive(Clone, Copy, Debug)]
 pub enum Default {
     /// The parameter must be given.
     Required,
     /// Unset unless given: the operator derives the value from its node's seed (the graph
     /// seed mixed with the node id), so `--seed` changes it.
     FromGraphSeed,
-    /// Boolean default.
-    Bool(bool),
-    /// Integer default.
-    Int(i64),
-    /// Number default.
-    Float(f64),
-    /// String default.
-    Str(&'static str),
+    /// The default value, as JSON (written by `params!` from the typed default).
+    Value(fn() -> serde_json::Value),
 }
 
 impl Default {
-    /// As JSON, `None` when required.
+    /// As JSON, `None` when required or seeded.
     pub fn to_json(self) -> Option<serde_json::Value> {
         match self {
             Default::Required | Default::FromGraphSeed => None,
-            Default::Bool(b) => Some(b.into()),
-            Default::Int(i) => Some(i.into()),
-            Default::Float(f) => Some(f.into()),
-            Default::Str(s) => Some(s.into()),
+            Default::Value(f) => Some(f()),
         }
+    }
+}
+
+impl serde::Serialize for Default {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        self.to_json().serialize(s)
     }
 }
 

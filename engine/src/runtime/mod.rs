@@ -392,8 +392,8 @@ pub(crate) fn records(policy: RecordPolicy, seq: u64) -> bool {
 }
 
 /// Install SIGINT/SIGTERM handlers: the first signal requests a graceful stop, a second one
-/// exits immediately with status 130.
-pub fn stop_on_signals(stop: StopHandle) {
+/// calls `abort` (the CLI exits with status 130; the engine never ends the process).
+pub fn stop_on_signals(stop: StopHandle, abort: impl FnOnce() + Send + 'static) {
     tokio::spawn(async move {
         #[cfg(unix)]
         {
@@ -414,7 +414,8 @@ pub fn stop_on_signals(stop: StopHandle) {
                     stop.request();
                 } else {
                     tracing::error!("aborted");
-                    std::process::exit(130);
+                    abort();
+                    return;
                 }
             }
         }

@@ -37,6 +37,7 @@
 //! ```
 
 mod oracle;
+mod params;
 mod parse;
 mod resolved;
 pub(crate) mod validate;
@@ -194,6 +195,9 @@ pub struct NodePatch {
     pub node: String,
     /// Where the id is written.
     pub node_span: Span,
+    /// Another operator in the node's place, with where it is written: the node's `in` and
+    /// `params` are then the patch's alone (the base's belong to the old operator).
+    pub op: Option<(String, Span)>,
     /// New `disabled`.
     pub disabled: Option<bool>,
     /// Params to set (merged key by key).

@@ -10,7 +10,7 @@ use crate::yaml::{Key, Span, Yaml, YamlKind};
 
 const TOP_KEYS: &[&str] = &["name", "description", "seed", "oracle", "nodes", "variants"];
 const NODE_KEYS: &[&str] = &["op", "params", "in", "record", "disabled"];
-const PATCH_KEYS: &[&str] = &["params", "in", "record", "disabled"];
+const PATCH_KEYS: &[&str] = &["op", "params", "in", "record", "disabled"];
 const INPUT_KEYS: &[&str] = &["from", "join", "delay", "queue", "capacity"];
 /// Longest allowed `delay:`; longer feedback needs a state operator, not a queue.
 const MAX_DELAY: u32 = 64;
@@ -296,6 +296,7 @@ fn parse_patch(variant: &str, node: &Key, body: &Yaml, diags: &mut Vec<Diagnosti
     let mut patch = NodePatch {
         node: node.text.clone(),
         node_span: node.span,
+        op: None,
         disabled: None,
         params: Vec::new(),
         inputs: Vec::new(),
@@ -304,6 +305,9 @@ fn parse_patch(variant: &str, node: &Key, body: &Yaml, diags: &mut Vec<Diagnosti
     let what = format!("variant `{variant}` patch of `{}`", node.text);
     for (key, value) in entries(body, &what, Some(PATCH_KEYS), diags) {
         match key.text.as_str() {
+            "op" => {
+                patch.op = string(value, &format!("`{}/op`", node.text), diags).map(|op| (op, value.span));
+            }
             "params" => patch.params = param_entries(&node.text, value, diags),
             "in" => patch.inputs = parse_inputs(&node.text, value, diags),
             "record" => patch.record = Some(parse_record(&node.text, value, diags)),

@@ -6,13 +6,13 @@ use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 
+use super::params::check_params;
 use super::{
     GraphSpec, Join, NodeSpec, RecordPolicy, ResolvedEdge, ResolvedGraph, ResolvedInput, ResolvedNode, ResolvedOutput,
 };
 use crate::diag::{Diagnostic, did_you_mean};
 use crate::msg::PortType;
-use crate::op::{OpKind, OpSpec, ParamSpec, ParamType, Params, Registry};
-use crate::yaml::{Yaml, YamlKind};
+use crate::op::{OpKind, OpSpec, Params, Registry};
 
 /// Context that is not part of the graph text.
 #[derive(Clone, Debug, Default)]
@@ -223,7 +223,10 @@ fn lookup_op<'r>(n: &NodeSpec, registry: &'r Registry, diags: &mut Vec<Diagnosti
     let op = registry.get(&n.op);
     if op.is_none() {
         // A namespaced operator (`testing.fault`) is also found by its name alone.
-        let hint = did_you_mean(&n.op, registry.names())
+        let hint = registry
+            .migration(&n.op)
+            .map(str::to_owned)
+            .or_else(|| did_you_mean(&n.op, registry.names()))
             .or_else(|| {
                 let guess = did_you_mean(bare_of(&n.op), registry.names().map(bare_of))?;
                 let full = registry.names().find(|name| guess.contains(&format!("`{}`", bare_of(name))))?;
@@ -258,138 +261,6 @@ fn record_policy(n: &NodeSpec, port: &str) -> RecordPolicy {
         .map(|(_, _, r)| *r)
         .or(n.record.default)
         .unwrap_or(RecordPolicy::All)
-}
-
-fn check_params(n: &NodeSpec, op: &OpSpec, cx: &ResolveContext, diags: &mut Vec<Diagnostic>) -> Params {
-    let mut values = serde_json::Map::new();
-    for (key, value) in &n.params {
-        let Some(p) = op.param(&key.text) else {
-            let hint = did_you_mean(&key.text, op.params.iter().map(|p| p.name)).unwrap_or_else(|| {
-                if op.params.is_empty() {
-                    format!("`{}` takes no parameters", op.name)
-                } else {
-                    format!("`{}` takes: {}", op.name, op.params.iter().map(|p| p.name).collect::<Vec<_>>().join(", "))
-                }
-            });
-            diags.push(
-                Diagnostic::error(
-                    "unknown-param",
-                    key.span,
-                    format!("node `{}`: unknown param `{}` for op `{}`", n.id, key.text, op.name),
-                )
-                .with_hint(hint),
-            );
-            continue;
-        };
-        if let Some(v) = check_value(n, p, value, diags) {
-            values.insert(p.name.to_owned(), v);
-        }
-    }
-    for p in op.params {
-        if values.contains_key(p.name)
-            || n.params.iter().any(|(k, _)| k.text == p.name)
-            || matches!(p.default, crate::op::Default::FromGraphSeed)
-        {
-            continue;
-        }
-        match p.default.to_json() {
-            Some(v) => {
-                values.insert(p.name.to_owned(), v);
-            }
-            None => diags.push(
-                Diagnostic::error(
-                    "missing-param",
-                    n.id_span,
-                    format!("node `{}`: required param `{}` is missing", n.id, p.name),
-                )
-                .with_hint(format!(
-                    "add `params: {{ {}: <{}> }}` ({})",
-                    p.name,
-                    p.ty.describe(),
-                    p.doc
-                )),
-            ),
-        }
-    }
-    Params::new(values, cx.base_dir.clone())
-}
-
-/// Check one value against its declaration. Range checks are written as containment so NaN
-/// and infinities fail.
-fn check_value(n: &NodeSpec, p: &ParamSpec, value: &Yaml, diags: &mut Vec<Diagnostic>) -> Option<serde_json::Value> {
-    let json = value.to_json();
-    let what = format!("node `{}`: param `{}`", n.id, p.name);
-    let bad_type = |diags: &mut Vec<Diagnostic>| {
-        diags.push(
-            Diagnostic::error(
-                "param-type",
-                value.span,
-                format!("{what} expects {}, found {}", p.ty.describe(), value.type_name()),
-            )
-            .with_hint(p.doc),
-        );
-        None
-    };
-    match p.ty {
-        ParamType::Bool => json.is_boolean().then_some(json).or_else(|| bad_type(diags)),
-        ParamType::Int { min, max } => match json.as_i64() {
-            Some(v) if (min..=max).contains(&v) => Some(json),
-            Some(v) => {
-                diags.push(
-                    Diagnostic::error("param-range", value.span, format!("{what} = {v} is out of range {min}..={max}"))
-                        .with_hint(p.doc),
-                );
-                None
-            }
-            None => bad_type(diags),
-        },
-        ParamType::Float { min, max } => match json.as_f64() {
-            Some(v) if (min..=max).contains(&v) => Some(json),
-            Some(v) => {
-                diags.push(
-                    Diagnostic::error("param-range", value.span, format!("{what} = {v} is out of range {min}..={max}"))
-                        .with_hint(p.doc),
-                );
-                None
-            }
-            None => match value.as_str() {
-                // `.nan`/`.inf` and friends: numbers, but never in range.
-                Some(s)
-                    if matches!(
-                        s.to_ascii_lowercase().as_str(),
-                        ".nan" | ".inf" | "-.inf" | "+.inf" | "nan" | "inf"
-                    ) =>
-                {
-                    diags.push(
-                        Diagnostic::error(
-                            "param-range",
-                            value.span,
-                            format!("{what} = {s} is out of range {min}..={max}"),
-                        )
-                        .with_hint("the value must be a finite number"),
-                    );
-                    None
-                }
-                _ => bad_type(diags),
-            },
-        },
-        ParamType::Str | ParamType::Path => match &value.kind {
-            YamlKind::Scalar { text, .. } if !value.is_null() => Some(serde_json::Value::String(text.clone())),
-            _ => bad_type(diags),
-        },
-        ParamType::Enum { values } => match value.as_str() {
-            Some(s) if values.contains(&s) => Some(json),
-            Some(s) => {
-                let hint = did_you_mean(s, values.iter().copied()).unwrap_or_else(|| p.ty.describe());
-                diags.push(
-                    Diagnostic::error("param-value", value.span, format!("{what}: `{s}` is not {}", p.ty.describe()))
-                        .with_hint(hint),
-                );
-                None
-            }
-            None => bad_type(diags),
-        },
-    }
 }
 
 /// Output types, with `same_as` outputs following what is wired into their input (through
@@ -594,16 +465,18 @@ fn check_inputs(
             if let Some(prod_node) = spec.nodes.get(k)
                 && prod_node.disabled
                 && !n.disabled
-                && op.inputs.get(j).is_some_and(|p| p.required)
+                && let Some(decl) = op.inputs.get(j).filter(|p| p.wired)
             {
+                let effect = if decl.required {
+                    format!("`{}` will skip every frame", n.id)
+                } else {
+                    format!("`{}` will see nothing on it", n.id)
+                };
                 diags.push(
                     Diagnostic::warning(
                         "disabled-input",
                         from.span,
-                        format!(
-                            "input `{}/{}` is fed by disabled node `{}`: `{}` will skip every frame",
-                            n.id, input.port, from.node, n.id
-                        ),
+                        format!("input `{}/{}` is fed by disabled node `{}`: {effect}", n.id, input.port, from.node),
                     )
                     .with_hint("disable this node too, or rewire the input in the variant"),
                 );
@@ -624,7 +497,7 @@ fn check_inputs(
             });
         }
         if op.kind == OpKind::Transform {
-            for p in op.inputs.iter().filter(|p| p.required && !seen_ports.contains(&p.name)) {
+            for p in op.inputs.iter().filter(|p| p.wired && !seen_ports.contains(&p.name)) {
                 let producers: Vec<String> = spec
                     .nodes
                     .iter()

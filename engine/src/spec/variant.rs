@@ -48,6 +48,12 @@ fn apply_patch(spec: &mut GraphSpec, patch: &NodePatch) -> bool {
     if let Some(d) = patch.disabled {
         node.disabled = d;
     }
+    if let Some((op, span)) = &patch.op {
+        node.op.clone_from(op);
+        node.op_span = *span;
+        node.params.clear();
+        node.inputs.clear();
+    }
     merge_params(&mut node.params, &patch.params);
     for input in &patch.inputs {
         match node.inputs.iter_mut().find(|i| i.port == input.port) {

@@ -1,21 +1,57 @@
-//! Readers of recorded sequences: TUM RGB-D folders (`tum_rgbd`), image folders
-//! (`image_folder`), KITTI odometry sequences (`kitti_odometry`), layout detection for `--input`, and the pieces they share:
-//! intrinsics presets, timestamp index files, PNG decoding with bit-depth checks.
-//!
-//! Split: `folder` (image folders, layout detection), `index` (timestamped list files, association, ground-truth interpolation),
-//! `intrinsics` (presets and parsing), `kitti` (the KITTI reader), `png` (image loading), `tum` (the operator).
+//! The reader operators: TUM RGB-D folders (`tum_rgbd`), image folders (`image_folder`),
+//! KITTI odometry sequences (`kitti_odometry`), and layout detection for `--input`. Each is a
+//! thin wrapper over its reader in `dynaflow-datasets`, which does the file work.
 
 mod folder;
-mod index;
-mod intrinsics;
 mod kitti;
-mod png;
 mod tum;
+
+use dynaflow_datasets::intrinsics::Intrinsics;
+use dynaflow_engine::op::{OpError, Param, ParamType, Params};
 
 pub(crate) use folder::IMAGE_FOLDER;
 pub use folder::{Layout, detect_layout};
-pub use index::{Associated, IndexError, associate, interpolate_pose, nearest_pose, read_index, read_trajectory};
-pub use intrinsics::{Intrinsics, preset_for_folder};
 pub(crate) use kitti::KITTI_ODOMETRY;
-pub use png::{load_depth, load_rgb};
 pub(crate) use tum::TUM_RGBD;
+
+/// A reader's error as the operator's: bad input, the file named (by value: `map_err` hands it so).
+#[allow(clippy::needless_pass_by_value)]
+fn input(e: dynaflow_datasets::Error) -> OpError {
+    OpError::Input(e.to_string())
+}
+
+/// The `intrinsics` parameter of the readers: `auto` (from the folder) or given.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum CameraParam {
+    /// From the folder: its name (TUM) or its `calibration.txt`.
+    Auto,
+    /// As written.
+    Given(Intrinsics),
+}
+
+impl Param for CameraParam {
+    const TYPE: ParamType = ParamType::Text {
+        what: "`auto`, `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy` or `fx,fy,cx,cy,k1,k2,p1,p2,k3`",
+        check: |s| if s.trim() == "auto" { Ok(()) } else { Intrinsics::parse(s).map(|_| ()) },
+    };
+    fn from_json(value: &serde_json::Value, _: &Params) -> Result<Self, String> {
+        match value.as_str().map(str::trim) {
+            Some("auto") => Ok(CameraParam::Auto),
+            Some(s) => Intrinsics::parse(s).map(CameraParam::Given),
+            None => Err(format!("expected intrinsics, found {value}")),
+        }
+    }
+    fn to_json(&self) -> serde_json::Value {
+        match self {
+            CameraParam::Auto => "auto".into(),
+            CameraParam::Given(k) => {
+                let p = k.pinhole;
+                let mut v = vec![p.fx, p.fy, p.cx, p.cy];
+                if k.distortion != [0.0; 5] {
+                    v.extend(k.distortion);
+                }
+                v.iter().map(f64::to_string).collect::<Vec<_>>().join(",").into()
+            }
+        }
+    }
+}

@@ -1,107 +1,54 @@
 //! `lk_flow`.
 
-use dynaflow_engine::msg::{Body, PortType, Track, Tracks};
-use dynaflow_engine::op::{
-    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
-    PortSpec,
-};
+use dynaflow_engine::msg::{Image, Keypoints, Track, Tracks};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::params;
 use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid, seed_corners};
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Config {
-    window: u64,
-    max_level: u64,
-    iterations: u64,
-    epsilon: f64,
-    min_eig: f64,
-    fb_threshold: f64,
-    max_points: u64,
-    min_points: u64,
-    min_distance: f64,
-    fast_threshold: u64,
+params! {
+    struct Config {
+        /// window side, pixels
+        window: u64 [3, 101] = 21,
+        /// coarsest pyramid level (OpenCV's maxLevel: 3 = four levels)
+        max_level: u64 [0, 8] = 3,
+        /// iterations per level at most
+        iterations: u64 [1, 1000] = 30,
+        /// stop when a step is shorter, pixels
+        epsilon: f64 [0.0, 10.0] = 0.01,
+        /// minimum-eigenvalue threshold (OpenCV's minEigThreshold)
+        min_eig: f64 [0.0, 1.0] = 1e-4,
+        /// forward-backward check: a point must return within this many pixels (0 = off)
+        fb_threshold: f64 [0.0, 100.0] = 1.0,
+        /// points tracked at most
+        max_points: u64 [1, 100_000] = 1000,
+        /// add new points when fewer are tracked
+        min_points: u64 [0, 100_000] = 500,
+        /// pixels between tracked points
+        min_distance: f64 [0.0, 1000.0] = 10.0,
+        /// FAST threshold of new corners
+        fast_threshold: u64 [1, 254] = 20,
+    }
 }
+
+const IMAGE: In<Image> = In::required("image", "RGB8 or grey image");
+const POINTS: In<Keypoints> = In::optional("points", "candidate points for new tracks");
+const TRACKS: Out<Tracks> = Out::new(
+    "tracks",
+    "tracked points: id, previous and current position, LK error (mean absolute intensity difference)",
+);
 
 pub const LK_FLOW: OpSpec = OpSpec {
     name: "lk_flow",
     family: "flow",
     doc: "Pyramidal Lucas-Kanade tracking as OpenCV's calcOpticalFlowPyrLK (Scharr gradients, minimum-eigenvalue rejection, optional forward-backward check): tracks the previous frame's points into this frame with stable ids. When fewer than `min_points` remain it adds new points, from `points` when wired (e.g. ORB keypoints) or from FAST corners, at least `min_distance` from existing ones (as YG-SLAM re-detects).",
     kind: OpKind::Transform,
-    inputs: &[
-        PortSpec::input("image", PortType::Image, "RGB8 or grey image"),
-        PortSpec::optional("points", PortType::Keypoints, "candidate points for new tracks"),
-    ],
-    outputs: &[PortSpec::output(
-        "tracks",
-        PortType::Tracks,
-        "tracked points: id, previous and current position, LK error (mean absolute intensity difference)",
-    )],
-    params: &[
-        ParamSpec {
-            name: "window",
-            ty: ParamType::Int { min: 3, max: 101 },
-            default: Default::Int(21),
-            doc: "window side, pixels",
-        },
-        ParamSpec {
-            name: "max_level",
-            ty: ParamType::Int { min: 0, max: 8 },
-            default: Default::Int(3),
-            doc: "coarsest pyramid level (OpenCV's maxLevel: 3 = four levels)",
-        },
-        ParamSpec {
-            name: "iterations",
-            ty: ParamType::Int { min: 1, max: 1000 },
-            default: Default::Int(30),
-            doc: "iterations per level at most",
-        },
-        ParamSpec {
-            name: "epsilon",
-            ty: ParamType::Float { min: 0.0, max: 10.0 },
-            default: Default::Float(0.01),
-            doc: "stop when a step is shorter, pixels",
-        },
-        ParamSpec {
-            name: "min_eig",
-            ty: ParamType::Float { min: 0.0, max: 1.0 },
-            default: Default::Float(1e-4),
-            doc: "minimum-eigenvalue threshold (OpenCV's minEigThreshold)",
-        },
-        ParamSpec {
-            name: "fb_threshold",
-            ty: ParamType::Float { min: 0.0, max: 100.0 },
-            default: Default::Float(1.0),
-            doc: "forward-backward check: a point must return within this many pixels (0 = off)",
-        },
-        ParamSpec {
-            name: "max_points",
-            ty: ParamType::Int { min: 1, max: 100_000 },
-            default: Default::Int(1000),
-            doc: "points tracked at most",
-        },
-        ParamSpec {
-            name: "min_points",
-            ty: ParamType::Int { min: 0, max: 100_000 },
-            default: Default::Int(500),
-            doc: "add new points when fewer are tracked",
-        },
-        ParamSpec {
-            name: "min_distance",
-            ty: ParamType::Float { min: 0.0, max: 1000.0 },
-            default: Default::Float(10.0),
-            doc: "pixels between tracked points",
-        },
-        ParamSpec {
-            name: "fast_threshold",
-            ty: ParamType::Int { min: 1, max: 254 },
-            default: Default::Int(20),
-            doc: "FAST threshold of new corners",
-        },
-    ],
+    inputs: &[IMAGE.spec, POINTS.spec],
+    outputs: &[TRACKS.spec],
+    params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
-        let c: Config = p.parse()?;
+        let c = Config::from_params(p)?;
         let lk = LkConfig {
             window: c.window as usize,
             max_level: c.max_level as usize,
@@ -137,8 +84,8 @@ struct LkOp {
 
 impl Operator for LkOp {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let msg = inputs.require("image")?;
-        let img = super::gray(msg)?;
+        let (msg, image) = IMAGE.require(inputs)?;
+        let img = super::gray(image)?;
         self.cur.build(&img, self.max_level);
         let mut tracks = Vec::new();
         let mut kept: Vec<(u64, [f32; 2])> = Vec::new();
@@ -156,8 +103,8 @@ impl Operator for LkOp {
         if kept.len() < self.config.min_points as usize && kept.len() < max {
             let existing: Vec<[f32; 2]> = kept.iter().map(|(_, p)| *p).collect();
             let want = max - kept.len();
-            let fresh = match inputs.get("points").map(|m| &m.body) {
-                Some(Body::Keypoints(k)) => {
+            let fresh = match POINTS.get(inputs)? {
+                Some(k) => {
                     let mut cands: Vec<&dynaflow_engine::msg::Keypoint> = k.points.iter().collect();
                     cands.sort_by(|a, b| b.response.total_cmp(&a.response));
                     let mut chosen: Vec<[f32; 2]> = Vec::new();
@@ -174,7 +121,7 @@ impl Operator for LkOp {
                     }
                     chosen
                 }
-                _ => seed_corners(
+                None => seed_corners(
                     &img,
                     want,
                     self.config.fast_threshold.min(254) as u8,
@@ -191,7 +138,6 @@ impl Operator for LkOp {
         self.points = kept;
         std::mem::swap(&mut self.prev, &mut self.cur);
         let prev_seq = self.prev_seq.replace(msg.header.seq).unwrap_or(msg.header.seq);
-        let body = Body::Tracks(Tracks { prev_seq, tracks });
-        Ok(Outputs::new().with("tracks", msg.header.clone(), body))
+        Ok(Outputs::new().send(&TRACKS, msg.header.clone(), Tracks { prev_seq, tracks }))
     }
 }

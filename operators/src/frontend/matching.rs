@@ -1,65 +1,40 @@
 //! `match_descriptors`.
 
-use dynaflow_engine::msg::{Body, Keypoints, PortType, Track, Tracks};
-use dynaflow_engine::op::{
-    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
-    PortSpec,
-};
+use dynaflow_engine::msg::{Keypoints, Track, Tracks};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::params;
 use dynaflow_vision::matching::{MatchConfig, match_brute_force};
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Config {
-    ratio: f64,
-    max_distance: u64,
-    cross_check: bool,
-    check_orientation: bool,
+params! {
+    struct Config {
+        /// best distance must be below ratio x second best (1 disables); ORB-SLAM's initialiser uses 0.9
+        ratio: f64 [0.0, 1.0] = 0.9,
+        /// largest Hamming distance accepted (ORB-SLAM's TH_HIGH)
+        max_distance: u64 [0, 256] = 100,
+        /// keep mutual best matches only
+        cross_check: bool = true,
+        /// keep matches in the three fullest rotation bins (of 30)
+        check_orientation: bool = true,
+    }
 }
+
+const CURRENT: In<Keypoints> = In::required("current", "this frame's keypoints with descriptors");
+const PREVIOUS: In<Keypoints> = In::optional("previous", "the previous frame's keypoints (`delay: 1`)");
+const TRACKS: Out<Tracks> =
+    Out::new("tracks", "one per match: track id, previous and current position, Hamming distance as `error`");
 
 pub const MATCH_DESCRIPTORS: OpSpec = OpSpec {
     name: "match_descriptors",
     family: "matching",
     doc: "Matches this frame's ORB keypoints to the previous frame's (wire `previous` with `delay: 1`): Hamming brute force with Lowe's ratio test, cross-check and ORB-SLAM's rotation-consistency histogram. A keypoint matched to a tracked one keeps its track id; others start new tracks.",
     kind: OpKind::Transform,
-    inputs: &[
-        PortSpec::input("current", PortType::Keypoints, "this frame's keypoints with descriptors"),
-        PortSpec::optional("previous", PortType::Keypoints, "the previous frame's keypoints (`delay: 1`)"),
-    ],
-    outputs: &[PortSpec::output(
-        "tracks",
-        PortType::Tracks,
-        "one per match: track id, previous and current position, Hamming distance as `error`",
-    )],
-    params: &[
-        ParamSpec {
-            name: "ratio",
-            ty: ParamType::Float { min: 0.0, max: 1.0 },
-            default: Default::Float(0.9),
-            doc: "best distance must be below ratio x second best (1 disables); ORB-SLAM's initialiser uses 0.9",
-        },
-        ParamSpec {
-            name: "max_distance",
-            ty: ParamType::Int { min: 0, max: 256 },
-            default: Default::Int(100),
-            doc: "largest Hamming distance accepted (ORB-SLAM's TH_HIGH)",
-        },
-        ParamSpec {
-            name: "cross_check",
-            ty: ParamType::Bool,
-            default: Default::Bool(true),
-            doc: "keep mutual best matches only",
-        },
-        ParamSpec {
-            name: "check_orientation",
-            ty: ParamType::Bool,
-            default: Default::Bool(true),
-            doc: "keep matches in the three fullest rotation bins (of 30)",
-        },
-    ],
+    inputs: &[CURRENT.spec, PREVIOUS.spec],
+    outputs: &[TRACKS.spec],
+    params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
-        let c: Config = p.parse()?;
+        let c = Config::from_params(p)?;
         let config = MatchConfig {
             max_distance: c.max_distance as u32,
             ratio: c.ratio as f32,
@@ -88,16 +63,13 @@ fn descriptors(k: &Keypoints) -> Vec<[u8; 32]> {
 
 impl Operator for MatchOp {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let cur_msg = inputs.require("current")?;
-        let Body::Keypoints(cur) = &cur_msg.body else {
-            return Err(OpError::Input("`current` is not keypoints".into()));
-        };
+        let (cur_msg, cur) = CURRENT.require(inputs)?;
         let cur_desc = descriptors(cur);
         let mut ids: Vec<Option<u64>> = vec![None; cur.points.len()];
         let mut tracks = Vec::new();
         let mut prev_seq = cur_msg.header.seq;
-        if let Some(prev_msg) = inputs.get("previous")
-            && let Body::Keypoints(prev) = &prev_msg.body
+        if let Some(prev_msg) = PREVIOUS.message(inputs)?
+            && let Some(prev) = PREVIOUS.get(inputs)?
         {
             prev_seq = prev_msg.header.seq;
             let prev_desc = descriptors(prev);
@@ -131,7 +103,6 @@ impl Operator for MatchOp {
             })
             .collect();
         self.last = Some((cur_msg.header.seq, ids));
-        let body = Body::Tracks(Tracks { prev_seq, tracks });
-        Ok(Outputs::new().with("tracks", cur_msg.header.clone(), body))
+        Ok(Outputs::new().send(&TRACKS, cur_msg.header.clone(), Tracks { prev_seq, tracks }))
     }
 }

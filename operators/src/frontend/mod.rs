@@ -12,15 +12,13 @@ pub use flow::LK_FLOW;
 pub use matching::MATCH_DESCRIPTORS;
 pub use orb::ORB_EXTRACT;
 
-use dynaflow_engine::msg::{Body, Image, Message, PixelFormat};
+use dynaflow_engine::msg::{Image, PixelFormat};
 use dynaflow_engine::op::OpError;
 use dynaflow_vision::GrayImage;
 
-/// The grey image of an image message (RGB converted with OpenCV's weights).
-fn gray(msg: &Message) -> Result<GrayImage, OpError> {
-    let Body::Image(Image { width, height, format, data }) = &msg.body else {
-        return Err(OpError::Input(format!("expected an image, got {}", msg.body.port_type())));
-    };
+/// The grey image of an image (RGB converted with OpenCV's weights).
+fn gray(image: &Image) -> Result<GrayImage, OpError> {
+    let Image { width, height, format, data } = image;
     let (w, h) = (*width as usize, *height as usize);
     let img = match format {
         PixelFormat::Gray8 => GrayImage::from_vec(w, h, data.clone()),

@@ -2,63 +2,40 @@
 
 use std::sync::Arc;
 
-use dynaflow_engine::msg::{Body, PortType, SegmentationMask};
-use dynaflow_engine::op::{
-    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
-    PortSpec,
-};
+use dynaflow_engine::msg::{DepthImage, Detections, SegmentationMask};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::params;
 
+use super::{ClassName, class_list};
 use crate::culling::rules::box_depth_mask;
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Config {
-    classes: String,
-    tolerance: f64,
-    bin: f64,
+params! {
+    struct Config {
+        /// class names to mask (the seed papers' dynamic priors start with people)
+        classes: Vec<ClassName> = class_list(&["person"]),
+        /// metres around the foreground depth that belong to the object (a person is about 0.3-0.5 m deep)
+        tolerance: f64 [0.01, 10.0] = 0.4,
+        /// depth histogram bin, metres
+        bin: f64 [0.005, 1.0] = 0.1,
+    }
 }
+
+const DETECTIONS: In<Detections> = In::required("detections", "boxes");
+const DEPTH: In<DepthImage> = In::required("depth", "depth in metres, same image");
+const MASK: Out<SegmentationMask> =
+    Out::new("mask", "class 0 static, k the k-th class of `classes` (named in the mask); instance = box index + 1");
 
 pub const BOX_TO_MASK: OpSpec = OpSpec {
     name: "box_to_mask",
     family: "inference",
     doc: "A segmentation mask from detector boxes and depth, so mask-based culling rules run with a detector: inside each box of a listed class, the pixels near the object's dominant foreground depth (the nearest depth-histogram bin holding at least half as many pixels as the fullest) are the object's. Class 1 is every masked pixel; instances are the boxes.",
     kind: OpKind::Transform,
-    inputs: &[
-        PortSpec::input("detections", PortType::Detections, "boxes"),
-        PortSpec::input("depth", PortType::Depth, "depth in metres, same image"),
-    ],
-    outputs: &[PortSpec::output(
-        "mask",
-        PortType::Mask,
-        "class 0 static, k the k-th class of `classes` (named in the mask); instance = box index + 1",
-    )],
-    params: &[
-        ParamSpec {
-            name: "classes",
-            ty: ParamType::Str,
-            default: Default::Str("person"),
-            doc: "comma-separated class names to mask (the seed papers' dynamic priors start with people)",
-        },
-        ParamSpec {
-            name: "tolerance",
-            ty: ParamType::Float { min: 0.01, max: 10.0 },
-            default: Default::Float(0.4),
-            doc: "metres around the foreground depth that belong to the object (a person is about 0.3-0.5 m deep)",
-        },
-        ParamSpec {
-            name: "bin",
-            ty: ParamType::Float { min: 0.005, max: 1.0 },
-            default: Default::Float(0.1),
-            doc: "depth histogram bin, metres",
-        },
-    ],
+    inputs: &[DETECTIONS.spec, DEPTH.spec],
+    outputs: &[MASK.spec],
+    params: Config::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
-    build: |p: &Params| {
-        let config: Config = p.parse()?;
-        super::known_classes("classes", &config.classes)?;
-        Ok(Instance::Transform(Box::new(BoxToMask { config })))
-    },
+    build: |p: &Params| Ok(Instance::Transform(Box::new(BoxToMask { config: Config::from_params(p)? }))),
 };
 
 struct BoxToMask {
@@ -67,15 +44,10 @@ struct BoxToMask {
 
 impl Operator for BoxToMask {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let msg = inputs.require("detections")?;
-        let Body::Detections(d) = &msg.body else {
-            return Err(OpError::Input("`detections` is not detections".into()));
-        };
-        let Body::Depth(depth) = &inputs.require("depth")?.body else {
-            return Err(OpError::Input("`depth` is not a depth image".into()));
-        };
+        let (msg, d) = DETECTIONS.require(inputs)?;
+        let (_, depth) = DEPTH.require(inputs)?;
         // One class id per listed class (1, 2, ... in the order given; 0 is static).
-        let wanted: Vec<&str> = self.config.classes.split(',').map(str::trim).filter(|s| !s.is_empty()).collect();
+        let wanted: Vec<&str> = self.config.classes.iter().map(ClassName::as_str).collect();
         let mut boxes: Vec<(f32, [f32; 4], u16)> = d
             .detections
             .iter()
@@ -102,6 +74,6 @@ impl Operator for BoxToMask {
             instances: Some(instances),
             class_names,
         };
-        Ok(Outputs::new().with("mask", msg.header.clone(), Body::Mask(mask)))
+        Ok(Outputs::new().send(&MASK, msg.header.clone(), mask))
     }
 }

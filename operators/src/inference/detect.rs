@@ -2,12 +2,12 @@
 
 use std::sync::Arc;
 
-use super::runner::{BACKENDS, Runner};
-use dynaflow_engine::msg::{Body, Detection, Detections, PixelFormat, PortType};
-use dynaflow_engine::op::{
-    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
-    PortSpec,
-};
+use std::path::PathBuf;
+
+use super::runner::{Backend, Runner};
+use dynaflow_engine::msg::{Detection, Detections, Image, PixelFormat};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::{param_enum, params};
 use dynaflow_infer::detect::{Decoder, Detector};
 use dynaflow_infer::onnx;
 
@@ -16,15 +16,39 @@ pub const YOLOX_NANO: &[u8] = include_bytes!("../../../models/yolox_nano/yolox_n
 /// COCO-80 class names (index 0 = person).
 pub const COCO_NAMES: &str = include_str!("../../../models/yolox_nano/coco.names");
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Config {
-    model: String,
-    decoder: String,
-    backend: String,
-    score_threshold: f64,
-    nms_iou: f64,
-    allow_software: bool,
+param_enum! {
+    /// How a detector's output is decoded (and its input prepared).
+    pub enum DecoderName { Yolox = "yolox", FastestDet = "fastestdet" }
+}
+
+params! {
+    struct Config {
+        /// ONNX model file; empty: the embedded YOLOX-nano (COCO-80)
+        model: PathBuf = PathBuf::new(),
+        /// how the model's output is decoded (and its input prepared)
+        decoder: DecoderName = DecoderName::Yolox,
+        /// where the model runs: `cpu` (rten: SIMD, multi-threaded), `wgpu` (our planned executor on any Vulkan, Metal or DX12 adapter: one submit per frame) or `reference` (plain loops, the oracle the others are tested against; slow). Without an adapter, or for a model the GPU plan cannot take, `wgpu` falls back to `cpu` with a warning (and says so in the summary)
+        backend: Backend = Backend::Cpu,
+        /// detections scoring below this are dropped (YOLOX's demo: 0.3)
+        score_threshold: f64 [0.0, 1.0] = 0.3,
+        /// overlap above which a lower-scored box of the same class is suppressed (YOLOX: 0.45)
+        nms_iou: f64 [0.0, 1.0] = 0.45,
+        /// `wgpu`: use a software adapter (Mesa's lavapipe, WARP) too; otherwise such an adapter counts as no GPU and the model runs on the CPU (rten, about 40x faster than lavapipe on the same cores)
+        allow_software: bool = false,
+    }
+}
+
+const IMAGE: In<Image> = In::required("image", "RGB8 image");
+const DETECTIONS: Out<Detections> = Out::new("detections", "boxes, classes and scores, highest score first");
+
+impl DecoderName {
+    /// The decoder it names.
+    pub fn decoder(self) -> Decoder {
+        match self {
+            DecoderName::Yolox => Decoder::Yolox,
+            DecoderName::FastestDet => Decoder::FastestDet,
+        }
+    }
 }
 
 pub const DETECT: OpSpec = OpSpec {
@@ -32,66 +56,26 @@ pub const DETECT: OpSpec = OpSpec {
     family: "inference",
     doc: "Object detection with an ONNX model: YOLOX (letterbox, BGR 0..255, grid decoding, score obj x cls) or FastestDet (resize, BGR 0..1, tanh/sigmoid box decoding, score obj^0.6 x cls^0.4), then class-wise NMS; boxes in image pixels with COCO class names. The default model is the vendored YOLOX-nano (embedded in the binary). Backends: `cpu` (rten), `wgpu` (our WGSL executor), `reference` (plain loops); all checked against onnxruntime.",
     kind: OpKind::Transform,
-    inputs: &[PortSpec::input("image", PortType::Image, "RGB8 image")],
-    outputs: &[PortSpec::output("detections", PortType::Detections, "boxes, classes and scores, highest score first")],
-    params: &[
-        ParamSpec {
-            name: "model",
-            ty: ParamType::Path,
-            default: Default::Str(""),
-            doc: "ONNX model file; empty: the embedded YOLOX-nano (COCO-80)",
-        },
-        ParamSpec {
-            name: "decoder",
-            ty: ParamType::Enum { values: &["yolox", "fastestdet"] },
-            default: Default::Str("yolox"),
-            doc: "how the model's output is decoded (and its input prepared)",
-        },
-        ParamSpec {
-            name: "backend",
-            ty: ParamType::Enum { values: BACKENDS },
-            default: Default::Str("cpu"),
-            doc: "where the model runs: `cpu` (rten: SIMD, multi-threaded), `wgpu` (our planned executor on any Vulkan, Metal or DX12 adapter: one submit per frame) or `reference` (plain loops, the oracle the others are tested against; slow). Without an adapter, or for a model the GPU plan cannot take, `wgpu` falls back to `cpu` with a warning (and says so in the summary)",
-        },
-        ParamSpec {
-            name: "score_threshold",
-            ty: ParamType::Float { min: 0.0, max: 1.0 },
-            default: Default::Float(0.3),
-            doc: "detections scoring below this are dropped (YOLOX's demo: 0.3)",
-        },
-        ParamSpec {
-            name: "nms_iou",
-            ty: ParamType::Float { min: 0.0, max: 1.0 },
-            default: Default::Float(0.45),
-            doc: "overlap above which a lower-scored box of the same class is suppressed (YOLOX: 0.45)",
-        },
-        ParamSpec {
-            name: "allow_software",
-            ty: ParamType::Bool,
-            default: Default::Bool(false),
-            doc: "`wgpu`: use a software adapter (Mesa's lavapipe, WARP) too; otherwise such an adapter counts as no GPU and the model runs on the CPU (rten, about 40x faster than lavapipe on the same cores)",
-        },
-    ],
+    inputs: &[IMAGE.spec],
+    outputs: &[DETECTIONS.spec],
+    params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
-        let c: Config = p.parse()?;
-        let (model, bytes) = if c.model.is_empty() {
+        let c = Config::from_params(p)?;
+        let embedded = c.model.as_os_str().is_empty();
+        let (model, bytes) = if embedded {
             let m = onnx::parse(YOLOX_NANO).map_err(|e| OpError::Input(format!("embedded YOLOX-nano: {e}")))?;
             (m, YOLOX_NANO.to_vec())
         } else {
-            onnx::load_with_bytes(&p.resolve_path(&c.model)).map_err(|e| OpError::Input(e.to_string()))?
+            onnx::load_with_bytes(&c.model).map_err(|e| OpError::Input(e.to_string()))?
         };
-        let decoder = if c.decoder == "fastestdet" { Decoder::FastestDet } else { Decoder::Yolox };
-        let which = if c.model.is_empty() {
-            "the embedded YOLOX-nano".to_owned()
-        } else {
-            p.resolve_path(&c.model).display().to_string()
-        };
+        let decoder = c.decoder.decoder();
+        let which = if embedded { "the embedded YOLOX-nano".to_owned() } else { c.model.display().to_string() };
         let detector = Detector::new(model, decoder).map_err(|e| OpError::Input(format!("{which}: {e}")))?;
         let names: Vec<Arc<str>> = COCO_NAMES.lines().map(Arc::from).collect();
         let (runner, backend) =
-            Runner::new(&bytes, detector.model(), &c.backend, c.allow_software).map_err(OpError::Input)?;
+            Runner::new(&bytes, detector.model(), c.backend, c.allow_software).map_err(OpError::Input)?;
         Ok(Instance::Transform(Box::new(Detect { config: c, detector, names, runner, backend })))
     },
 };
@@ -107,8 +91,7 @@ struct Detect {
 
 impl Operator for Detect {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let msg = inputs.require("image")?;
-        let Body::Image(img) = &msg.body else { return Err(OpError::Input("`image` is not an image".into())) };
+        let (msg, img) = IMAGE.require(inputs)?;
         let (w, h) = (img.width as usize, img.height as usize);
         let grey_as_rgb: Vec<u8>;
         let rgb: &[u8] = match img.format {
@@ -134,7 +117,7 @@ impl Operator for Detect {
                 score: d.score,
             })
             .collect();
-        Ok(Outputs::new().with("detections", msg.header.clone(), Body::Detections(Detections { detections })))
+        Ok(Outputs::new().send(&DETECTIONS, msg.header.clone(), Detections { detections }))
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {

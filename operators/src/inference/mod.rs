@@ -10,7 +10,7 @@ mod gate;
 mod runner;
 
 pub use box_mask::BOX_TO_MASK;
-pub use classes::known_classes;
-pub use detect::{COCO_NAMES, DETECT, YOLOX_NANO};
+pub use classes::{COCO80, ClassName, KNOWN_CLASSES, class_list};
+pub use detect::{COCO_NAMES, DETECT, DecoderName, YOLOX_NANO};
 pub use gate::KEYFRAME_GATE;
-pub use runner::{BACKENDS, Runner};
+pub use runner::{Backend, Runner};

@@ -7,8 +7,17 @@ use dynaflow_infer::cpu::{self, Tensor};
 use dynaflow_infer::onnx::Model;
 use dynaflow_infer::rten_cpu::RtenModel;
 
-/// The backends a graph or `dynaflow infer` may name.
-pub const BACKENDS: &[&str] = &["cpu", "wgpu", "reference"];
+dynaflow_engine::param_enum! {
+    /// Where a model runs: the graph parameter and `dynaflow infer --backend` alike.
+    pub enum Backend {
+        /// rten on the CPU (SIMD, multi-threaded).
+        Cpu = "cpu",
+        /// Our planned WGSL executor on a GPU adapter (falls back to `cpu`, saying so).
+        Wgpu = "wgpu",
+        /// The reference executor: plain loops, the oracle the others are tested against.
+        Reference = "reference",
+    }
+}
 
 /// A model ready to run.
 pub enum Runner {
@@ -35,13 +44,13 @@ impl Runner {
     /// reports (which backend really runs, and why a fallback happened). A software adapter
     /// (a renderer on the CPU, 40x slower than rten on the same cores) counts as no GPU unless
     /// `allow_software` (the tests' lavapipe runs).
-    pub fn new(bytes: &[u8], model: &Model, backend: &str, allow_software: bool) -> Result<(Self, String), String> {
+    pub fn new(bytes: &[u8], model: &Model, backend: Backend, allow_software: bool) -> Result<(Self, String), String> {
         match backend {
-            "reference" => {
+            Backend::Reference => {
                 cpu::check_ops(model).map_err(|e| e.to_string())?;
                 Ok((Runner::Reference(model.clone()), "reference".into()))
             }
-            "wgpu" => {
+            Backend::Wgpu => {
                 // Planning names an op without a kernel (with its node) and any shape it
                 // cannot take; without an adapter there is nothing to plan on.
                 let why = match Gpu::new() {
@@ -62,7 +71,7 @@ impl Runner {
                 let m = RtenModel::load(bytes.to_vec())?;
                 Ok((Runner::Cpu(Box::new(m)), format!("cpu (wgpu fallback: {why})")))
             }
-            _ => Ok((Runner::Cpu(Box::new(RtenModel::load(bytes.to_vec())?)), "cpu".into())),
+            Backend::Cpu => Ok((Runner::Cpu(Box::new(RtenModel::load(bytes.to_vec())?)), "cpu".into())),
         }
     }
 

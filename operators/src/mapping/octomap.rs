@@ -2,130 +2,70 @@
 
 use std::time::Instant;
 
-use dynaflow_engine::msg::{Body, OctreeUpdate, PixelFormat, PortType};
-use dynaflow_engine::op::{
-    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
-    PortSpec,
-};
+use dynaflow_engine::msg::{CameraInfo, DepthImage, Image, OctreeUpdate, PixelFormat, Pose, SegmentationMask};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::{param_enum, params};
+
+use crate::inference::{ClassName, class_list};
 use dynaflow_octomap::{Key, Label, OcTree, Params as TreeParams, io};
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Config {
-    resolution: f64,
-    max_range: f64,
-    subsample: u64,
-    prob_hit: f64,
-    prob_miss: f64,
-    clamp_min: f64,
-    clamp_max: f64,
-    dynamic_classes: String,
-    color: String,
-    snapshot_every: u64,
-    max_memory_mb: u64,
+param_enum! {
+    /// Where a voxel's colour comes from.
+    enum Colour { Image = "image", Class = "class" }
 }
+
+params! {
+    struct Config {
+        /// voxel edge in metres (PSPNet-SLAM and DS-SLAM: 0.05)
+        resolution: f64 [0.001, 10.0] = 0.05,
+        /// depths beyond this clear their ray up to it and mark nothing (Kinect v1 depth noise grows with the square of range; 4 m keeps it under ~4 cm); -1: no limit
+        max_range: f64 [-1.0, 1000.0] = 4.0,
+        /// use every n-th pixel in x and y (4: 160x120 rays of a 640x480 frame; a 5 cm voxel at 2 m spans ~13 pixels)
+        subsample: u64 [1, 64] = 4,
+        /// OctoMap's hit probability
+        prob_hit: f64 [0.5, 1.0] = 0.7,
+        /// OctoMap's miss probability
+        prob_miss: f64 [0.0, 0.5] = 0.4,
+        /// lower clamping probability (OctoMap: 0.1192)
+        clamp_min: f64 [0.0, 1.0] = 0.1192,
+        /// upper clamping probability (OctoMap: 0.971)
+        clamp_max: f64 [0.0, 1.0] = 0.971,
+        /// mask classes never inserted
+        dynamic_classes: Vec<ClassName> = class_list(&["person"]),
+        /// voxel colour in the .ot file: the image's, or a colour per class (a semantic map)
+        color: Colour = Colour::Image,
+        /// frames between full-map outputs on `map` (0: only the last frame's)
+        snapshot_every: u64 [0, 1_000_000] = 30,
+        /// memory budget in MiB for the map's nodes plus one scan's scratch: a frame that would take them past it (a tiny `resolution` over a long `max_range`) ends the run with an error naming its need, before anything is allocated; the map of the frames before is written (a resource bound, not an OctoMap parameter)
+        max_memory_mb: u64 [16, 1_048_576] = 4096,
+    }
+}
+
+const DEPTH: In<DepthImage> = In::required("depth", "depth in metres");
+const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
+const POSE: In<Pose> = In::required("pose", "world_from_cam: the tracker's estimate or the ground truth");
+const IMAGE: In<Image> = In::optional("image", "RGB8 colours for the voxels");
+const MASK: In<SegmentationMask> =
+    In::optional("mask", "per-pixel classes: dynamic ones are skipped, the rest kept per voxel");
+const UPDATES: Out<OctreeUpdate> =
+    Out::new("updates", "voxels whose occupancy changed this frame (newly occupied with their class, newly freed)");
+const MAP: Out<OctreeUpdate> = Out::new(
+    "map",
+    "every occupied voxel with its class, every `snapshot_every` frames (what the viewer shows as the map)",
+);
 
 pub const OCTOMAP: OpSpec = OpSpec {
     name: "octomap",
     family: "mapping",
     doc: "A semantic OctoMap (OctoMap 1.9's semantics: log-odds hit/miss updates with clamping, free space ray-cast from the camera to every depth pixel, each voxel updated once per frame with end points winning, pruning). Depth pixels (every `subsample`-th in x and y) are back-projected with the intrinsics and placed with `pose`; pixels whose `mask` class is dynamic are not inserted at all, neither as end points nor as rays, so moving people leave no trace. Each voxel keeps a colour (from `image`, or its class's) as OctoMap's ColorOcTree does (`averageNodeColor` per point after the insertion, octomap_server's rule; the file equals liboctomap's for the same frames) and a class (from `mask`, the most frequent of the frame's points). At the end of the run writes `<out>/<graph>[-<variant>].<node>.ot` (ColorOcTree) and `.bt` (binary), which OctoMap's tools and octovis open.",
     kind: OpKind::Transform,
-    inputs: &[
-        PortSpec::input("depth", PortType::Depth, "depth in metres"),
-        PortSpec::input("camera_info", PortType::CameraInfo, "intrinsics"),
-        PortSpec::input("pose", PortType::Pose, "world_from_cam: the tracker's estimate or the ground truth"),
-        PortSpec::optional("image", PortType::Image, "RGB8 colours for the voxels"),
-        PortSpec::optional(
-            "mask",
-            PortType::Mask,
-            "per-pixel classes: dynamic ones are skipped, the rest kept per voxel",
-        ),
-    ],
-    outputs: &[
-        PortSpec::output(
-            "updates",
-            PortType::OctreeUpdate,
-            "voxels whose occupancy changed this frame (newly occupied with their class, newly freed)",
-        ),
-        PortSpec::output(
-            "map",
-            PortType::OctreeUpdate,
-            "every occupied voxel with its class, every `snapshot_every` frames (what the viewer shows as the map)",
-        ),
-    ],
-    params: &[
-        ParamSpec {
-            name: "resolution",
-            ty: ParamType::Float { min: 0.001, max: 10.0 },
-            default: Default::Float(0.05),
-            doc: "voxel edge in metres (PSPNet-SLAM and DS-SLAM: 0.05)",
-        },
-        ParamSpec {
-            name: "max_range",
-            ty: ParamType::Float { min: -1.0, max: 1000.0 },
-            default: Default::Float(4.0),
-            doc: "depths beyond this clear their ray up to it and mark nothing (Kinect v1 depth noise grows with the square of range; 4 m keeps it under ~4 cm); -1: no limit",
-        },
-        ParamSpec {
-            name: "subsample",
-            ty: ParamType::Int { min: 1, max: 64 },
-            default: Default::Int(4),
-            doc: "use every n-th pixel in x and y (4: 160x120 rays of a 640x480 frame; a 5 cm voxel at 2 m spans ~13 pixels)",
-        },
-        ParamSpec {
-            name: "prob_hit",
-            ty: ParamType::Float { min: 0.5, max: 1.0 },
-            default: Default::Float(0.7),
-            doc: "OctoMap's hit probability",
-        },
-        ParamSpec {
-            name: "prob_miss",
-            ty: ParamType::Float { min: 0.0, max: 0.5 },
-            default: Default::Float(0.4),
-            doc: "OctoMap's miss probability",
-        },
-        ParamSpec {
-            name: "clamp_min",
-            ty: ParamType::Float { min: 0.0, max: 1.0 },
-            default: Default::Float(0.1192),
-            doc: "lower clamping probability (OctoMap: 0.1192)",
-        },
-        ParamSpec {
-            name: "clamp_max",
-            ty: ParamType::Float { min: 0.0, max: 1.0 },
-            default: Default::Float(0.971),
-            doc: "upper clamping probability (OctoMap: 0.971)",
-        },
-        ParamSpec {
-            name: "dynamic_classes",
-            ty: ParamType::Str,
-            default: Default::Str("person"),
-            doc: "comma-separated mask classes never inserted",
-        },
-        ParamSpec {
-            name: "color",
-            ty: ParamType::Enum { values: &["image", "class"] },
-            default: Default::Str("image"),
-            doc: "voxel colour in the .ot file: the image's, or a colour per class (a semantic map)",
-        },
-        ParamSpec {
-            name: "snapshot_every",
-            ty: ParamType::Int { min: 0, max: 1_000_000 },
-            default: Default::Int(30),
-            doc: "frames between full-map outputs on `map` (0: only the last frame's)",
-        },
-        ParamSpec {
-            name: "max_memory_mb",
-            ty: ParamType::Int { min: 16, max: 1_048_576 },
-            default: Default::Int(4096),
-            doc: "memory budget in MiB for the map's nodes plus one scan's scratch: a frame that would take them past it (a tiny `resolution` over a long `max_range`) ends the run with an error naming its need, before anything is allocated; the map of the frames before is written (a resource bound, not an OctoMap parameter)",
-        },
-    ],
+    inputs: &[DEPTH.spec, CAMERA_INFO.spec, POSE.spec, IMAGE.spec, MASK.spec],
+    outputs: &[UPDATES.spec, MAP.spec],
+    params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
-        let c: Config = p.parse()?;
-        crate::inference::known_classes("dynamic_classes", &c.dynamic_classes)?;
+        let c = Config::from_params(p)?;
         let params = TreeParams {
             resolution: c.resolution,
             prob_hit: c.prob_hit,
@@ -180,14 +120,9 @@ impl Octomap {
 
 impl Operator for Octomap {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let msg = inputs.require("depth")?;
-        let Body::Depth(depth) = &msg.body else { return Err(OpError::Input("`depth` is not a depth image".into())) };
-        let Body::CameraInfo(k) = &inputs.require("camera_info")?.body else {
-            return Err(OpError::Input("`camera_info` is not camera info".into()));
-        };
-        let Body::Pose(pose) = &inputs.require("pose")?.body else {
-            return Err(OpError::Input("`pose` is not a pose".into()));
-        };
+        let (msg, depth) = DEPTH.require(inputs)?;
+        let (_, k) = CAMERA_INFO.require(inputs)?;
+        let (_, pose) = POSE.require(inputs)?;
         // An image or mask of another size would be read at the wrong pixels: an error.
         let same_size = |what: &str, (w, h): (u32, u32)| {
             if (w, h) == (depth.width, depth.height) {
@@ -199,25 +134,19 @@ impl Operator for Octomap {
                 )))
             }
         };
-        let image = match inputs.get("image").map(|m| &m.body) {
-            Some(Body::Image(i)) => {
-                same_size("image", (i.width, i.height))?;
-                Some(i)
-            }
-            _ => None,
-        };
-        let mask = match inputs.get("mask").map(|m| &m.body) {
-            Some(Body::Mask(m)) => {
-                same_size("mask", (m.width, m.height))?;
-                Some(m)
-            }
-            _ => None,
-        };
+        let image = IMAGE.get(inputs)?;
+        if let Some(i) = image {
+            same_size("image", (i.width, i.height))?;
+        }
+        let mask = MASK.get(inputs)?;
+        if let Some(m) = mask {
+            same_size("mask", (m.width, m.height))?;
+        }
         let dynamic: Vec<u16> = mask.map_or_else(Vec::new, |m| {
             m.class_names
                 .iter()
                 .enumerate()
-                .filter(|(_, n)| self.config.dynamic_classes.split(',').any(|c| c.trim() == &***n))
+                .filter(|(_, n)| self.config.dynamic_classes.iter().any(|c| c.as_str() == &***n))
                 .map(|(i, _)| i as u16)
                 .collect()
         });
@@ -241,8 +170,8 @@ impl Operator for Octomap {
                 let p = nalgebra::Point3::new((u as f64 - k.cx) * z / k.fx, (v as f64 - k.cy) * z / k.fy, z);
                 let q = iso * p;
                 points.push([q.x as f32, q.y as f32, q.z as f32]);
-                let color = match (self.config.color.as_str(), image) {
-                    ("class", _) => class_color(class),
+                let color = match (self.config.color, image) {
+                    (Colour::Class, _) => class_color(class),
                     (_, Some(img)) => match img.format {
                         PixelFormat::Rgb8 => [img.data[3 * i], img.data[3 * i + 1], img.data[3 * i + 2]],
                         PixelFormat::Gray8 => [img.data[i]; 3],
@@ -276,10 +205,10 @@ impl Operator for Octomap {
             }
         }
         let update = OctreeUpdate { resolution: self.config.resolution as f32, occupied, freed };
-        let mut out = Outputs::new().with("updates", msg.header.clone(), Body::OctreeUpdate(update));
+        let mut out = Outputs::new().send(&UPDATES, msg.header.clone(), update);
         let every = self.config.snapshot_every;
         if every > 0 && self.frames.is_multiple_of(every) {
-            out = out.with("map", msg.header.clone(), Body::OctreeUpdate(self.snapshot()));
+            out = out.send(&MAP, msg.header.clone(), self.snapshot());
         }
         Ok(out)
     }
@@ -301,7 +230,7 @@ impl Operator for Octomap {
         });
         if let Some(dir) = &ctx.out_dir {
             let mut tree = self.tree.clone();
-            if self.config.color == "class" {
+            if self.config.color == Colour::Class {
                 tree.recolor(class_color);
             }
             let ot = dir.join(format!("{}.{}.ot", ctx.stem, ctx.node));

@@ -3,66 +3,46 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use dynaflow_engine::msg::{Body, Header, PointCloud, PortType, Scalars};
-use dynaflow_engine::op::{
-    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
-    PortSpec,
-};
+use dynaflow_engine::msg::{CameraInfo, Header, PointCloud, Scalars, SparseMap};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::params;
 use dynaflow_slam::{LocalMapConfig, LocalMapper};
-use dynaflow_vision::geometry::Camera;
+use dynaflow_vision::camera::Pinhole;
 
 use super::convert;
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Config {
-    window: u64,
-    keep_keyframes: u64,
-    baseline: f64,
+params! {
+    struct Config {
+        /// key frames refined by local BA: the new one and its best covisible neighbours
+        window: u64 [2, 100] = 10,
+        /// key frames kept at most (the oldest are forgotten; no loop closing needs them)
+        keep_keyframes: u64 [2, 100_000] = 60,
+        /// virtual baseline, metres (as `pnp_track`'s)
+        baseline: f64 [0.0, 10.0] = 0.08,
+    }
 }
+
+const KEYFRAME: In<SparseMap> = In::required("keyframe", "a key frame from `pnp_track`");
+const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
+const MAP: Out<SparseMap> = Out::new("map", "the refined local window: key frames, points, removed point ids");
+const POINTS: Out<PointCloud> = Out::new("points", "every map point held (on key frames)");
+const STATS: Out<Scalars> = Out::new(
+    "stats",
+    "`keyframes`, `points`, `window`, `removed`, `ba_iterations`, `ba_cost_before`, `ba_cost_after` (insertion times: the summary's `report.local_ba_ms`)",
+);
 
 pub const LOCAL_MAP: OpSpec = OpSpec {
     name: "local_map",
     family: "pnp_ba",
     doc: "ORB-SLAM's local mapping: each key frame from `pnp_track` joins the map with its observations and new points; it and its best covisible key frames (the window) are refined with their points by local BA (sparse LM, Schur complement on the points, Huber; two stages with outliers dropped between), key frames outside the window that see its points held fixed; bad observations are erased and points seen by fewer than two key frames two key frames after their creation are culled. The refined window goes back to `pnp_track` on `map` (connect it with `delay: 1` and `join: latest`, so tracking never waits on it in `--realtime`).",
     kind: OpKind::Transform,
-    inputs: &[
-        PortSpec::input("keyframe", PortType::Map, "a key frame from `pnp_track`"),
-        PortSpec::input("camera_info", PortType::CameraInfo, "intrinsics"),
-    ],
-    outputs: &[
-        PortSpec::output("map", PortType::Map, "the refined local window: key frames, points, removed point ids"),
-        PortSpec::output("points", PortType::PointCloud, "every map point held (on key frames)"),
-        PortSpec::output(
-            "stats",
-            PortType::Scalars,
-            "`keyframes`, `points`, `window`, `removed`, `ba_iterations`, `ba_cost_before`, `ba_cost_after` (insertion times: the summary's `report.local_ba_ms`)",
-        ),
-    ],
-    params: &[
-        ParamSpec {
-            name: "window",
-            ty: ParamType::Int { min: 2, max: 100 },
-            default: Default::Int(10),
-            doc: "key frames refined by local BA: the new one and its best covisible neighbours",
-        },
-        ParamSpec {
-            name: "keep_keyframes",
-            ty: ParamType::Int { min: 2, max: 100_000 },
-            default: Default::Int(60),
-            doc: "key frames kept at most (the oldest are forgotten; no loop closing needs them)",
-        },
-        ParamSpec {
-            name: "baseline",
-            ty: ParamType::Float { min: 0.0, max: 10.0 },
-            default: Default::Float(0.08),
-            doc: "virtual baseline, metres (as `pnp_track`'s)",
-        },
-    ],
+    inputs: &[KEYFRAME.spec, CAMERA_INFO.spec],
+    outputs: &[MAP.spec, POINTS.spec, STATS.spec],
+    params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
-        Ok(Instance::Transform(Box::new(LocalMap { config: p.parse()?, mapper: None, ba_ms: Vec::new() })))
+        Ok(Instance::Transform(Box::new(LocalMap { config: Config::from_params(p)?, mapper: None, ba_ms: Vec::new() })))
     },
 };
 
@@ -75,17 +55,14 @@ struct LocalMap {
 
 impl Operator for LocalMap {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let msg = inputs.require("keyframe")?;
-        let Body::Map(batch) = &msg.body else { return Err(OpError::Input("`keyframe` is not a map".into())) };
-        let Body::CameraInfo(k) = &inputs.require("camera_info")?.body else {
-            return Err(OpError::Input("`camera_info` is not camera info".into()));
-        };
+        let (msg, batch) = KEYFRAME.require(inputs)?;
+        let (_, k) = CAMERA_INFO.require(inputs)?;
         let mapper = self.mapper.get_or_insert_with(|| {
             let mut c = LocalMapConfig::rgbd(k.fx);
             c.window = self.config.window as usize;
             c.keep_keyframes = self.config.keep_keyframes as usize;
             c.bf = k.fx * self.config.baseline;
-            LocalMapper::new(c, Camera { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy })
+            LocalMapper::new(c, Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy })
         });
         let t0 = Instant::now();
         let update = mapper.insert(&convert::from_msg(batch));
@@ -111,9 +88,9 @@ impl Operator for LocalMap {
             colors: None,
         };
         Ok(Outputs::new()
-            .with("map", header.clone(), Body::Map(convert::to_msg(&update)))
-            .with("points", header.clone(), Body::PointCloud(cloud))
-            .with("stats", header, Body::Scalars(Scalars { values: stats })))
+            .send(&MAP, header.clone(), convert::to_msg(&update))
+            .send(&POINTS, header.clone(), cloud)
+            .send(&STATS, header, Scalars { values: stats }))
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {

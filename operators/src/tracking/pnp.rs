@@ -3,35 +3,61 @@
 use std::io::Write;
 use std::sync::Arc;
 
-use dynaflow_engine::msg::{Body, Header, Message, PortType, Pose, Scalars};
-use dynaflow_engine::op::{
-    Context, Default, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType, Params,
-    PortSpec,
+use dynaflow_engine::msg::{
+    CameraInfo, DepthImage, Header, Keypoints, Message, PointLabels, Pose, Scalars, SegmentationMask, SparseMap, Tracks,
 };
+use dynaflow_engine::op::{
+    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
+};
+use dynaflow_engine::params;
 use dynaflow_slam::eval::{Align, evaluate};
 use dynaflow_slam::{Feature, Tracker, TrackerConfig};
-use dynaflow_vision::geometry::Camera;
+use dynaflow_vision::camera::Pinhole;
 use nalgebra::Isometry3;
 use rand_core::Rng;
 
 use super::convert;
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Config {
-    min_inliers: u64,
-    search_radius: f64,
-    baseline: f64,
-    close_depth: f64,
-    max_depth: f64,
-    ransac_threshold: f64,
-    reset_after: u64,
-    label_radius: f64,
+params! {
+    struct Config {
+        /// fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30)
+        min_inliers: u64 [6, 100_000] = 30,
+        /// projection search radius, pixels (ORB-SLAM2's motion-model search: 15; widened 3x once)
+        search_radius: f64 [1.0, 200.0] = 15.0,
+        /// virtual baseline, metres: bf = fx x baseline weighs the depth residual (ORB-SLAM2 TUM configs: bf 40 at fx 525); 0 uses pixels only
+        baseline: f64 [0.0, 10.0] = 0.08,
+        /// points closer than this are `close` in the key-frame rule (ORB-SLAM2 ThDepth 40 x baseline)
+        close_depth: f64 [0.1, 1000.0] = 3.2,
+        /// depths beyond this (metres) are not used (Kinect noise grows with the square)
+        max_depth: f64 [0.1, 1000.0] = 6.0,
+        /// P3P RANSAC reprojection threshold, pixels
+        ransac_threshold: f64 [0.1, 100.0] = 3.0,
+        /// lost frames in a row before a new map starts
+        reset_after: u64 [0, 100_000] = 5,
+        /// a keypoint takes the culling label of the nearest labelled track within this many pixels (dynamic: left out); 10 = `lk_flow`'s `min_distance`, the spacing of the tracked corners, so a label speaks for its neighbourhood as a segment would; 0: only keypoints on a track
+        label_radius: f64 [0.0, 100.0] = 10.0,
+    }
 }
 
-const fn float(name: &'static str, min: f64, max: f64, default: f64, doc: &'static str) -> ParamSpec {
-    ParamSpec { name, ty: ParamType::Float { min, max }, default: Default::Float(default), doc }
-}
+const KEYPOINTS: In<Keypoints> = In::required("keypoints", "this frame's ORB keypoints with descriptors");
+const DEPTH: In<DepthImage> = In::required("depth", "depth in metres");
+const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
+const MAP: In<SparseMap> = In::optional("map", "local mapping's refined local map (`delay: 1`, `join: latest`)");
+const MASK: In<SegmentationMask> = In::optional("mask", "pixels of a non-zero class are dynamic");
+const LABELS: In<PointLabels> = In::optional("labels", "culling's labels of `tracks`");
+const TRACKS: In<Tracks> = In::optional(
+    "tracks",
+    "the tracks `labels` index (a keypoint whose nearest labelled track within `label_radius` is dynamic is left out)",
+);
+const GT_POSE: In<Pose> =
+    In::optional("gt_pose", "ground truth, for the ATE in the summary").with_role(InputRole::Evaluation);
+const POSE: Out<Pose> = Out::new("pose", "world_from_cam (the first key frame is the world)");
+const KEYFRAME: Out<SparseMap> =
+    Out::new("keyframe", "a new key frame with its observations and new points (to `local_map`)");
+const STATS: Out<Scalars> = Out::new(
+    "stats",
+    "`state` (0 not initialised, 1 new map, 2 tracked, 3 relocalised, 4 lost), `matches`, `inliers`, `map_points`, `map_id`, `keyframe`",
+);
 
 pub const PNP_TRACK: OpSpec = OpSpec {
     name: "pnp_track",
@@ -39,87 +65,22 @@ pub const PNP_TRACK: OpSpec = OpSpec {
     doc: "ORB-SLAM-style RGB-D tracking against the local map: map points projected with a constant-velocity prediction are matched to the keypoints in a search radius (Hamming distance, ratio test), refined by motion-only BA (LM on SE(3), pixels plus depth as ORB-SLAM2's virtual right coordinate, Huber, four re-classification rounds); when too few survive, descriptor matching against the local map and P3P RANSAC relocalise. Dynamic keypoints (on `mask` pixels, or whose nearest labelled track within `label_radius` is marked dynamic) never reach the solver. Lost frames follow the motion model; after `reset_after` of them a new map starts at the dead-reckoned pose. Key frames (ORB-SLAM2's rules) go to `local_map`, whose refined map comes back on `map`. Writes `<out>/<graph>[-<variant>].<node>.trajectory.txt` (TUM format) and, with `gt_pose`, puts the ATE (SE(3)-aligned) in the summary.",
     kind: OpKind::Transform,
     inputs: &[
-        PortSpec::input("keypoints", PortType::Keypoints, "this frame's ORB keypoints with descriptors"),
-        PortSpec::input("depth", PortType::Depth, "depth in metres"),
-        PortSpec::input("camera_info", PortType::CameraInfo, "intrinsics"),
-        PortSpec::optional("map", PortType::Map, "local mapping's refined local map (`delay: 1`, `join: latest`)"),
-        PortSpec::optional("mask", PortType::Mask, "pixels of a non-zero class are dynamic"),
-        PortSpec::optional("labels", PortType::PointLabels, "culling's labels of `tracks`"),
-        PortSpec::optional(
-            "tracks",
-            PortType::Tracks,
-            "the tracks `labels` index (a keypoint whose nearest labelled track within `label_radius` is dynamic is left out)",
-        ),
-        PortSpec::evaluation("gt_pose", PortType::Pose, "ground truth, for the ATE in the summary"),
+        KEYPOINTS.spec,
+        DEPTH.spec,
+        CAMERA_INFO.spec,
+        MAP.spec,
+        MASK.spec,
+        LABELS.spec,
+        TRACKS.spec,
+        GT_POSE.spec,
     ],
-    outputs: &[
-        PortSpec::output("pose", PortType::Pose, "world_from_cam (the first key frame is the world)"),
-        PortSpec::output(
-            "keyframe",
-            PortType::Map,
-            "a new key frame with its observations and new points (to `local_map`)",
-        ),
-        PortSpec::output(
-            "stats",
-            PortType::Scalars,
-            "`state` (0 not initialised, 1 new map, 2 tracked, 3 relocalised, 4 lost), `matches`, `inliers`, `map_points`, `map_id`, `keyframe`",
-        ),
-    ],
-    params: &[
-        ParamSpec {
-            name: "min_inliers",
-            ty: ParamType::Int { min: 6, max: 100_000 },
-            default: Default::Int(30),
-            doc: "fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30)",
-        },
-        float(
-            "search_radius",
-            1.0,
-            200.0,
-            15.0,
-            "projection search radius, pixels (ORB-SLAM2's motion-model search: 15; widened 3x once)",
-        ),
-        float(
-            "baseline",
-            0.0,
-            10.0,
-            0.08,
-            "virtual baseline, metres: bf = fx x baseline weighs the depth residual (ORB-SLAM2 TUM configs: bf 40 at fx 525); 0 uses pixels only",
-        ),
-        float(
-            "close_depth",
-            0.1,
-            1000.0,
-            3.2,
-            "points closer than this are `close` in the key-frame rule (ORB-SLAM2 ThDepth 40 x baseline)",
-        ),
-        float(
-            "max_depth",
-            0.1,
-            1000.0,
-            6.0,
-            "depths beyond this (metres) are not used (Kinect noise grows with the square)",
-        ),
-        float("ransac_threshold", 0.1, 100.0, 3.0, "P3P RANSAC reprojection threshold, pixels"),
-        ParamSpec {
-            name: "reset_after",
-            ty: ParamType::Int { min: 0, max: 100_000 },
-            default: Default::Int(5),
-            doc: "lost frames in a row before a new map starts",
-        },
-        float(
-            "label_radius",
-            0.0,
-            100.0,
-            10.0,
-            "a keypoint takes the culling label of the nearest labelled track within this many pixels (dynamic: left out); 10 = `lk_flow`'s `min_distance`, the spacing of the tracked corners, so a label speaks for its neighbourhood as a segment would; 0: only keypoints on a track",
-        ),
-    ],
+    outputs: &[POSE.spec, KEYFRAME.spec, STATS.spec],
+    params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
         Ok(Instance::Transform(Box::new(PnpTrack {
-            config: p.parse()?,
+            config: Config::from_params(p)?,
             tracker: None,
             trajectory: Vec::new(),
             ground_truth: Vec::new(),
@@ -182,9 +143,9 @@ fn transfer_labels(labelled: &[([f32; 2], bool)], points: &[[f32; 2]], radius: f
 }
 
 /// Per keypoint: left out as dynamic?
-fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]], label_radius: f32) -> Vec<bool> {
+fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]], label_radius: f32) -> Result<Vec<bool>, OpError> {
     let mut dynamic = vec![false; points.len()];
-    if let Some(Body::Mask(m)) = inputs.get("mask").map(|m| &m.body) {
+    if let Some(m) = MASK.get(inputs)? {
         for (d, p) in dynamic.iter_mut().zip(points) {
             // (The mask's size was checked against the depth image's.)
             let (x, y) = (p[0].round() as i64, p[1].round() as i64);
@@ -193,9 +154,7 @@ fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]], label_radius: f32) ->
             }
         }
     }
-    if let (Some(Body::PointLabels(l)), Some(Body::Tracks(t))) =
-        (inputs.get("labels").map(|m| &m.body), inputs.get("tracks").map(|m| &m.body))
-    {
+    if let (Some(l), Some(t)) = (LABELS.get(inputs)?, TRACKS.get(inputs)?) {
         let labelled: Vec<([f32; 2], bool)> = l
             .labels
             .iter()
@@ -203,20 +162,15 @@ fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]], label_radius: f32) ->
             .collect();
         transfer_labels(&labelled, points, label_radius, &mut dynamic);
     }
-    dynamic
+    Ok(dynamic)
 }
 
 impl Operator for PnpTrack {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let msg = inputs.require("keypoints")?;
-        let Body::Keypoints(kp) = &msg.body else { return Err(OpError::Input("`keypoints` is not keypoints".into())) };
-        let Body::Depth(depth) = &inputs.require("depth")?.body else {
-            return Err(OpError::Input("`depth` is not a depth image".into()));
-        };
-        let Body::CameraInfo(k) = &inputs.require("camera_info")?.body else {
-            return Err(OpError::Input("`camera_info` is not camera info".into()));
-        };
-        if let Some(Body::Mask(m)) = inputs.get("mask").map(|m| &m.body)
+        let (msg, kp) = KEYPOINTS.require(inputs)?;
+        let (_, depth) = DEPTH.require(inputs)?;
+        let (_, k) = CAMERA_INFO.require(inputs)?;
+        if let Some(m) = MASK.get(inputs)?
             && (m.width, m.height) != (depth.width, depth.height)
         {
             return Err(OpError::Input(format!(
@@ -242,20 +196,20 @@ impl Operator for PnpTrack {
             tc.min_inliers = self.config.min_inliers as usize;
             tc.ransac_threshold = self.config.ransac_threshold;
             tc.reset_after = self.config.reset_after as u32;
-            let cam = Camera { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
+            let cam = Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
             self.tracker = Some(Tracker::new(tc, cam, k.width as usize, k.height as usize, ctx.rng.next_u64()));
         }
         let Some(tracker) = self.tracker.as_mut() else { return Ok(Outputs::new()) };
-        if let Some(m) = inputs.get("map")
+        if let Some(m) = MAP.message(inputs)?
             && self.last_map.as_ref().is_none_or(|last| !Arc::ptr_eq(last, m))
         {
-            if let Body::Map(update) = &m.body {
+            if let Some(update) = MAP.get(inputs)? {
                 tracker.apply_map_update(&convert::from_msg(update));
             }
             self.last_map = Some(m.clone());
         }
         let uv: Vec<[f32; 2]> = kp.points.iter().map(|p| [p.x, p.y]).collect();
-        let dynamic = dynamic_keypoints(inputs, &uv, self.config.label_radius as f32);
+        let dynamic = dynamic_keypoints(inputs, &uv, self.config.label_radius as f32)?;
         let features: Vec<Feature> = kp
             .points
             .iter()
@@ -280,7 +234,7 @@ impl Operator for PnpTrack {
         let stamp = msg.header.stamp;
         let r = tracker.track(stamp, &features);
         self.counts[r.state.code() as usize] += 1;
-        if let Some(Body::Pose(gt)) = inputs.get("gt_pose").map(|m| &m.body) {
+        if let Some(gt) = GT_POSE.get(inputs)? {
             self.ground_truth.push((stamp, gt.world_from_cam));
         }
         let header = Header { frame_id: Arc::from("world"), ..msg.header.clone() };
@@ -292,13 +246,13 @@ impl Operator for PnpTrack {
             ("map_id".into(), f64::from(r.map_id)),
             ("keyframe".into(), if r.keyframe.is_some() { 1.0 } else { 0.0 }),
         ];
-        let mut out = Outputs::new().with("stats", header.clone(), Body::Scalars(Scalars { values: stats }));
+        let mut out = Outputs::new().send(&STATS, header.clone(), Scalars { values: stats });
         if let Some(pose) = r.pose {
             self.trajectory.push((stamp, pose));
-            out = out.with("pose", header.clone(), Body::Pose(Pose { world_from_cam: pose }));
+            out = out.send(&POSE, header.clone(), Pose { world_from_cam: pose });
         }
         if let Some(kf) = &r.keyframe {
-            out = out.with("keyframe", header, Body::Map(convert::to_msg(kf)));
+            out = out.send(&KEYFRAME, header, convert::to_msg(kf));
         }
         Ok(out)
     }

@@ -2,20 +2,26 @@
 
 use std::sync::Arc;
 
-use dynaflow_engine::msg::{Body, Header, Image, PixelFormat, PortType, Scalars};
-use dynaflow_engine::op::{
-    Context, Default, Instance, OpError, OpKind, OpSpec, Outputs, ParamSpec, ParamType, Params, PortSpec, Source,
-};
+use dynaflow_engine::msg::{Header, Image, PixelFormat, Scalars};
+use dynaflow_engine::op::{Context, Instance, OpError, OpKind, OpSpec, Out, Outputs, Params, Source};
+use dynaflow_engine::params;
 
-/// `testing.test_pattern` configuration.
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct Config {
-    frames: u64,
-    width: u32,
-    height: u32,
-    rate_hz: f64,
+params! {
+    /// `testing.test_pattern` configuration.
+    struct Config {
+        /// number of frames
+        frames: u64 [1, 100_000_000] = 300,
+        /// image width in pixels
+        width: u32 [1, 8192] = 64,
+        /// image height in pixels
+        height: u32 [1, 8192] = 48,
+        /// frame rate that sets the stamps (and pacing with --realtime)
+        rate_hz: f64 [0.001, 10_000.0] = 30.0,
+    }
 }
+
+const IMAGE: Out<Image> = Out::new("image", "RGB8 gradient shifted by one pixel per frame");
+const TICK: Out<Scalars> = Out::new("tick", "`frame` = sequence number, `time` = stamp in seconds");
 
 pub(super) const TEST_PATTERN: OpSpec = OpSpec {
     name: "testing.test_pattern",
@@ -23,43 +29,15 @@ pub(super) const TEST_PATTERN: OpSpec = OpSpec {
     doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): A moving RGB gradient and a frame counter at a fixed rate. For engine tests and smoke runs; it is not a camera model and feeds no SLAM result.",
     kind: OpKind::Source,
     inputs: &[],
-    outputs: &[
-        PortSpec::output("image", PortType::Image, "RGB8 gradient shifted by one pixel per frame"),
-        PortSpec::output("tick", PortType::Scalars, "`frame` = sequence number, `time` = stamp in seconds"),
-    ],
-    params: &[
-        ParamSpec {
-            name: "frames",
-            ty: ParamType::Int { min: 1, max: 100_000_000 },
-            default: Default::Int(300),
-            doc: "number of frames",
-        },
-        ParamSpec {
-            name: "width",
-            ty: ParamType::Int { min: 1, max: 8192 },
-            default: Default::Int(64),
-            doc: "image width in pixels",
-        },
-        ParamSpec {
-            name: "height",
-            ty: ParamType::Int { min: 1, max: 8192 },
-            default: Default::Int(48),
-            doc: "image height in pixels",
-        },
-        ParamSpec {
-            name: "rate_hz",
-            ty: ParamType::Float { min: 0.001, max: 10_000.0 },
-            default: Default::Float(30.0),
-            doc: "frame rate that sets the stamps (and pacing with --realtime)",
-        },
-    ],
+    outputs: &[IMAGE.spec, TICK.spec],
+    params: Config::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
     build: build_test_pattern,
 };
 
 fn build_test_pattern(params: &Params) -> Result<Instance, OpError> {
-    let config: Config = params.parse()?;
+    let config = Config::from_params(params)?;
     Ok(Instance::Source(Box::new(TestPattern { config, frame_id: "camera".into() })))
 }
 
@@ -83,11 +61,7 @@ impl Source for TestPattern {
         let stamp = seq as f64 / self.config.rate_hz;
         let header = Header { seq, stamp, frame_id: self.frame_id.clone() };
         let tick = Scalars { values: vec![("frame".into(), seq as f64), ("time".into(), stamp)] };
-        Ok(Some(Outputs::new().with("image", header.clone(), Body::Image(img)).with(
-            "tick",
-            header,
-            Body::Scalars(tick),
-        )))
+        Ok(Some(Outputs::new().send(&IMAGE, header.clone(), img).send(&TICK, header, tick)))
     }
 
     fn len_hint(&self) -> Option<u64> {

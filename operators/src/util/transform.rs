@@ -2,22 +2,22 @@
 
 use std::time::{Duration, Instant};
 
-use dynaflow_engine::msg::{Body, Header, PortType, Scalars};
+use dynaflow_engine::msg::{Body, Header, Scalars, SegmentationMask};
 use dynaflow_engine::op::{
-    Context, Default, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Outputs, ParamSpec, ParamType,
-    Params, PortSpec,
+    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params, PortSpec,
 };
+use dynaflow_engine::{param_enum, params};
 use rand_core::Rng;
 use std::collections::BTreeSet;
 
-const ANY_IN: &[PortSpec] = &[PortSpec::input("input", PortType::Any, "any message")];
-const SAME_OUT: &[PortSpec] = &[PortSpec::output_like("output", "input", "the input message, unchanged")];
+const INPUT: In<Body> = In::required("input", "any message");
+const OUTPUT: Out<Body> = Out::like("output", "input", "the input message, unchanged");
+const ANY_IN: &[PortSpec] = &[INPUT.spec];
+const SAME_OUT: &[PortSpec] = &[OUTPUT.spec];
 
 fn forward(inputs: &Inputs) -> Result<Outputs, OpError> {
-    let msg = inputs.require("input")?;
-    let mut out = Outputs::new();
-    out.push("output", msg.header.clone(), msg.body.clone());
-    Ok(out)
+    let (msg, body) = INPUT.require(inputs)?;
+    Ok(Outputs::new().send(&OUTPUT, msg.header.clone(), body.clone()))
 }
 
 // --- passthrough -----------------------------------------------------------------------
@@ -45,11 +45,13 @@ impl Operator for Passthrough {
 
 // --- simulate_work ---------------------------------------------------------------------
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct WorkConfig {
-    work_us: u64,
-    spin: bool,
+params! {
+    struct WorkConfig {
+        /// time spent per frame, microseconds
+        work_us: u64 [0, 60_000_000] = 1000,
+        /// busy-wait instead of sleeping
+        spin: bool = false,
+    }
 }
 
 pub(super) const SIMULATE_WORK: OpSpec = OpSpec {
@@ -59,23 +61,10 @@ pub(super) const SIMULATE_WORK: OpSpec = OpSpec {
     kind: OpKind::Transform,
     inputs: ANY_IN,
     outputs: SAME_OUT,
-    params: &[
-        ParamSpec {
-            name: "work_us",
-            ty: ParamType::Int { min: 0, max: 60_000_000 },
-            default: Default::Int(1000),
-            doc: "time spent per frame, microseconds",
-        },
-        ParamSpec {
-            name: "spin",
-            ty: ParamType::Bool,
-            default: Default::Bool(false),
-            doc: "busy-wait instead of sleeping",
-        },
-    ],
+    params: WorkConfig::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(SimulateWork(p.parse()?)))),
+    build: |p: &Params| Ok(Instance::Transform(Box::new(SimulateWork(WorkConfig::from_params(p)?)))),
 };
 
 struct SimulateWork(WorkConfig);
@@ -97,37 +86,33 @@ impl Operator for SimulateWork {
 
 // --- random_scalar ---------------------------------------------------------------------
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RandomConfig {
-    distribution: String,
-    scale: f64,
+param_enum! {
+    enum Distribution { Uniform = "uniform", Normal = "normal" }
 }
+
+params! {
+    struct RandomConfig {
+        /// uniform in [0, scale) or normal with σ = scale
+        distribution: Distribution = Distribution::Uniform,
+        /// range or standard deviation
+        scale: f64 [0.0, 1e12] = 1.0,
+    }
+}
+
+const TRIGGER: In<Body> = In::required("trigger", "any message; one value is drawn per frame");
+const VALUE: Out<Scalars> = Out::new("value", "`value`: the draw");
 
 pub(super) const RANDOM_SCALAR: OpSpec = OpSpec {
     name: "testing.random_scalar",
     family: "testing",
     doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Emits one random number per frame from the node's seeded RNG (`value`). Shows that runs with the same seed are identical.",
     kind: OpKind::Transform,
-    inputs: &[PortSpec::input("trigger", PortType::Any, "any message; one value is drawn per frame")],
-    outputs: &[PortSpec::output("value", PortType::Scalars, "`value`: the draw")],
-    params: &[
-        ParamSpec {
-            name: "distribution",
-            ty: ParamType::Enum { values: &["uniform", "normal"] },
-            default: Default::Str("uniform"),
-            doc: "uniform in [0, scale) or normal with σ = scale",
-        },
-        ParamSpec {
-            name: "scale",
-            ty: ParamType::Float { min: 0.0, max: 1e12 },
-            default: Default::Float(1.0),
-            doc: "range or standard deviation",
-        },
-    ],
+    inputs: &[TRIGGER.spec],
+    outputs: &[VALUE.spec],
+    params: RandomConfig::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(RandomScalar(p.parse()?)))),
+    build: |p: &Params| Ok(Instance::Transform(Box::new(RandomScalar(RandomConfig::from_params(p)?)))),
 };
 
 struct RandomScalar(RandomConfig);
@@ -139,25 +124,28 @@ fn unit(rng: &mut impl Rng) -> f64 {
 
 impl Operator for RandomScalar {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let header = inputs.require("trigger")?.header.clone();
-        let v = if self.0.distribution == "normal" {
-            // Box–Muller; 1 - u keeps the log argument in (0, 1].
-            let (u1, u2) = (1.0 - unit(&mut ctx.rng), unit(&mut ctx.rng));
-            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos() * self.0.scale
-        } else {
-            unit(&mut ctx.rng) * self.0.scale
+        let header = TRIGGER.require(inputs)?.0.header.clone();
+        let v = match self.0.distribution {
+            Distribution::Normal => {
+                // Box–Muller; 1 - u keeps the log argument in (0, 1].
+                let (u1, u2) = (1.0 - unit(&mut ctx.rng), unit(&mut ctx.rng));
+                (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos() * self.0.scale
+            }
+            Distribution::Uniform => unit(&mut ctx.rng) * self.0.scale,
         };
-        Ok(Outputs::new().with("value", header, Body::Scalars(Scalars::one("value", v))))
+        Ok(Outputs::new().send(&VALUE, header, Scalars::one("value", v)))
     }
 }
 
 // --- gate ------------------------------------------------------------------------------
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct GateConfig {
-    every: u64,
-    offset: u64,
+params! {
+    struct GateConfig {
+        /// period in frames
+        every: u64 [1, 1_000_000] = 5,
+        /// phase in frames
+        offset: u64 [0, 1_000_000] = 0,
+    }
 }
 
 pub(super) const GATE: OpSpec = OpSpec {
@@ -167,23 +155,10 @@ pub(super) const GATE: OpSpec = OpSpec {
     kind: OpKind::Transform,
     inputs: ANY_IN,
     outputs: SAME_OUT,
-    params: &[
-        ParamSpec {
-            name: "every",
-            ty: ParamType::Int { min: 1, max: 1_000_000 },
-            default: Default::Int(5),
-            doc: "period in frames",
-        },
-        ParamSpec {
-            name: "offset",
-            ty: ParamType::Int { min: 0, max: 1_000_000 },
-            default: Default::Int(0),
-            doc: "phase in frames",
-        },
-    ],
+    params: GateConfig::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(Gate(p.parse()?)))),
+    build: |p: &Params| Ok(Instance::Transform(Box::new(Gate(GateConfig::from_params(p)?)))),
 };
 
 struct Gate(GateConfig);
@@ -201,48 +176,53 @@ pub(super) const SCALAR_SUM: OpSpec = OpSpec {
     family: "testing",
     doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Sums the first value of `a` and, when present, of `b` into `sum`; also reports whether `b` was present (`b_present`). Exercises joins and feedback.",
     kind: OpKind::Transform,
-    inputs: &[
-        PortSpec::input("a", PortType::Scalars, "first addend (required)"),
-        PortSpec::optional("b", PortType::Scalars, "second addend (optional)"),
-    ],
-    outputs: &[PortSpec::output("sum", PortType::Scalars, "`sum`, `b_present`, `b_seq` (frame of `b`, -1 if absent)")],
+    inputs: &[A.spec, B.spec],
+    outputs: &[SUM.spec],
     params: &[],
     cpu_heavy: false,
     ground_truth_outputs: None,
     build: |_| Ok(Instance::Transform(Box::new(ScalarSum))),
 };
 
+const A: In<Scalars> = In::required("a", "first addend (required)");
+const B: In<Scalars> = In::optional("b", "second addend (optional)");
+const SUM: Out<Scalars> = Out::new("sum", "`sum`, `b_present`, `b_seq` (frame of `b`, -1 if absent)");
+
 struct ScalarSum;
 
-fn first(body: &Body) -> Result<f64, OpError> {
-    match body {
-        Body::Scalars(s) => s.values.first().map(|(_, v)| *v).ok_or_else(|| OpError::Input("empty scalars".into())),
-        other => Err(OpError::Input(format!("expected scalars, got {}", other.port_type()))),
-    }
+fn first(s: &Scalars) -> Result<f64, OpError> {
+    s.values.first().map(|(_, v)| *v).ok_or_else(|| OpError::Input("empty scalars".into()))
 }
 
 impl Operator for ScalarSum {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let a = inputs.require("a")?;
-        let b = inputs.get("b");
-        let sum = first(&a.body)? + b.map(|m| first(&m.body)).transpose()?.unwrap_or(0.0);
+        let (a_msg, a) = A.require(inputs)?;
+        let b_msg = B.message(inputs)?;
+        let b = B.get(inputs)?;
+        let sum = first(a)? + b.map(first).transpose()?.unwrap_or(0.0);
         let values = vec![
             ("sum".into(), sum),
             ("b_present".into(), f64::from(u8::from(b.is_some()))),
-            ("b_seq".into(), b.map_or(-1.0, |m| m.header.seq as f64)),
+            ("b_seq".into(), b_msg.map_or(-1.0, |m| m.header.seq as f64)),
         ];
-        let header = Header { ..a.header.clone() };
-        Ok(Outputs::new().with("sum", header, Body::Scalars(Scalars { values })))
+        let header = Header { ..a_msg.header.clone() };
+        Ok(Outputs::new().send(&SUM, header, Scalars { values }))
     }
 }
 
 // --- fault -----------------------------------------------------------------------------
 
-#[derive(Debug, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-struct FaultConfig {
-    at_frame: u64,
-    mode: String,
+param_enum! {
+    enum FaultMode { Error = "error", Panic = "panic" }
+}
+
+params! {
+    struct FaultConfig {
+        /// frame at which to fail
+        at_frame: u64 [0, i64::MAX],
+        /// return an error or panic
+        mode: FaultMode = FaultMode::Error,
+    }
 }
 
 pub(super) const FAULT: OpSpec = OpSpec {
@@ -252,23 +232,10 @@ pub(super) const FAULT: OpSpec = OpSpec {
     kind: OpKind::Transform,
     inputs: ANY_IN,
     outputs: SAME_OUT,
-    params: &[
-        ParamSpec {
-            name: "at_frame",
-            ty: ParamType::Int { min: 0, max: i64::MAX },
-            default: Default::Required,
-            doc: "frame at which to fail",
-        },
-        ParamSpec {
-            name: "mode",
-            ty: ParamType::Enum { values: &["error", "panic"] },
-            default: Default::Str("error"),
-            doc: "return an error or panic",
-        },
-    ],
+    params: FaultConfig::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(Fault(p.parse()?)))),
+    build: |p: &Params| Ok(Instance::Transform(Box::new(Fault(FaultConfig::from_params(p)?)))),
 };
 
 struct Fault(FaultConfig);
@@ -276,7 +243,7 @@ struct Fault(FaultConfig);
 impl Operator for Fault {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         if inputs.seq >= self.0.at_frame {
-            if self.0.mode == "panic" {
+            if self.0.mode == FaultMode::Panic {
                 #[allow(clippy::panic)]
                 {
                     panic!("fault injected at frame {}", inputs.seq);
@@ -295,28 +262,28 @@ pub(super) const MASK_STATS: OpSpec = OpSpec {
     family: "util",
     doc: "Statistics of a segmentation mask: the fraction of pixels of a non-background class (`dynamic_fraction`) and the number of distinct instances (`instances`). Shows how dynamic each frame of a sequence is.",
     kind: OpKind::Transform,
-    inputs: &[PortSpec::input("mask", PortType::Mask, "class (and instance) mask; class 0 is background/static")
-        .with_role(InputRole::Statistics)],
-    outputs: &[PortSpec::output("stats", PortType::Scalars, "`dynamic_fraction`, `instances`")],
+    inputs: &[MASK.spec],
+    outputs: &[STATS.spec],
     params: &[],
     cpu_heavy: false,
     ground_truth_outputs: None,
     build: |_| Ok(Instance::Transform(Box::new(MaskStats))),
 };
 
+const MASK: In<SegmentationMask> =
+    In::required("mask", "class (and instance) mask; class 0 is background/static").with_role(InputRole::Statistics);
+const STATS: Out<Scalars> = Out::new("stats", "`dynamic_fraction`, `instances`");
+
 struct MaskStats;
 
 impl Operator for MaskStats {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let msg = inputs.require("mask")?;
-        let Body::Mask(m) = &msg.body else {
-            return Err(OpError::Input(format!("expected a mask, got {}", msg.body.port_type())));
-        };
+        let (msg, m) = MASK.require(inputs)?;
         let dynamic = m.classes.iter().filter(|&&c| c != 0).count();
         let fraction = if m.classes.is_empty() { 0.0 } else { dynamic as f64 / m.classes.len() as f64 };
         let instances =
             m.instances.as_ref().map_or(0, |i| i.iter().filter(|&&v| v != 0).collect::<BTreeSet<_>>().len());
         let values = vec![("dynamic_fraction".into(), fraction), ("instances".into(), instances as f64)];
-        Ok(Outputs::new().with("stats", msg.header.clone(), Body::Scalars(Scalars { values })))
+        Ok(Outputs::new().send(&STATS, msg.header.clone(), Scalars { values }))
     }
 }

@@ -65,7 +65,7 @@ pub fn schema_text(name: &str) -> String {
         "foxglove.SceneUpdate" => format!(
             r#""deletions":{{"type":"array"}},"entities":{{"type":"array","items":{{"type":"object","properties":{{"timestamp":{TIME},"frame_id":{{"type":"string"}},"id":{{"type":"string"}},"lifetime":{TIME},"frame_locked":{{"type":"boolean"}},"cubes":{{"type":"array","items":{{"type":"object","properties":{{"pose":{pose},"size":{VEC3},"color":{COLOR}}}}}}}}}}}}}"#
         ),
-        "dynaflow.PointLabels" => r#""timestamp":{"type":"object"},"index":{"type":"array","items":{"type":"integer"}},"dynamic":{"type":"array","items":{"type":"boolean"}},"reason":{"type":"array","items":{"type":"string","enum":["static","epipolar","semantic","flow","depth"]}},"score":{"type":"array","items":{"type":"number"}}"#.replace(r#"{"type":"object"}"#, TIME),
+        "dynaflow.PointLabels" => r#""timestamp":{"type":"object"},"index":{"type":"array","items":{"type":"integer"}},"dynamic":{"type":"array","items":{"type":"boolean"}},"reason":{"type":"array","items":{"type":"string","enum":["static","epipolar","semantic","flow","depth"]}},"score":{"type":"array","items":{"type":"number"}},"at":{"type":"array","items":{"type":"array","items":{"type":"number"}}}"#.replace(r#"{"type":"object"}"#, TIME),
         _ => format!(r#""timestamp":{TIME},"values":{{"type":"object","additionalProperties":{{"type":"number"}}}}"#),
     };
     format!(r#"{{"title":"{name}","type":"object","properties":{{{body},"dynaflow":{DYNAFLOW}}}}}"#)
@@ -168,6 +168,7 @@ pub fn to_json(msg: &Message) -> Result<Vec<u8>, String> {
             "dynamic": l.labels.iter().map(|l| l.dynamic).collect::<Vec<_>>(),
             "reason": l.labels.iter().map(|l| l.reason).collect::<Vec<_>>(),
             "score": l.labels.iter().map(|l| l.score).collect::<Vec<_>>(),
+            "at": l.labels.iter().map(|l| l.at).collect::<Vec<_>>(),
         }),
         Body::Pose(p) => json!({"timestamp": ts, "frame_id": "world", "pose": pose_json(&p.world_from_cam)}),
         Body::Trajectory(t) => json!({

@@ -8,7 +8,7 @@
 //! |---|---|---|
 //! | image | `/<node>/<port>` | `EncodedImage` (JPEG/PNG), `Image` with `--image-format raw` |
 //! | depth | `/<node>/<port>` | `DepthImage` (raw 16-bit millimetres) |
-//! | camera_info | (none of its own) | the intrinsics of each pose's `Pinhole` |
+//! | camera_info | (none of its own) | the intrinsics of the `Pinhole` of each pose stream seen through it (`RunInfo::cameras`) |
 //! | keypoints | `/<node>/<port>` | `Points2D` coloured by octave |
 //! | tracks | `/<node>/<port>` | `Arrows2D` |
 //! | detections | `/<node>/<port>` | `Boxes2D` with class labels |
@@ -29,7 +29,7 @@
 //! the batcher's in-flight budget; the file writer encodes and writes each chunk as it comes,
 //! with no queue of its own.
 
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
 
 use dynaflow_engine::msg::{Body, CameraInfo, Message, PixelFormat, PortType};
@@ -66,9 +66,10 @@ pub struct RrdSink {
     target: Target,
     rec: Option<rerun::RecordingStream>,
     codec: ImageCodec,
-    intrinsics: Option<CameraInfo>,
-    /// Positions of the latest keypoints/tracks per frame, to place point labels.
-    points_by_seq: HashMap<u64, Vec<[f32; 2]>>,
+    /// The latest intrinsics on each camera-info port (`node/port`).
+    intrinsics: HashMap<String, CameraInfo>,
+    /// The camera-info port each pose port is seen through (the run's `RunInfo::cameras`).
+    cameras: BTreeMap<String, String>,
     /// Positions of each pose stream so far, drawn as a path.
     trails: HashMap<String, Vec<[f32; 3]>>,
     cache: EncodeCache,
@@ -153,8 +154,8 @@ impl RrdSink {
             target,
             rec: None,
             codec: ImageCodec::Jpeg(90),
-            intrinsics: None,
-            points_by_seq: HashMap::new(),
+            intrinsics: HashMap::new(),
+            cameras: BTreeMap::new(),
             trails: HashMap::new(),
             cache: EncodeCache::default(),
             series: HashMap::new(),
@@ -293,6 +294,7 @@ impl Sink for RrdSink {
         // Wall-clock log time is not a dynaflow timeline (`frame` is), and each timeline adds
         // a column per component to every chunk's manifest row.
         rec.set_log_time_enabled(false);
+        self.cameras.clone_from(&info.cameras);
         let name = match &info.variant {
             Some(v) => format!("{} ({v})", info.graph),
             None => info.graph.clone(),
@@ -382,12 +384,11 @@ impl Sink for RrdSink {
                 )
             }
             Body::CameraInfo(c) => {
-                self.intrinsics = Some(c.clone());
+                self.intrinsics.insert(path.clone(), c.clone());
                 Ok(())
             }
             Body::Keypoints(k) => {
                 let xy: Vec<[f32; 2]> = k.points.iter().map(|p| [p.x, p.y]).collect();
-                self.points_by_seq.insert(msg.header.seq, xy.clone());
                 rec.log(
                     path.as_str(),
                     &rerun::Points2D::new(xy)
@@ -396,7 +397,6 @@ impl Sink for RrdSink {
                 )
             }
             Body::Tracks(t) => {
-                self.points_by_seq.insert(msg.header.seq, t.tracks.iter().map(|t| t.cur).collect());
                 let origins: Vec<[f32; 2]> = t.tracks.iter().map(|t| t.prev).collect();
                 let vectors: Vec<[f32; 2]> =
                     t.tracks.iter().map(|t| [t.cur[0] - t.prev[0], t.cur[1] - t.prev[1]]).collect();
@@ -428,13 +428,12 @@ impl Sink for RrdSink {
                 rec.log(path.as_str(), &rerun::SegmentationImage::new(bytes, format).with_opacity(0.5))
             }
             Body::PointLabels(l) => {
-                let pts = self.points_by_seq.get(&msg.header.seq).cloned().unwrap_or_default();
                 let mut xy = Vec::new();
                 let mut colors = Vec::new();
                 let mut texts = Vec::new();
-                for lab in &l.labels {
-                    let Some(p) = pts.get(lab.index as usize) else { continue };
-                    xy.push(*p);
+                // Each label at its own point (a replayed label of unknown place is left out).
+                for lab in l.labels.iter().filter(|l| l.at.iter().all(|v| v.is_finite())) {
+                    xy.push(lab.at);
                     colors.push(if lab.dynamic {
                         rerun::Color::from_rgb(230, 40, 40)
                     } else {
@@ -472,7 +471,9 @@ impl Sink for RrdSink {
                     let logged = (first..=segment).try_for_each(|k| log_trail_segment(&rec, &world, trail, k));
                     logged.map_err(|e| self.err(e))?;
                 }
-                match &self.intrinsics {
+                // The pinhole of this pose stream's own camera (a graph may hold several).
+                let camera = self.cameras.get(&path).and_then(|c| self.intrinsics.get(c));
+                match camera {
                     Some(c) if changed(&mut self.logged_pinholes, &world, c) => rec.log_static(
                         world,
                         &rerun::Pinhole::from_focal_length_and_resolution(
@@ -540,11 +541,6 @@ impl Sink for RrdSink {
         if matches!(self.target, Target::File(_)) && msg.header.seq / CUT_EVERY_FRAMES > self.cut {
             self.cut = msg.header.seq / CUT_EVERY_FRAMES;
             rec.flush_async().map_err(|e| self.err(e))?;
-        }
-        // Bound the label lookup table: frames older than a few hundred are never labelled.
-        if self.points_by_seq.len() > 256 {
-            let newest = msg.header.seq;
-            self.points_by_seq.retain(|k, _| *k + 128 >= newest);
         }
         r.map_err(|e| self.err(e))
     }
@@ -635,6 +631,7 @@ mod tests {
             realtime: false,
             ports: BTreeMap::new(),
             ground_truth_ports: Default::default(),
+            cameras: BTreeMap::new(),
         };
         let cache = EncodeCache::new(2);
         let mut rrd = RrdSink::new(dir.join("t.rrd")).with_cache(cache.clone());

@@ -21,7 +21,7 @@ pub use fundamental::{eight_point, epipolar_distance, epipolar_error, seven_poin
 pub use homography::{HomographyFit, fit_homography_prosac, homography_dlt, transfer, transfer_error};
 pub use p3p::p3p;
 pub use pose::{
-    CHI2_2DOF_95, CHI2_3DOF_95, Camera, PoseFit, PoseObservation, bearing, compose, exp_se3, observation_jacobian,
+    CHI2_2DOF_95, CHI2_3DOF_95, PoseFit, PoseObservation, bearing, compose, exp_se3, observation_jacobian,
     optimize_pose, p3p_ransac, pnp_dlt, pnp_ransac, refine_pose, renormalised,
 };
 pub use ransac::{FundamentalFit, RansacConfig, SplitMix64, fit_fundamental};

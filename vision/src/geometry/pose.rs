@@ -1,4 +1,4 @@
-//! Camera pose from 3-D points and their images (PnP), as ORB-SLAM's tracking needs it:
+//! Pinhole pose from 3-D points and their images (PnP), as ORB-SLAM's tracking needs it:
 //! a linear DLT for initial poses inside RANSAC, then motion-only bundle adjustment
 //! (Levenberg-Marquardt on SE(3), Huber kernel, analytic Jacobians, inliers re-classified
 //! over four rounds as ORB-SLAM's `PoseOptimization` does).
@@ -10,29 +10,7 @@ use nalgebra::{
 
 use super::p3p::p3p;
 use super::ransac::{SplitMix64, needed};
-
-/// A pinhole camera.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Camera {
-    /// Focal length x, pixels.
-    pub fx: f64,
-    /// Focal length y, pixels.
-    pub fy: f64,
-    /// Principal point x.
-    pub cx: f64,
-    /// Principal point y.
-    pub cy: f64,
-}
-
-impl Camera {
-    /// Pixel of a point in the camera frame (`None` behind the camera).
-    pub fn project(&self, p: &Point3<f64>) -> Option<[f64; 2]> {
-        (p.z > 1e-9).then(|| [self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy])
-    }
-    fn normalised(&self, uv: [f64; 2]) -> [f64; 2] {
-        [(uv[0] - self.cx) / self.fx, (uv[1] - self.cy) / self.fy]
-    }
-}
+use crate::camera::Pinhole;
 
 /// Chi-square 95 % quantile for 2 degrees of freedom: ORB-SLAM's inlier test on squared
 /// reprojection errors in units of the measurement's sigma.
@@ -40,7 +18,7 @@ pub const CHI2_2DOF_95: f64 = 5.991;
 
 /// `cam_from_world` by the direct linear transform on `n >= 6` correspondences, the rotation
 /// projected onto SO(3). `None` when degenerate (coplanar or collinear points can defeat it).
-pub fn pnp_dlt(world: &[Point3<f64>], pixels: &[[f64; 2]], cam: &Camera) -> Option<Isometry3<f64>> {
+pub fn pnp_dlt(world: &[Point3<f64>], pixels: &[[f64; 2]], cam: &Pinhole) -> Option<Isometry3<f64>> {
     if world.len() < 6 || world.len() != pixels.len() {
         return None;
     }
@@ -182,7 +160,7 @@ pub struct PoseObservation {
 /// rows 0-1 for the pixel, row 2 for the virtual right coordinate `u - bf / z` when the
 /// observation has a depth and `bf > 0` (zero otherwise). `None` behind the camera.
 pub fn observation_jacobian(
-    cam: &Camera,
+    cam: &Pinhole,
     bf: f64,
     pc: &Point3<f64>,
     obs: &PoseObservation,
@@ -220,7 +198,7 @@ fn huber(e2: f64, delta: f64) -> (f64, f64) {
 /// classification (all observations when `None`).
 pub fn optimize_pose(
     obs: &[PoseObservation],
-    cam: &Camera,
+    cam: &Pinhole,
     bf: f64,
     initial: &Isometry3<f64>,
     inliers: Option<Vec<bool>>,
@@ -293,7 +271,7 @@ fn pixel_observations(world: &[Point3<f64>], pixels: &[[f64; 2]], sigma: f64) ->
 pub fn refine_pose(
     world: &[Point3<f64>],
     pixels: &[[f64; 2]],
-    cam: &Camera,
+    cam: &Pinhole,
     initial: &Isometry3<f64>,
     sigma: f64,
 ) -> PoseFit {
@@ -301,7 +279,7 @@ pub fn refine_pose(
 }
 
 /// The unit bearing of a pixel.
-pub fn bearing(cam: &Camera, uv: [f64; 2]) -> Vector3<f64> {
+pub fn bearing(cam: &Pinhole, uv: [f64; 2]) -> Vector3<f64> {
     let [x, y] = cam.normalised(uv);
     Vector3::new(x, y, 1.0).normalize()
 }
@@ -314,7 +292,7 @@ pub fn bearing(cam: &Camera, uv: [f64; 2]) -> Vector3<f64> {
 pub fn p3p_ransac(
     world: &[Point3<f64>],
     pixels: &[[f64; 2]],
-    cam: &Camera,
+    cam: &Pinhole,
     threshold: f64,
     max_iterations: usize,
     rng: &mut SplitMix64,
@@ -373,7 +351,7 @@ pub fn p3p_ransac(
 pub fn pnp_ransac(
     world: &[Point3<f64>],
     pixels: &[[f64; 2]],
-    cam: &Camera,
+    cam: &Pinhole,
     threshold: f64,
     max_iterations: usize,
     rng: &mut SplitMix64,
@@ -388,10 +366,10 @@ mod tests {
     use super::*;
 
     /// Points, their pixels, the camera and the true `cam_from_world`.
-    type Scene = (Vec<Point3<f64>>, Vec<[f64; 2]>, Camera, Isometry3<f64>);
+    type Scene = (Vec<Point3<f64>>, Vec<[f64; 2]>, Pinhole, Isometry3<f64>);
 
     fn scene(n: usize, seed: u64) -> Scene {
-        let cam = Camera { fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5 };
+        let cam = Pinhole { fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5 };
         let truth = Isometry3::from_parts(
             Translation3::new(0.1, -0.2, 0.3),
             UnitQuaternion::from_euler_angles(0.05, -0.1, 0.2),

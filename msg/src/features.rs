@@ -117,6 +117,10 @@ pub struct PointLabel {
     /// The rule's measure for this point, in the rule's unit (epipolar distance in pixels,
     /// a class's dynamic value, a flow or depth residual, ...), compared with its threshold.
     pub score: f32,
+    /// Where the point is in this frame's image (pixels; a track's current position), so a
+    /// label is drawn at its own point whatever else the frame carries (NaN: unknown, e.g.
+    /// replayed from a recording made before labels carried it).
+    pub at: [f32; 2],
 }
 
 /// Labels of all points of a frame.
@@ -137,6 +141,8 @@ impl PointLabels {
             d.u64(u64::from(l.index));
             d.bytes(&[u8::from(l.dynamic), l.reason as u8]);
             d.f32(l.score);
+            d.f32(l.at[0]);
+            d.f32(l.at[1]);
         }
     }
 }

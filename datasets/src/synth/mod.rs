@@ -7,10 +7,10 @@
 //!
 //! Split: `scene` (geometry and motion of people), `texture` (procedural patterns),
 //! `motion` (camera trajectories), `render` (ray caster), `sensor` (noise models), `tum`
-//! (writing the TUM RGB-D layout), `op` (the `synth` source operator).
+//! (writing the TUM RGB-D layout). The `synth` operator that streams it into a graph lives in
+//! `dynaflow-operators`.
 
 mod motion;
-mod op;
 mod render;
 mod scene;
 mod sensor;
@@ -18,16 +18,15 @@ mod texture;
 mod tum;
 
 pub use motion::Motion;
-pub(crate) use op::SYNTH;
 pub use render::Intrinsics;
 pub use scene::PeopleMode;
 pub use tum::{WriteOptions, write_tum};
 
 use nalgebra::{Isometry3, Point3};
 
-/// TUM fr3 intrinsics: what the generated camera uses, so `tum_rgbd` reads it back with `fr3`.
-pub const FR3: Intrinsics =
-    Intrinsics { width: 640, height: 480, fx: 535.4, fy: 539.2, cx: 320.1, cy: 247.6, distortion: [0.0; 5] };
+/// TUM fr3 intrinsics at 640x480: what the generated camera uses, so `tum_rgbd` reads it back
+/// with `fr3`.
+pub const FR3: Intrinsics = crate::intrinsics::FR3.camera_info(640, 480);
 /// First timestamp (seconds), in the range of TUM's Unix-time stamps.
 pub const STAMP_BASE: f64 = 1_700_000_000.0;
 

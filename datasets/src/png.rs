@@ -2,20 +2,22 @@
 
 use std::path::Path;
 
-use dynaflow_engine::msg::{DepthImage, Image, PixelFormat};
+use dynaflow_msg::{DepthImage, Image, PixelFormat};
 use image::{DynamicImage, ImageReader};
 
-fn open(path: &Path) -> Result<DynamicImage, String> {
+use crate::Error;
+
+fn open(path: &Path) -> Result<DynamicImage, Error> {
     ImageReader::open(path)
-        .map_err(|e| format!("{}: {e}", path.display()))?
+        .map_err(|e| Error::file(path, e))?
         .with_guessed_format()
-        .map_err(|e| format!("{}: {e}", path.display()))?
+        .map_err(|e| Error::file(path, e))?
         .decode()
-        .map_err(|e| format!("{}: cannot decode: {e}", path.display()))
+        .map_err(|e| Error::file(path, format!("cannot decode: {e}")))
 }
 
 /// An 8-bit colour (or grey, kept grey) image.
-pub fn load_rgb(path: &Path) -> Result<Image, String> {
+pub fn load_rgb(path: &Path) -> Result<Image, Error> {
     match open(path)? {
         DynamicImage::ImageRgb8(img) => {
             Ok(Image { width: img.width(), height: img.height(), format: PixelFormat::Rgb8, data: img.into_raw() })
@@ -27,36 +29,38 @@ pub fn load_rgb(path: &Path) -> Result<Image, String> {
         DynamicImage::ImageLuma8(img) => {
             Ok(Image { width: img.width(), height: img.height(), format: PixelFormat::Gray8, data: img.into_raw() })
         }
-        other => Err(format!("{}: expected an 8-bit colour image, found {:?}", path.display(), other.color())),
+        other => Err(Error::file(path, format!("expected an 8-bit colour image, found {:?}", other.color()))),
     }
 }
 
 /// A 16-bit depth PNG, `value / factor` metres (0 = no measurement).
-pub fn load_depth(path: &Path, factor: f64) -> Result<DepthImage, String> {
+pub fn load_depth(path: &Path, factor: f64) -> Result<DepthImage, Error> {
     match open(path)? {
         DynamicImage::ImageLuma16(img) => {
             let (width, height) = (img.width(), img.height());
             let data = img.into_raw().into_iter().map(|v| (f64::from(v) / factor) as f32).collect();
             Ok(DepthImage { width, height, data })
         }
-        other => Err(format!(
-            "{}: expected a 16-bit single-channel depth PNG, found {:?} (TUM depth is 16-bit, {factor} per metre)",
-            path.display(),
-            other.color()
+        other => Err(Error::file(
+            path,
+            format!(
+                "expected a 16-bit single-channel depth PNG, found {:?} (TUM depth is 16-bit, {factor} per metre)",
+                other.color()
+            ),
         )),
     }
 }
 
 /// `a` (of `a_size`) must cover `b` (of `b_size`) pixel for pixel: a depth, mask or second
 /// camera image read at another image's coordinates. The error names both files and sizes.
-pub(crate) fn same_size(
+pub fn same_size(
     a: impl std::fmt::Display,
     a_size: (u32, u32),
     b: impl std::fmt::Display,
     b_size: (u32, u32),
-) -> Result<(), String> {
+) -> Result<(), Error> {
     if a_size == b_size {
         return Ok(());
     }
-    Err(format!("{a}: {}x{} but {b} is {}x{}", a_size.0, a_size.1, b_size.0, b_size.1))
+    Err(Error::Data(format!("{a}: {}x{} but {b} is {}x{}", a_size.0, a_size.1, b_size.0, b_size.1)))
 }

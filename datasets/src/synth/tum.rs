@@ -7,11 +7,12 @@
 use std::fmt::Write as _;
 use std::fs;
 use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use image::{ExtendedColorType, ImageEncoder};
 
 use super::{Frame, Generator, Motion, PeopleMode};
+use crate::Error;
 
 /// TUM depth scale: PNG value per metre.
 pub const DEPTH_FACTOR: f64 = 5000.0;
@@ -27,21 +28,11 @@ pub struct WriteOptions {
     pub flow: bool,
 }
 
-/// A file that could not be written.
-#[derive(Debug, thiserror::Error)]
-#[error("{}: {message}", path.display())]
-pub struct WriteError {
-    /// The file.
-    pub path: PathBuf,
-    /// What went wrong.
-    pub message: String,
+fn err(path: &Path, e: impl std::fmt::Display) -> Error {
+    Error::file(path, e)
 }
 
-fn err(path: &Path, e: impl std::fmt::Display) -> WriteError {
-    WriteError { path: path.to_path_buf(), message: e.to_string() }
-}
-
-fn png(path: &Path, data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<(), WriteError> {
+fn png(path: &Path, data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<(), Error> {
     let file = fs::File::create(path).map_err(|e| err(path, e))?;
     image::codecs::png::PngEncoder::new_with_quality(
         std::io::BufWriter::new(file),
@@ -52,7 +43,7 @@ fn png(path: &Path, data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Re
     .map_err(|e| err(path, e))
 }
 
-fn write_flo(path: &Path, flow: &[[f32; 2]], w: u32, h: u32) -> Result<(), WriteError> {
+fn write_flo(path: &Path, flow: &[[f32; 2]], w: u32, h: u32) -> Result<(), Error> {
     let mut bytes = Vec::with_capacity(12 + flow.len() * 8);
     bytes.extend_from_slice(&202_021.25f32.to_le_bytes());
     bytes.extend_from_slice(&(w as i32).to_le_bytes());
@@ -71,7 +62,7 @@ pub fn stamp_name(stamp: f64) -> String {
     format!("{stamp:.6}")
 }
 
-fn write_frame(dir: &Path, f: &Frame, w: u32, h: u32) -> Result<(), WriteError> {
+fn write_frame(dir: &Path, f: &Frame, w: u32, h: u32) -> Result<(), Error> {
     let s = stamp_name(f.stamp);
     let sd = stamp_name(f.stamp + DEPTH_STAMP_OFFSET);
     png(&dir.join(format!("rgb/{s}.png")), &f.rgb, w, h, ExtendedColorType::Rgb8)?;
@@ -92,7 +83,7 @@ fn write_frame(dir: &Path, f: &Frame, w: u32, h: u32) -> Result<(), WriteError> 
 }
 
 /// Write `opts.frames` frames of `generator` to `dir` in the TUM layout.
-pub fn write_tum(generator: &Generator, dir: &Path, opts: &WriteOptions) -> Result<(), WriteError> {
+pub fn write_tum(generator: &Generator, dir: &Path, opts: &WriteOptions) -> Result<(), Error> {
     let c = generator.config();
     let k = &c.intrinsics;
     for sub in ["rgb", "depth", "mask", "instance"].iter().chain(opts.flow.then_some(&"flow")) {

@@ -1,4 +1,7 @@
-//! Every message type that travels on a dynaflow edge, in one place.
+#![warn(missing_docs)]
+//! Every message type that travels on a dynaflow edge, in one place (the engine re-exports
+//! this crate as `dynaflow_engine::msg`; libraries such as the dataset readers use it
+//! without the engine).
 //!
 //! Operators import payloads from here and never define their own wire types, so the
 //! validator, the recorders and the diff tool all agree on what a port carries.
@@ -190,6 +193,61 @@ impl Body {
             Body::Map(_) => PortType::Map,
             Body::Scalars(_) => PortType::Scalars,
         }
+    }
+}
+
+/// A payload type: what a typed port handle (the engine's `op::In`, `op::Out`) carries.
+pub trait Payload: Sized {
+    /// The port type it travels on.
+    const PORT: PortType;
+    /// The payload of `body`, if it is of this type.
+    fn of(body: &Body) -> Option<&Self>;
+    /// As a message body.
+    fn into_body(self) -> Body;
+}
+
+macro_rules! payload {
+    ($($variant:ident($ty:ty)),* $(,)?) => {$(
+        impl Payload for $ty {
+            const PORT: PortType = PortType::$variant;
+            fn of(body: &Body) -> Option<&Self> {
+                match body {
+                    Body::$variant(v) => Some(v),
+                    _ => None,
+                }
+            }
+            fn into_body(self) -> Body {
+                Body::$variant(self)
+            }
+        }
+    )*};
+}
+
+payload!(
+    Image(Image),
+    Depth(DepthImage),
+    CameraInfo(CameraInfo),
+    Keypoints(Keypoints),
+    Tracks(Tracks),
+    Detections(Detections),
+    Mask(SegmentationMask),
+    PointLabels(PointLabels),
+    Pose(Pose),
+    Trajectory(Trajectory),
+    PointCloud(PointCloud),
+    OctreeUpdate(OctreeUpdate),
+    Map(SparseMap),
+    Scalars(Scalars),
+);
+
+/// Any message (ports of type `any`).
+impl Payload for Body {
+    const PORT: PortType = PortType::Any;
+    fn of(body: &Body) -> Option<&Self> {
+        Some(body)
+    }
+    fn into_body(self) -> Body {
+        self
     }
 }
 

@@ -9,7 +9,7 @@ use super::scene::{Kind, Part, ROOM_HALF_DEPTH, ROOM_HALF_WIDTH, ROOM_HEIGHT, Sc
 use super::texture::Texture;
 
 /// The rendered camera: a pinhole without distortion.
-pub type Intrinsics = dynaflow_engine::msg::CameraInfo;
+pub type Intrinsics = dynaflow_msg::CameraInfo;
 
 /// What a pixel's ray hit, for ground-truth flow.
 #[derive(Clone, Copy, Debug, Default)]

@@ -1,29 +1,24 @@
-//! TUM index files (`rgb.txt`, `depth.txt`: `timestamp filename`; `groundtruth.txt`:
-//! `timestamp tx ty tz qx qy qz qw`), association by nearest timestamp, and pose
-//! interpolation. Every error names the file and line.
+//! TUM RGB-D sequence folders as published: index files (`rgb.txt`, `depth.txt`: `timestamp
+//! filename`; `groundtruth.txt`: `timestamp tx ty tz qx qy qz qw`, '#' comments), association
+//! by nearest timestamp (as TUM's associate.py), ground truth by nearest pose (as evo), pose
+//! interpolation, and the frames ([`TumSequence`]). Every error names the file and line.
 
 use std::path::{Path, PathBuf};
 
+use dynaflow_msg::{CameraInfo, DepthImage, Image, SegmentationMask};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-/// A problem in an index file (`file:line: message`, or `file: message` for the whole file).
-#[derive(Debug, thiserror::Error)]
-#[error("{}{}: {message}", path.display(), if *line == 0 { String::new() } else { format!(":{line}") })]
-pub struct IndexError {
-    /// The file.
-    pub path: PathBuf,
-    /// 1-based line (0 for the whole file).
-    pub line: usize,
-    /// What is wrong.
-    pub message: String,
-}
+use crate::intrinsics::{Intrinsics, preset_for_folder, read_calibration};
+use crate::png::{load_depth, load_rgb, same_size};
 
-fn bad(path: &Path, line: usize, message: impl Into<String>) -> IndexError {
-    IndexError { path: path.to_path_buf(), line, message: message.into() }
+use crate::Error;
+
+fn bad(path: &Path, line: usize, message: impl Into<String>) -> Error {
+    Error::line(path, line, message.into())
 }
 
 /// Data lines of a TUM text file: `(line number, fields)`, comments and blank lines skipped.
-fn lines(path: &Path) -> Result<Vec<(usize, Vec<String>)>, IndexError> {
+fn lines(path: &Path) -> Result<Vec<(usize, Vec<String>)>, Error> {
     let text = std::fs::read(path).map_err(|e| bad(path, 0, e.to_string()))?;
     let text = String::from_utf8(text).map_err(|_| bad(path, 0, "not a text file (invalid UTF-8)"))?;
     // A UTF-8 byte-order mark (some editors write one) is not part of the first line.
@@ -38,12 +33,12 @@ fn lines(path: &Path) -> Result<Vec<(usize, Vec<String>)>, IndexError> {
         .collect())
 }
 
-fn stamp(path: &Path, line: usize, field: &str) -> Result<f64, IndexError> {
+fn stamp(path: &Path, line: usize, field: &str) -> Result<f64, Error> {
     number(path, line, field, "timestamp")
 }
 
 /// `field` as a finite number; the error names what it should have been (`what`).
-fn number(path: &Path, line: usize, field: &str, what: &str) -> Result<f64, IndexError> {
+fn number(path: &Path, line: usize, field: &str, what: &str) -> Result<f64, Error> {
     field
         .parse::<f64>()
         .ok()
@@ -57,7 +52,7 @@ fn show(t: f64) -> String {
     if t.abs() < 1e12 { format!("{t:.6}") } else { format!("{t:e}") }
 }
 
-fn check_order(path: &Path, prev: Option<(usize, f64)>, line: usize, t: f64) -> Result<(), IndexError> {
+fn check_order(path: &Path, prev: Option<(usize, f64)>, line: usize, t: f64) -> Result<(), Error> {
     match prev {
         Some((pl, pt)) if t == pt => {
             Err(bad(path, line, format!("duplicate timestamp {} (also on line {pl})", show(t))))
@@ -72,7 +67,7 @@ fn check_order(path: &Path, prev: Option<(usize, f64)>, line: usize, t: f64) -> 
 }
 
 /// `timestamp filename` lines, in order; timestamps must strictly increase.
-pub fn read_index(path: &Path) -> Result<Vec<(f64, String)>, IndexError> {
+pub fn read_index(path: &Path) -> Result<Vec<(f64, String)>, Error> {
     let mut out: Vec<(f64, String)> = Vec::new();
     let mut prev = None;
     for (line, fields) in lines(path)? {
@@ -91,7 +86,7 @@ pub fn read_index(path: &Path) -> Result<Vec<(f64, String)>, IndexError> {
 }
 
 /// A TUM trajectory file: `(stamp, world_from_cam)` in order.
-pub fn read_trajectory(path: &Path) -> Result<Vec<(f64, Isometry3<f64>)>, IndexError> {
+pub fn read_trajectory(path: &Path) -> Result<Vec<(f64, Isometry3<f64>)>, Error> {
     let mut out = Vec::new();
     let mut prev: Option<(usize, f64)> = None;
     let mut duplicates = 0usize;
@@ -224,6 +219,200 @@ pub fn interpolate_pose(traj: &[(f64, Isometry3<f64>)], t: f64, slack: f64) -> O
         (Some(a), None) => Some(a.1),
         (None, Some(b)) => Some(b.1),
         (None, None) => None,
+    }
+}
+
+/// The ground-truth pose of a frame is the `groundtruth.txt` pose nearest its time within
+/// this many seconds: evo's default `--t_max_diff` (and the TUM tools'), so the ATE a run
+/// prints is the one `evo_ape tum groundtruth.txt trajectory.txt -a` computes.
+pub const GT_MAX_DIFF_S: f64 = 0.01;
+
+/// One frame of a [`TumSequence`].
+#[derive(Clone, Debug)]
+pub struct TumFrame {
+    /// The colour image's time, seconds.
+    pub stamp: f64,
+    /// Colour image (RGB8, or Gray8 if the file is grey).
+    pub rgb: Image,
+    /// Depth in metres.
+    pub depth: DepthImage,
+    /// The intrinsics at the image's size.
+    pub camera: CameraInfo,
+    /// The class/instance mask from `mask/` and `instance/` (written by `dynaflow synth`).
+    pub gt_mask: Option<SegmentationMask>,
+    /// The `groundtruth.txt` pose nearest the frame within [`GT_MAX_DIFF_S`].
+    pub gt_pose: Option<Isometry3<f64>>,
+}
+
+/// An opened TUM RGB-D sequence folder.
+#[derive(Debug)]
+pub struct TumSequence {
+    dir: PathBuf,
+    /// Whether the folder has `mask/` (written by `dynaflow synth`): then every frame has one.
+    masks: bool,
+    /// The first frame's size and colour file.
+    size: std::sync::Mutex<Option<((u32, u32), String)>>,
+    frames: Vec<Associated>,
+    gt: Option<Vec<(f64, Isometry3<f64>)>>,
+    intrinsics: Intrinsics,
+    depth_factor: f64,
+    /// Frames with no ground-truth pose within [`GT_MAX_DIFF_S`] (motion capture drops out
+    /// now and then; evo leaves such frames out of the ATE too).
+    pub frames_without_pose: usize,
+}
+
+/// The intrinsics of a TUM folder: its name (`rgbd_dataset_freiburgN_*`), else its
+/// `calibration.txt`.
+pub fn folder_intrinsics(dir: &Path) -> Result<Intrinsics, Error> {
+    if let Some(preset) = preset_for_folder(dir) {
+        return Ok(preset);
+    }
+    if let Some(calibrated) = read_calibration(dir) {
+        return calibrated;
+    }
+    Err(Error::file(
+        dir,
+        "cannot tell the camera: the folder is not named `rgbd_dataset_freiburgN_*` and has no calibration.txt; set `intrinsics: fr1|fr2|fr3|fx,fy,cx,cy` (or `--intrinsics`)",
+    ))
+}
+
+impl TumSequence {
+    /// Open `dir`: colour and depth associated within `max_difference` seconds (as TUM's
+    /// associate.py), at most `frames` frames (0: all), with `intrinsics` (`None`: from the
+    /// folder, [`folder_intrinsics`]); depth PNG values are `depth_factor` per metre.
+    pub fn open(
+        dir: &Path,
+        intrinsics: Option<Intrinsics>,
+        max_difference: f64,
+        depth_factor: f64,
+        frames: usize,
+    ) -> Result<Self, Error> {
+        if !dir.is_dir() {
+            return Err(Error::file(dir, "not a folder"));
+        }
+        let intrinsics = match intrinsics {
+            Some(k) => k,
+            None => folder_intrinsics(dir)?,
+        };
+        for file in ["rgb.txt", "depth.txt"] {
+            if !dir.join(file).is_file() {
+                return Err(Error::file(
+                    &dir.join(file),
+                    "missing (a TUM RGB-D folder has rgb.txt, depth.txt and rgb/, depth/)",
+                ));
+            }
+        }
+        let rgb = read_index(&dir.join("rgb.txt"))?;
+        let depth = read_index(&dir.join("depth.txt"))?;
+        let mut associated = associate(&rgb, &depth, max_difference);
+        if associated.is_empty() {
+            return Err(Error::file(
+                dir,
+                format!(
+                    "no colour frame has a depth frame within {max_difference} s (rgb.txt {:.3}..{:.3}, depth.txt {:.3}..{:.3})",
+                    rgb.first().map_or(0.0, |r| r.0),
+                    rgb.last().map_or(0.0, |r| r.0),
+                    depth.first().map_or(0.0, |r| r.0),
+                    depth.last().map_or(0.0, |r| r.0)
+                ),
+            ));
+        }
+        if frames > 0 {
+            associated.truncate(frames);
+        }
+        let gt_path = dir.join("groundtruth.txt");
+        let gt = if gt_path.is_file() { Some(read_trajectory(&gt_path)?) } else { None };
+        let mut frames_without_pose = 0;
+        if let Some(gt) = &gt {
+            frames_without_pose =
+                associated.iter().filter(|f| nearest_pose(gt, f.rgb_stamp, GT_MAX_DIFF_S).is_none()).count();
+            if frames_without_pose == associated.len() {
+                return Err(Error::file(
+                    &gt_path,
+                    format!(
+                        "no pose within {GT_MAX_DIFF_S} s of any frame (ground truth {:.6}..{:.6}, frames {:.6}..{:.6})",
+                        gt.first().map_or(0.0, |g| g.0),
+                        gt.last().map_or(0.0, |g| g.0),
+                        associated.first().map_or(0.0, |f| f.rgb_stamp),
+                        associated.last().map_or(0.0, |f| f.rgb_stamp),
+                    ),
+                ));
+            }
+        }
+        Ok(Self {
+            masks: dir.join("mask").is_dir(),
+            size: std::sync::Mutex::new(None),
+            dir: dir.to_path_buf(),
+            frames: associated,
+            gt,
+            intrinsics,
+            depth_factor,
+            frames_without_pose,
+        })
+    }
+
+    /// The folder.
+    pub fn dir(&self) -> &Path {
+        &self.dir
+    }
+
+    /// Number of frames.
+    pub fn len(&self) -> usize {
+        self.frames.len()
+    }
+
+    /// Whether the sequence has no frame (never, once opened).
+    pub fn is_empty(&self) -> bool {
+        self.frames.is_empty()
+    }
+
+    /// Frame `index`, `None` past the end. Errors name the file (relative to the folder).
+    pub fn frame(&self, index: usize) -> Result<Option<TumFrame>, Error> {
+        let Some(f) = self.frames.get(index) else { return Ok(None) };
+        let rgb = load_rgb(&self.dir.join(&f.rgb))?;
+        let depth = load_depth(&self.dir.join(&f.depth), self.depth_factor)?;
+        let rgb_size = (rgb.width, rgb.height);
+        // Every frame of a sequence has the first frame's size (the intrinsics are the first's).
+        {
+            let mut first = self.size.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+            let ((w, h), name) = first.get_or_insert_with(|| (rgb_size, f.rgb.clone()));
+            if (*w, *h) != rgb_size {
+                return Err(Error::Data(format!(
+                    "{}: {}x{} but the sequence's first frame ({name}) is {w}x{h}",
+                    f.rgb, rgb.width, rgb.height
+                )));
+            }
+        }
+        same_size(&f.depth, (depth.width, depth.height), &f.rgb, rgb_size)?;
+        let camera = self.intrinsics.camera_info(rgb.width, rgb.height);
+        let mut gt_mask = None;
+        let mask_path = self.dir.join("mask").join(Path::new(&f.rgb).file_name().unwrap_or_default());
+        if self.masks && !mask_path.is_file() {
+            return Err(Error::file(&mask_path, "missing (the folder has `mask/`, so every frame needs its mask)"));
+        }
+        if self.masks {
+            let classes = load_rgb(&mask_path)?;
+            let inst_path = self.dir.join("instance").join(Path::new(&f.rgb).file_name().unwrap_or_default());
+            let instances = if inst_path.is_file() {
+                Some(load_rgb(&inst_path)?.data.into_iter().map(u16::from).collect())
+            } else {
+                None
+            };
+            if classes.format != dynaflow_msg::PixelFormat::Gray8 {
+                return Err(Error::file(&mask_path, "expected an 8-bit grey class mask"));
+            }
+            same_size(mask_path.display(), (classes.width, classes.height), &f.rgb, rgb_size)?;
+            let mask = SegmentationMask {
+                width: classes.width,
+                height: classes.height,
+                classes: classes.data.into_iter().map(u16::from).collect(),
+                instances,
+                class_names: vec!["static".into(), "person".into()],
+            };
+            gt_mask = Some(mask);
+        }
+        let gt_pose = self.gt.as_ref().and_then(|gt| nearest_pose(gt, f.rgb_stamp, GT_MAX_DIFF_S));
+        Ok(Some(TumFrame { stamp: f.rgb_stamp, rgb, depth, camera, gt_mask, gt_pose }))
     }
 }
 

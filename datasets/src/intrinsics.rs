@@ -3,31 +3,43 @@
 
 use std::path::Path;
 
-/// Pinhole intrinsics with OpenCV-order distortion.
+use dynaflow_msg::CameraInfo;
+use dynaflow_vision::camera::Pinhole;
+
+use crate::Error;
+
+/// A calibrated camera without its image size: the pinhole and OpenCV-order distortion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Intrinsics {
-    /// Focal length x.
-    pub fx: f64,
-    /// Focal length y.
-    pub fy: f64,
-    /// Principal point x.
-    pub cx: f64,
-    /// Principal point y.
-    pub cy: f64,
-    /// `[k1, k2, p1, p2, k3]`.
+    /// Focal lengths and principal point.
+    pub pinhole: Pinhole,
+    /// `[k1, k2, p1, p2, k3]` (see `dynaflow_vision::camera::distort`).
     pub distortion: [f64; 5],
 }
 
+const fn preset(fx: f64, fy: f64, cx: f64, cy: f64, distortion: [f64; 5]) -> Intrinsics {
+    Intrinsics { pinhole: Pinhole::new(fx, fy, cx, cy), distortion }
+}
+
 /// TUM fr1 (ROS default calibration as published with the dataset).
-pub const FR1: Intrinsics =
-    Intrinsics { fx: 517.3, fy: 516.5, cx: 318.6, cy: 255.3, distortion: [0.2624, -0.9531, -0.0054, 0.0026, 1.1633] };
+pub const FR1: Intrinsics = preset(517.3, 516.5, 318.6, 255.3, [0.2624, -0.9531, -0.0054, 0.0026, 1.1633]);
 /// TUM fr2.
-pub const FR2: Intrinsics =
-    Intrinsics { fx: 520.9, fy: 521.0, cx: 325.1, cy: 249.7, distortion: [0.2312, -0.7849, -0.0033, -0.0001, 0.9172] };
+pub const FR2: Intrinsics = preset(520.9, 521.0, 325.1, 249.7, [0.2312, -0.7849, -0.0033, -0.0001, 0.9172]);
 /// TUM fr3 (images are already undistorted).
-pub const FR3: Intrinsics = Intrinsics { fx: 535.4, fy: 539.2, cx: 320.1, cy: 247.6, distortion: [0.0; 5] };
+pub const FR3: Intrinsics = preset(535.4, 539.2, 320.1, 247.6, [0.0; 5]);
 
 impl Intrinsics {
+    /// Without distortion.
+    pub const fn pinhole(fx: f64, fy: f64, cx: f64, cy: f64) -> Self {
+        preset(fx, fy, cx, cy, [0.0; 5])
+    }
+
+    /// The message for images of `width` x `height`.
+    pub const fn camera_info(&self, width: u32, height: u32) -> CameraInfo {
+        let p = self.pinhole;
+        CameraInfo { width, height, fx: p.fx, fy: p.fy, cx: p.cx, cy: p.cy, distortion: self.distortion }
+    }
+
     /// `fr1`, `fr2`, `fr3`, or `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`.
     pub fn parse(text: &str) -> Result<Self, String> {
         match text.trim() {
@@ -43,11 +55,9 @@ impl Intrinsics {
             .collect::<Result<_, _>>()?;
         let ok = |v: &[f64]| v.iter().all(|x| x.is_finite());
         match v.as_slice() {
-            [fx, fy, cx, cy] if ok(&v) && *fx > 0.0 && *fy > 0.0 => {
-                Ok(Self { fx: *fx, fy: *fy, cx: *cx, cy: *cy, distortion: [0.0; 5] })
-            }
+            [fx, fy, cx, cy] if ok(&v) && *fx > 0.0 && *fy > 0.0 => Ok(preset(*fx, *fy, *cx, *cy, [0.0; 5])),
             [fx, fy, cx, cy, k1, k2, p1, p2, k3] if ok(&v) && *fx > 0.0 && *fy > 0.0 => {
-                Ok(Self { fx: *fx, fy: *fy, cx: *cx, cy: *cy, distortion: [*k1, *k2, *p1, *p2, *k3] })
+                Ok(preset(*fx, *fy, *cx, *cy, [*k1, *k2, *p1, *p2, *k3]))
             }
             _ => Err(format!(
                 "expected `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy` or `fx,fy,cx,cy,k1,k2,p1,p2,k3` with positive focal lengths, got `{text}`"
@@ -73,19 +83,20 @@ pub fn preset_for_folder(dir: &Path) -> Option<Intrinsics> {
 
 /// The intrinsics in `dir/calibration.txt` (first non-comment line, as [`Intrinsics::parse`]
 /// reads it), or `None` when the folder has no such file.
-pub fn read_calibration(dir: &Path) -> Option<Result<Intrinsics, dynaflow_engine::op::OpError>> {
-    use dynaflow_engine::op::OpError;
+pub fn read_calibration(dir: &Path) -> Option<Result<Intrinsics, Error>> {
     let calib = dir.join("calibration.txt");
     if !calib.is_file() {
         return None;
     }
     let text = match std::fs::read_to_string(&calib) {
         Ok(t) => t,
-        Err(source) => return Some(Err(OpError::Io { path: calib, source })),
+        Err(e) => return Some(Err(Error::file(&calib, e))),
     };
-    let line = text.lines().map(str::trim).find(|l| !l.is_empty() && !l.starts_with('#')).unwrap_or("");
-    Some(
-        Intrinsics::parse(line)
-            .map_err(|e| OpError::Config { key: "intrinsics".into(), message: format!("{}: {e}", calib.display()) }),
-    )
+    let (n, line) = text
+        .lines()
+        .enumerate()
+        .map(|(i, l)| (i + 1, l.trim()))
+        .find(|(_, l)| !l.is_empty() && !l.starts_with('#'))
+        .unwrap_or((0, ""));
+    Some(Intrinsics::parse(line).map_err(|e| Error::line(&calib, n, e)))
 }

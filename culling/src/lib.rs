@@ -1,7 +1,12 @@
-//! The culling rules, as plain functions. Each labels every point (dynamic or not, why, and
-//! the measure compared with the threshold), so runs with different rules can be diffed.
+//! The seed papers' dynamic-point culling rules, as plain functions and structs with no
+//! engine or async dependency (the `cull_*` operators wrap them). Each labels every point
+//! (dynamic or not, why, and the measure compared with the threshold), so runs with
+//! different rules can be diffed.
 
-use dynaflow_engine::msg::LabelReason;
+#![warn(missing_docs)]
+
+use dynaflow_msg::LabelReason;
+pub use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{
     FundamentalFit, HomographyFit, RansacConfig, SplitMix64, epipolar_distance, fit_fundamental, fit_homography_prosac,
     transfer_error,
@@ -100,28 +105,6 @@ pub fn flow_consistency(residuals: &[f32], threshold: f32) -> Vec<Decision> {
         .collect()
 }
 
-/// A pinhole camera (pixels).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Pinhole {
-    /// Focal lengths and principal point.
-    pub fx: f64,
-    /// Focal length y.
-    pub fy: f64,
-    /// Principal point x.
-    pub cx: f64,
-    /// Principal point y.
-    pub cy: f64,
-}
-
-/// Back-project pixel `p` with depth `z` (metres) into the camera frame.
-pub fn back_project(camera: Pinhole, p: [f32; 2], z: f64) -> nalgebra::Point3<f64> {
-    nalgebra::Point3::new(
-        (f64::from(p[0]) - camera.cx) / camera.fx * z,
-        (f64::from(p[1]) - camera.cy) / camera.fy * z,
-        z,
-    )
-}
-
 /// YOEC-DSLAM's multi-view depth check: each point of a key frame, back-projected with its
 /// depth and moved into the current camera frame (`predicted[i]`, `None` when it had no depth),
 /// is projected into the current image; where the depth measured there (`depth_cur`, metres,
@@ -141,7 +124,7 @@ pub fn depth_consistency(
             let Some(x) = x.filter(|x| x.z > 1e-6) else {
                 return Decision::keep(LabelReason::Static, f32::NAN);
             };
-            let (u, v) = ((camera.fx * x.x / x.z + camera.cx) as f32, (camera.fy * x.y / x.z + camera.cy) as f32);
+            let [u, v] = camera.project(&x).map_or([f32::NAN; 2], |uv| uv.map(|c| c as f32));
             let z2 = depth_cur(u, v);
             // No measurement (0, or NaN from outside the image).
             if z2.is_nan() || z2 <= 0.0 {
@@ -152,6 +135,73 @@ pub fn depth_consistency(
             Decision { dynamic, reason: if dynamic { LabelReason::Depth } else { LabelReason::Static }, score: r }
         })
         .collect()
+}
+
+/// YOEC-DSLAM's depth check over a sequence: the anchoring state of [`depth_consistency`].
+/// Each track is anchored in the world when first seen (at its previous position, with the
+/// previous frame's depth and pose); each frame predicts every anchored track's point in the
+/// current view and compares its depth with the measured one. Tracks that end are forgotten.
+#[derive(Debug, Default)]
+pub struct DepthAnchors {
+    anchors: std::collections::HashMap<u64, nalgebra::Point3<f64>>,
+}
+
+/// One track for [`DepthAnchors`]: its id and its previous and current pixel.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrackedPoint {
+    /// Stable track id.
+    pub id: u64,
+    /// Pixel in the previous frame.
+    pub prev: [f32; 2],
+    /// Pixel in this frame.
+    pub cur: [f32; 2],
+}
+
+impl DepthAnchors {
+    /// No anchors.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Label this frame's tracks. `previous`: the previous frame's depth lookup (metres, 0:
+    /// none) and `world_from_cam`, when this node saw it; `current`: this frame's.
+    pub fn label(
+        &mut self,
+        tracks: &[TrackedPoint],
+        camera: Pinhole,
+        previous: Option<(impl Fn(f32, f32) -> f32, nalgebra::Isometry3<f64>)>,
+        current: (impl Fn(f32, f32) -> f32, nalgebra::Isometry3<f64>),
+        threshold: f32,
+    ) -> Vec<Decision> {
+        let ids: std::collections::HashSet<u64> = tracks.iter().map(|t| t.id).collect();
+        self.anchors.retain(|id, _| ids.contains(id));
+        if let Some((prev_depth, world_from_prev)) = previous {
+            for t in tracks {
+                let z = prev_depth(t.prev[0], t.prev[1]);
+                if z > 0.0 && !self.anchors.contains_key(&t.id) {
+                    self.anchors.insert(
+                        t.id,
+                        world_from_prev * camera.unproject([f64::from(t.prev[0]), f64::from(t.prev[1])], f64::from(z)),
+                    );
+                }
+            }
+        }
+        let (cur_depth, world_from_cur) = current;
+        let cur_from_world = world_from_cur.inverse();
+        let predicted: Vec<Option<nalgebra::Point3<f64>>> =
+            tracks.iter().map(|t| self.anchors.get(&t.id).map(|x| cur_from_world * x)).collect();
+        depth_consistency(&predicted, camera, cur_depth, threshold)
+    }
+
+    /// Tracks anchored.
+    pub fn len(&self) -> usize {
+        self.anchors.len()
+    }
+
+    /// Whether no track is anchored.
+    pub fn is_empty(&self) -> bool {
+        self.anchors.is_empty()
+    }
 }
 
 /// MG-SLAM: dynamic where the epipolar distance exceeds `threshold` pixels.
@@ -199,7 +249,8 @@ pub fn mask_rule(points: &[[f32; 2]], dynamic_at: impl Fn(usize, usize) -> bool)
         .collect()
 }
 
-/// YG-SLAM's dynamic values per COCO class; unlisted classes are 0 (static).
+/// YG-SLAM's dynamic values per COCO class (as the vendored detectors name them: `tvmonitor`,
+/// `diningtable`); unlisted classes are 0 (static).
 pub const DEFAULT_DYNAMIC_VALUES: &[(&str, f32)] = &[
     ("person", 1.0),
     ("cup", 0.7),
@@ -207,8 +258,8 @@ pub const DEFAULT_DYNAMIC_VALUES: &[(&str, f32)] = &[
     ("keyboard", 0.7),
     ("mouse", 0.7),
     ("chair", 0.6),
-    ("tv", 0.5),
-    ("dining table", 0.2),
+    ("tvmonitor", 0.5),
+    ("diningtable", 0.2),
     ("book", 0.1),
 ];
 
@@ -407,12 +458,15 @@ mod tests {
 
     #[test]
     fn depth_consistency_flags_points_whose_depth_does_not_follow_the_camera() {
-        let cam = Pinhole { fx: 500.0, fy: 500.0, cx: 320.0, cy: 240.0 };
+        let cam = Pinhole::new(500.0, 500.0, 320.0, 240.0);
         // The camera moved 0.1 m forward since the key frame: static points came 0.1 m closer.
         let cur_from_key = nalgebra::Isometry3::translation(0.0, 0.0, -0.1);
         let pts = [[320.0, 240.0], [100.0, 100.0], [200.0, 300.0], [50.0, 50.0]];
-        let predicted: Vec<Option<nalgebra::Point3<f64>>> =
-            pts.iter().enumerate().map(|(i, p)| (i != 3).then(|| cur_from_key * back_project(cam, *p, 2.0))).collect();
+        let predicted: Vec<Option<nalgebra::Point3<f64>>> = pts
+            .iter()
+            .enumerate()
+            .map(|(i, p)| (i != 3).then(|| cur_from_key * cam.unproject(*p, 2.0)))
+            .collect();
         // Moving straight forward keeps the centre pixel and pulls the others outwards: the
         // second point now projects near (88, 93), where something 0.5 m nearer is seen (it
         // moved); the third near (194, 303), with no measurement; the fourth had no key depth.
@@ -435,5 +489,34 @@ mod tests {
     fn mask_rule_uses_the_point_position() {
         let d = mask_rule(&[[1.0, 1.0], [5.0, 5.0], [-3.0, 2.0]], |x, y| x < 3 && y < 3);
         assert_eq!(d.iter().map(|x| x.dynamic).collect::<Vec<_>>(), vec![true, false, false]);
+    }
+
+    #[test]
+    fn depth_anchors_keep_a_static_point_and_flag_one_that_moved() {
+        // A camera 2 m in front of a wall moves 0.1 m sideways; track 1 sits on the wall,
+        // track 2 on a person 1 m away who walks with the camera (same pixel, same depth).
+        let camera = Pinhole::new(500.0, 500.0, 320.0, 240.0);
+        let wall = |_: f32, _: f32| 2.0f32;
+        let person = |x: f32, _: f32| if (x - 320.0).abs() < 1.0 { 1.0f32 } else { 2.0 };
+        let world_from_prev = nalgebra::Isometry3::identity();
+        let world_from_cur = nalgebra::Isometry3::translation(0.1, 0.0, 0.0);
+        // The wall point shifts by fx * 0.1 / 2 = 25 px; the person stays at the centre.
+        let tracks = [
+            TrackedPoint { id: 1, prev: [300.0, 240.0], cur: [275.0, 240.0] },
+            TrackedPoint { id: 2, prev: [320.0, 240.0], cur: [320.0, 240.0] },
+        ];
+        let mut anchors = DepthAnchors::new();
+        // First frame: nothing anchored yet, nothing judged.
+        let first = anchors.label(&tracks, camera, None::<(fn(f32, f32) -> f32, _)>, (person, world_from_prev), 0.1);
+        assert!(first.iter().all(|d| !d.dynamic && d.score.is_nan()) && anchors.is_empty());
+        let second = anchors.label(&tracks, camera, Some((person, world_from_prev)), (person, world_from_cur), 0.1);
+        assert_eq!(anchors.len(), 2);
+        assert!(!second[0].dynamic && second[0].score < 1e-3, "{:?}", second[0]);
+        // The person's anchor (1 m ahead at x = 0) is seen at x = -0.1 m, 50 px left of the
+        // centre, where the wall (2 m) is measured: 1 m off, dynamic.
+        assert!(second[1].dynamic && (second[1].score - 1.0).abs() < 1e-3, "{:?}", second[1]);
+        // A track that ends is forgotten.
+        let _ = anchors.label(&tracks[..1], camera, Some((wall, world_from_cur)), (wall, world_from_cur), 0.1);
+        assert_eq!(anchors.len(), 1);
     }
 }

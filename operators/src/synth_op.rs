@@ -1,0 +1,146 @@
+//! The `synth` source operator: streams generated frames straight into a graph.
+
+use std::sync::Arc;
+
+use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, PixelFormat, Pose, SegmentationMask};
+use dynaflow_engine::op::Seeded;
+use dynaflow_engine::op::{Context, Instance, OpError, OpKind, OpSpec, Out, Outputs, Param, ParamType, Params, Source};
+use dynaflow_engine::params;
+
+use dynaflow_datasets::synth::{Generator, Motion, PeopleMode, SynthConfig, scaled_fr3};
+
+/// The camera motion as a parameter (the generator's names).
+#[derive(Clone, Copy, Debug)]
+struct MotionParam(Motion);
+
+impl Param for MotionParam {
+    const TYPE: ParamType = ParamType::Enum { values: Motion::NAMES };
+    fn from_json(value: &serde_json::Value, _: &Params) -> Result<Self, String> {
+        value.as_str().and_then(Motion::from_name).map(MotionParam).ok_or_else(|| format!("unknown motion {value}"))
+    }
+    fn to_json(&self) -> serde_json::Value {
+        Motion::NAMES.iter().find(|n| Motion::from_name(n) == Some(self.0)).copied().unwrap_or("?").into()
+    }
+}
+
+params! {
+    struct Config {
+        /// camera motion, like the TUM fr3 sequences
+        motion: MotionParam = MotionParam(Motion::Xyz),
+        /// number of people
+        people: u64 [0, 16] = 2,
+        /// people sit and move little (TUM `sitting`)
+        sitting: bool = false,
+        /// number of frames
+        frames: u64 [1, 1_000_000] = 300,
+        /// image width (intrinsics scale with it)
+        width: u32 [16, 4096] = 640,
+        /// image height
+        height: u32 [16, 4096] = 480,
+        /// frame rate
+        rate_hz: f64 [0.1, 1000.0] = 30.0,
+        /// scene and noise seed; unset, it derives from the graph seed (`--seed`) and the node id
+        seed: Seeded [0, i64::MAX],
+        /// Kinect depth noise, holes and quantisation
+        depth_noise: bool = true,
+        /// image noise σ in grey levels
+        image_noise: f64 [0.0, 50.0] = 2.0,
+        /// 3×3 image blur
+        blur: bool = true,
+    }
+}
+
+const RGB: Out<Image> = Out::new("rgb", "RGB8 camera image");
+const DEPTH: Out<DepthImage> = Out::new("depth", "depth in metres (0 = no measurement)");
+const CAMERA_INFO: Out<CameraInfo> = Out::new("camera_info", "pinhole intrinsics (TUM fr3, scaled to the resolution)");
+const GT_POSE: Out<Pose> = Out::ground_truth("gt_pose", "ground-truth world_from_cam");
+const GT_MASK: Out<SegmentationMask> =
+    Out::ground_truth("gt_mask", "ground-truth class (0 static, 1 person) and instance masks");
+
+pub(crate) const SYNTH: OpSpec = OpSpec {
+    name: "synth",
+    family: "synth",
+    doc: "Semi-synthetic dynamic RGB-D scene with exact ground truth: a textured room with furniture, people walking across the view (or sitting), a TUM-fr3-like camera motion, Kinect-like depth noise/holes/quantisation, image noise and blur. Deterministic by `seed`. `dynaflow synth` writes the same frames as a TUM folder.",
+    kind: OpKind::Source,
+    inputs: &[],
+    outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec],
+    params: Config::PARAMS,
+    cpu_heavy: true,
+    ground_truth_outputs: None,
+    build,
+};
+
+fn build(params: &Params) -> Result<Instance, OpError> {
+    let c = Config::from_params(params)?;
+    let config = SynthConfig {
+        motion: c.motion.0,
+        people: c.people as usize,
+        mode: if c.sitting { PeopleMode::Sitting } else { PeopleMode::Walking },
+        // Replaced in `start` by the node's seed when the graph sets none.
+        seed: c.seed.or(0),
+        rate_hz: c.rate_hz,
+        intrinsics: scaled_fr3(c.width, c.height),
+        depth_noise: c.depth_noise,
+        image_noise: c.image_noise as f32,
+        blur: c.blur,
+    };
+    Ok(Instance::Source(Box::new(SynthSource {
+        generator: Generator::new(config),
+        seeded: c.seed.0.is_some(),
+        frames: c.frames,
+        frame_id: "camera".into(),
+    })))
+}
+
+struct SynthSource {
+    generator: Generator,
+    /// Whether the graph gave `seed`; otherwise the node's seed is used.
+    seeded: bool,
+    frames: u64,
+    frame_id: Arc<str>,
+}
+
+impl Source for SynthSource {
+    fn start(&mut self, ctx: &mut Context) -> Result<(), OpError> {
+        if !self.seeded {
+            let mut config = self.generator.config().clone();
+            config.seed = ctx.seed;
+            self.generator = Generator::new(config);
+        }
+        Ok(())
+    }
+
+    fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
+        if seq >= self.frames {
+            return Ok(None);
+        }
+        let f = self.generator.frame(seq, false);
+        let k = &self.generator.config().intrinsics;
+        let header = Header { seq, stamp: f.stamp, frame_id: self.frame_id.clone() };
+        let world = Header { frame_id: "world".into(), ..header.clone() };
+        let info = k.clone();
+        let mask = SegmentationMask {
+            width: k.width,
+            height: k.height,
+            classes: f.class,
+            instances: Some(f.instance),
+            class_names: vec!["static".into(), "person".into()],
+        };
+        Ok(Some(
+            Outputs::new()
+                .send(
+                    &RGB,
+                    header.clone(),
+                    Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: f.rgb },
+                )
+                .send(&DEPTH, header.clone(), DepthImage { width: k.width, height: k.height, data: f.depth })
+                .send(&CAMERA_INFO, header.clone(), info)
+                .send(&GT_POSE, world, Pose { world_from_cam: f.world_from_cam })
+                .send(&GT_MASK, header, mask),
+        ))
+    }
+
+    fn len_hint(&self) -> Option<u64> {
+        Some(self.frames)
+    }
+}
