@@ -16,10 +16,11 @@ use std::process::Command;
 use std::time::Instant;
 
 use dynaflow_gpu::{Gpu, GpuModel};
-use dynaflow_infer::cpu::{Tensor, run};
 use dynaflow_infer::detect::{Decoder, Detector, letterbox_bgr, resize_bgr_unit};
 use dynaflow_infer::onnx::load_with_bytes;
+use dynaflow_infer::reference::run;
 use dynaflow_infer::rten_cpu::RtenModel;
+use dynaflow_infer::tensor::Tensor;
 use serde_json::json;
 
 fn repo() -> PathBuf {

@@ -3,6 +3,8 @@
 
 use dynaflow_engine::op::Registry;
 
+pub mod summary;
+
 /// Every operator dynaflow ships: the `dynaflow-operators` families plus the recording-backed
 /// sources of `dynaflow-recordings` (`mcap_replay`).
 pub fn registry() -> Registry {

@@ -449,3 +449,32 @@ fn the_libraries_build_without_the_engine_gpu_inference_or_an_async_runtime() {
         }
     }
 }
+
+#[test]
+fn the_summary_is_one_typed_struct_that_reads_back_what_run_wrote() {
+    // Issue 30: `run` writes the summary from `dynaflow::summary::Summary`, `bench` and
+    // `eval` read it back as the same struct; nothing is edited or read by key, and reading
+    // loses no field (the re-serialised summary equals the file).
+    let dir = common::TempDir::new("summary");
+    let out = common::bin()
+        .args(["run", "--no-progress", "--digest", "--frames", "20", "--record", "mcap", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let files = dynaflow_engine::files::RunFiles::new(dir.path(), "orb_baseline", None);
+    let s = dynaflow::summary::Summary::read(&files.summary()).unwrap();
+    assert_eq!(s.run.frames, 20);
+    assert_eq!(s.run.status, dynaflow_engine::runtime::RunStatus::Completed);
+    let ate = s.ate.as_ref().expect("the tracker's ATE");
+    assert_eq!(ate.node.as_deref(), Some("track"));
+    assert!(ate.rmse.is_finite() && ate.rmse > 0.0 && ate.pairs > 0, "{ate:?}");
+    assert_eq!(s.trackers["track"].rmse, ate.rmse);
+    assert!(s.digests.is_some());
+    let mcap = &s.run.recorders["mcap"];
+    assert_eq!(mcap.bytes_per_frame, mcap.file_bytes.map(|b| (b as f64 / 20.0).round()));
+    let file: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(files.summary()).unwrap()).unwrap();
+    assert_eq!(serde_json::to_value(&s).unwrap(), file, "reading the summary lost a field");
+    assert!(files.node_file("track", "trajectory.txt").is_file());
+}

@@ -11,10 +11,11 @@ mod frontend;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-use dynaflow_infer::cpu::{SUPPORTED, Tensor, run};
 use dynaflow_infer::detect::{decode_yolox, letterbox_bgr, nms};
 use dynaflow_infer::onnx::{OnnxError, load, parse};
+use dynaflow_infer::reference::{SUPPORTED, run};
 use dynaflow_infer::rten_cpu::RtenModel;
+use dynaflow_infer::tensor::Tensor;
 
 fn yolox() -> PathBuf {
     common::repo().join("models/yolox_nano/yolox_nano.onnx")

@@ -462,11 +462,8 @@ mod tests {
         // The camera moved 0.1 m forward since the key frame: static points came 0.1 m closer.
         let cur_from_key = nalgebra::Isometry3::translation(0.0, 0.0, -0.1);
         let pts = [[320.0, 240.0], [100.0, 100.0], [200.0, 300.0], [50.0, 50.0]];
-        let predicted: Vec<Option<nalgebra::Point3<f64>>> = pts
-            .iter()
-            .enumerate()
-            .map(|(i, p)| (i != 3).then(|| cur_from_key * cam.unproject(*p, 2.0)))
-            .collect();
+        let predicted: Vec<Option<nalgebra::Point3<f64>>> =
+            pts.iter().enumerate().map(|(i, p)| (i != 3).then(|| cur_from_key * cam.unproject(*p, 2.0))).collect();
         // Moving straight forward keeps the centre pixel and pulls the others outwards: the
         // second point now projects near (88, 93), where something 0.5 m nearer is seen (it
         // moved); the third near (194, 303), with no measurement; the fourth had no key depth.

@@ -9,6 +9,7 @@
 #![warn(missing_docs)]
 
 pub mod diag;
+pub mod files;
 mod load;
 pub mod op;
 pub mod runtime;

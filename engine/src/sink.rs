@@ -163,20 +163,23 @@ pub trait Sink: Send {
 }
 
 /// What one recorder wrote, in the run summary's `recorders`.
-#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SinkReport {
     /// The file written, if any.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub path: Option<String>,
     /// Its size in bytes (after the container's compression).
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub file_bytes: Option<u64>,
+    /// `file_bytes` per frame of the run (set with the run's frame count).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bytes_per_frame: Option<f64>,
     /// `node/port` → what the recorder took of it.
     pub ports: BTreeMap<String, PortReport>,
 }
 
 /// One port in one recorder.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct PortReport {
     /// Messages written.
     pub messages: u64,
@@ -185,6 +188,9 @@ pub struct PortReport {
     pub bytes: u64,
     /// Messages this recorder could not deliver (a live viewer that fell behind), counted.
     pub dropped: u64,
+    /// `bytes` per frame of the run (set with the run's frame count).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bytes_per_frame: Option<f64>,
 }
 
 /// `(node, port, message)`.

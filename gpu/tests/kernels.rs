@@ -9,8 +9,9 @@ use std::collections::BTreeMap;
 
 use common::gpu;
 use dynaflow_gpu::{ConvShape, Gpu, GpuModel, PlanStats};
-use dynaflow_infer::cpu::{Tensor, run};
 use dynaflow_infer::onnx::{Attribute, DataType, Model, Node, TensorData, ValueInfo};
+use dynaflow_infer::reference::run;
+use dynaflow_infer::tensor::Tensor;
 
 /// Deterministic values in -1..1.
 fn values(n: usize, seed: u64) -> Vec<f32> {

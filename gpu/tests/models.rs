@@ -7,9 +7,10 @@ use std::path::PathBuf;
 
 use common::gpu;
 use dynaflow_gpu::GpuModel;
-use dynaflow_infer::cpu::{Tensor, run};
 use dynaflow_infer::detect::letterbox_bgr;
 use dynaflow_infer::onnx::load;
+use dynaflow_infer::reference::run;
+use dynaflow_infer::tensor::Tensor;
 
 fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")

@@ -246,16 +246,16 @@ impl Detector {
         classes: usize,
         score: f32,
         iou: f32,
-        run: impl FnOnce(&str, crate::cpu::Tensor) -> Result<Vec<crate::cpu::Tensor>, E>,
+        run: impl FnOnce(&str, crate::tensor::Tensor) -> Result<Vec<crate::tensor::Tensor>, E>,
     ) -> Result<Vec<Detection>, E> {
         let s = self.side;
         let (x, lb) = match self.decoder {
             Decoder::Yolox => letterbox_bgr(rgb, width, height, s),
             Decoder::FastestDet => (resize_bgr_unit(rgb, width, height, s), Letterbox { scale: 1.0, size: s }),
         };
-        let input = crate::cpu::Tensor::F32 { shape: vec![1, 3, s, s], data: x };
+        let input = crate::tensor::Tensor::F32 { shape: vec![1, 3, s, s], data: x };
         let out = run(self.input_name.as_str(), input)?;
-        let raw = out.first().map(crate::cpu::Tensor::floats).unwrap_or_default();
+        let raw = out.first().map(crate::tensor::Tensor::floats).unwrap_or_default();
         let dets = match self.decoder {
             Decoder::Yolox => decode_yolox(&raw, classes, &lb, score),
             Decoder::FastestDet => {

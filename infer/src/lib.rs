@@ -3,13 +3,30 @@
 //!
 //! - `onnx`: a reader for ONNX files (the protobuf wire format decoded by hand for the few
 //!   messages a model needs).
-//! - `cpu`: the reference executor, one plain loop nest per op: what a model computes here,
-//!   checked against onnxruntime, and what GPU kernels are tested against.
+//! - `tensor`: tensors and the shape arithmetic every executor shares.
+//! - `reference`: the reference executor, one plain loop nest per op: what a model computes
+//!   here, checked against onnxruntime, and what GPU kernels are tested against.
 //! - `rten_cpu`: the CPU backend, models run by rten (fast, multi-threaded; chosen over tract
 //!   by measurement).
 //! - `detect`: detector pre- and post-processing: YOLOX letterbox, decoding, class-wise NMS.
 
-pub mod cpu;
 pub mod detect;
 pub mod onnx;
+pub mod reference;
 pub mod rten_cpu;
+pub mod tensor;
+
+/// What runs a model: the reference executor (an [`onnx::Model`] itself), rten
+/// ([`rten_cpu::RtenModel`]) or, in `dynaflow-gpu`, the WGSL executor. The `detect` operator
+/// and `dynaflow infer` hold one of them behind this trait.
+pub trait Executor: Send + Sync {
+    /// Run on the named inputs; every graph output, in the model's order.
+    fn run(&self, inputs: &[(&str, tensor::Tensor)]) -> Result<Vec<tensor::Tensor>, reference::RunError>;
+}
+
+/// The reference executor runs a parsed model as it is.
+impl Executor for onnx::Model {
+    fn run(&self, inputs: &[(&str, tensor::Tensor)]) -> Result<Vec<tensor::Tensor>, reference::RunError> {
+        reference::run(self, inputs)
+    }
+}

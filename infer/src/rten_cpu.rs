@@ -7,7 +7,8 @@
 use rten::{Model, NodeId};
 use rten_tensor::prelude::*;
 
-use crate::cpu::Tensor;
+use crate::reference::RunError;
+use crate::tensor::Tensor;
 
 /// A model loaded into rten.
 pub struct RtenModel {
@@ -25,8 +26,8 @@ impl std::fmt::Debug for RtenModel {
 impl RtenModel {
     /// Load an ONNX model from its bytes (rten's own checks: unsupported ops and malformed
     /// files are errors, with rten's message).
-    pub fn load(bytes: Vec<u8>) -> Result<Self, String> {
-        let model = Model::load(bytes).map_err(|e| format!("rten: {e}"))?;
+    pub fn load(bytes: Vec<u8>) -> Result<Self, RunError> {
+        let model = Model::load(bytes).map_err(|e| RunError::Backend(format!("rten: {e}")))?;
         let inputs = model
             .input_ids()
             .iter()
@@ -40,7 +41,7 @@ impl RtenModel {
     }
 
     /// Run on the named float inputs; every graph output, in the model's order.
-    pub fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, String> {
+    pub fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, RunError> {
         let tensors: Vec<(NodeId, rten_tensor::Tensor<f32>)> = self
             .inputs
             .iter()
@@ -49,18 +50,24 @@ impl RtenModel {
                     .iter()
                     .find(|(n, _)| n == name)
                     .map(|(_, t)| t)
-                    .ok_or_else(|| format!("input `{name}` not given"))?;
+                    .ok_or_else(|| RunError::MissingInput(name.clone()))?;
                 Ok((*id, rten_tensor::Tensor::from_data(t.shape(), t.floats())))
             })
-            .collect::<Result<_, String>>()?;
+            .collect::<Result<_, RunError>>()?;
         let views = tensors.iter().map(|(id, t)| (*id, t.view().into())).collect();
-        let outs = self.model.run(views, &self.outputs, None).map_err(|e| format!("rten: {e}"))?;
+        let outs = self.model.run(views, &self.outputs, None).map_err(|e| RunError::Backend(format!("rten: {e}")))?;
         outs.into_iter()
             .map(|v| {
                 let t: rten_tensor::Tensor<f32> =
-                    v.try_into().map_err(|_| "rten: a model output is not a float tensor".to_string())?;
+                    v.try_into().map_err(|_| RunError::Backend("rten: a model output is not a float tensor".into()))?;
                 Ok(Tensor::F32 { shape: t.shape().to_vec(), data: t.to_vec() })
             })
             .collect()
+    }
+}
+
+impl crate::Executor for RtenModel {
+    fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, RunError> {
+        RtenModel::run(self, inputs)
     }
 }

@@ -8,6 +8,12 @@
 //! reaches a pruned node expands it into eight copies; on the way back up, a node whose eight
 //! children are identical leaves is pruned into one, otherwise it takes its children's
 //! maximum. A node at or above `logit(occupancy)` is occupied.
+//!
+//! Why one file of this size: the arena's block layout, the update and pruning walks, the
+//! batch scan insertion with its change tracking and the memory budget all work on the same
+//! private node representation and its invariants (a block is a node's eight children, freed
+//! blocks are reused, a pruned node has none); split apart they would need that
+//! representation public to each other. A third of the file is its unit tests.
 
 use std::collections::HashSet;
 use std::hash::{BuildHasherDefault, Hasher};

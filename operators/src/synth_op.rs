@@ -60,7 +60,7 @@ const GT_MASK: Out<SegmentationMask> =
 pub(crate) const SYNTH: OpSpec = OpSpec {
     name: "synth",
     family: "synth",
-    doc: "Semi-synthetic dynamic RGB-D scene with exact ground truth: a textured room with furniture, people walking across the view (or sitting), a TUM-fr3-like camera motion, Kinect-like depth noise/holes/quantisation, image noise and blur. Deterministic by `seed`. `dynaflow synth` writes the same frames as a TUM folder.",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/synth.md")),
     kind: OpKind::Source,
     inputs: &[],
     outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec],

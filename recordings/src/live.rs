@@ -210,9 +210,8 @@ impl Sink for LiveSink {
 
     fn report(&self) -> SinkReport {
         SinkReport {
-            path: None,
-            file_bytes: None,
             ports: self.shared.ports.lock().unwrap_or_else(PoisonError::into_inner).clone(),
+            ..SinkReport::default()
         }
     }
 }

@@ -10,7 +10,9 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Arc, Mutex};
 
+use dynaflow::summary::Summary;
 use dynaflow_engine::LoadRequest;
+use dynaflow_engine::files::RunFiles;
 use dynaflow_slam::eval::{Align, evaluate};
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
@@ -160,61 +162,58 @@ fn run_one(exe: &Path, job: &Job, args: &BenchArgs) -> Row {
         Err(e) => return Row { error: format!("cannot start {}: {e}", exe.display()), ..Row::default() },
     };
     let _ = std::fs::write(job.dir.join("stderr.txt"), &out.stderr);
-    let stem = match &job.variant {
-        Some(v) => format!("{}-{v}", job.name),
-        None => job.name.clone(),
-    };
-    let summary: Option<serde_json::Value> =
-        std::fs::read(job.dir.join(format!("{stem}.summary.json"))).ok().and_then(|b| serde_json::from_slice(&b).ok());
+    let files = RunFiles::new(&job.dir, &job.name, job.variant.as_deref());
+    let summary = Summary::read(&files.summary());
     let mut row = Row { ok: out.status.success(), ..Row::default() };
-    if !row.ok {
-        let err = String::from_utf8_lossy(&out.stderr);
-        row.error = err.lines().rev().find(|l| l.contains("error")).unwrap_or("run failed").trim().to_string();
-    }
-    let Some(s) = summary else {
-        if row.ok {
+    let s = match summary {
+        Ok(s) => s,
+        Err(e) => {
+            // No summary: the run was refused before it started (the first error line says
+            // why) or could not write one.
+            let err = String::from_utf8_lossy(&out.stderr);
+            let first = err.lines().find(|l| l.contains("error")).map(str::trim);
             row.ok = false;
-            row.error = "no summary written".into();
+            row.error = first.map_or(e, str::to_owned);
+            return row;
         }
-        return row;
     };
-    row.oracle = !s["oracle"].is_null();
-    row.frames = s["frames"].as_u64().unwrap_or(0);
-    row.wall_s = s["wall_s"].as_f64().unwrap_or(f64::NAN);
+    if let Some(f) = s.run.failures.first() {
+        row.ok = false;
+        row.error = format!("`{}` failed: {}", f.node, f.error);
+    } else if !row.ok {
+        row.error = format!("run {:?}", s.run.status).to_lowercase();
+    }
+    row.oracle = s.run.oracle.is_some();
+    row.frames = s.run.frames;
+    row.wall_s = s.run.wall_s;
     row.ms_per_frame = 1e3 * row.wall_s / row.frames.max(1) as f64;
-    let a = &s["ate"];
-    if let (Some(r), Some(m), Some(md), Some(sd)) =
-        (a["rmse"].as_f64(), a["mean"].as_f64(), a["median"].as_f64(), a["std"].as_f64())
-    {
-        row.ate = Some([r, m, md, sd]);
-        if !r.is_finite() && row.ok {
+    if let Some(a) = &s.ate {
+        row.ate = Some([a.rmse, a.mean, a.median, a.std]);
+        if !a.rmse.is_finite() && row.ok {
             // A tracker that reports no finite error has not been evaluated: never a number.
             row.ok = false;
-            row.error = format!("ATE rmse is {r}");
+            row.error = format!("ATE rmse is {}", a.rmse);
         }
     }
-    let node = a["node"].as_str().unwrap_or("track").to_string();
-    if let Some(nodes) = s["nodes"].as_array() {
-        for n in nodes {
-            let name = n["node"].as_str().unwrap_or("?").to_string();
-            if name == node
-                && let (Some(t), Some(r)) =
-                    (n["report"]["rpe"]["translation_rmse"].as_f64(), n["report"]["rpe"]["rotation_rmse_deg"].as_f64())
-            {
-                row.rpe = Some([t, r]);
-            }
-            if let Some(why) = n["report"]["not_initialised_because"].as_str()
-                && row.ok
-            {
-                row.ok = false;
-                row.error = format!("`{name}`: {why}");
-            }
-            let busy = n["busy_s"].as_f64().unwrap_or(0.0);
-            row.nodes.push((name, 1e3 * busy / row.frames.max(1) as f64));
+    let node = s.ate.as_ref().and_then(|a| a.node.clone()).unwrap_or_else(|| "track".into());
+    for n in &s.run.nodes {
+        let report = n.report.as_ref();
+        let rpe = |k: &str| report.and_then(|r| r.get("rpe")?.get(k)?.as_f64());
+        if n.node == node
+            && let (Some(t), Some(r)) = (rpe("translation_rmse"), rpe("rotation_rmse_deg"))
+        {
+            row.rpe = Some([t, r]);
         }
+        if let Some(why) = report.and_then(|r| r.get("not_initialised_because")).and_then(|w| w.as_str())
+            && row.ok
+        {
+            row.ok = false;
+            row.error = format!("`{}`: {why}", n.node);
+        }
+        row.nodes.push((n.node.clone(), 1e3 * n.busy_s / row.frames.max(1) as f64));
     }
-    let est = job.dir.join(format!("{stem}.{node}.trajectory.txt"));
-    let gt = job.dir.join(format!("{stem}.{node}.groundtruth.txt"));
+    let est = files.node_file(&node, "trajectory.txt");
+    let gt = files.node_file(&node, "groundtruth.txt");
     if est.exists() && gt.exists() {
         row.trajectory = Some((gt, est));
     }

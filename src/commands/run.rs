@@ -4,6 +4,8 @@ use std::io::IsTerminal;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
+use dynaflow::summary::Summary;
+use dynaflow_engine::files::RunFiles;
 use dynaflow_engine::runtime::{self, RunOptions, RunStatus};
 use dynaflow_engine::sink::{DigestSink, Sink};
 use dynaflow_engine::spec::Override;
@@ -72,10 +74,7 @@ pub fn run(args: &RunArgs) -> u8 {
         eprintln!("error: cannot create output folder {}: {e}", args.out.display());
         return EXIT_BAD_INPUT;
     }
-    let stem = match &graph.variant {
-        Some(v) => format!("{}-{v}", graph.name),
-        None => graph.name.clone(),
-    };
+    let files = RunFiles::new(&args.out, &graph.name, graph.variant.as_deref());
 
     // Each recorder once: two sinks on one file would interleave into a corrupt file.
     let mut recorders: Vec<&str> = Vec::new();
@@ -99,12 +98,12 @@ pub fn run(args: &RunArgs) -> u8 {
     let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
     for r in &args.record {
         match r.trim() {
-            "jsonl" => sinks.push(Box::new(MessageLog::new(args.out.join(format!("{stem}.messages.jsonl"))))),
-            "rrd" => sinks.push(Box::new(
-                RrdSink::new(args.out.join(format!("{stem}.rrd"))).with_codec(codec).with_cache(cache.clone()),
-            )),
+            "jsonl" => sinks.push(Box::new(MessageLog::new(files.run_file("messages.jsonl")))),
+            "rrd" => {
+                sinks.push(Box::new(RrdSink::new(files.run_file("rrd")).with_codec(codec).with_cache(cache.clone())))
+            }
             "mcap" => sinks.push(Box::new(
-                McapSink::new(args.out.join(format!("{stem}.mcap")))
+                McapSink::new(files.run_file("mcap"))
                     .with_codec(codec)
                     .with_cache(cache.clone())
                     .with_chunking(args.mcap_chunk_kib.saturating_mul(1024), DEFAULT_FLUSH_INTERVAL),
@@ -170,68 +169,44 @@ pub fn run(args: &RunArgs) -> u8 {
     } else {
         ""
     };
-    let mut summary = serde_json::to_value(&report).unwrap_or_default();
-    // Trackers with ground truth report their ATE: print each (the first in graph order is
-    // the reference the others are compared with, as a baseline is), lift the first to the
-    // top of the summary and keep all under `trackers`.
-    let mut trackers = serde_json::Map::new();
-    let mut reference: Option<(String, f64)> = None;
-    for n in &report.nodes {
+    let mut summary = Summary::of(report);
+    // Print each tracker's ATE, the first in graph order the reference the others are
+    // compared with (as a baseline is).
+    let mut reference: Option<(&str, f64)> = None;
+    for n in &summary.run.nodes {
         if let Some(why) = n.report.as_ref().and_then(|r| r.get("not_initialised_because")).and_then(|w| w.as_str()) {
             say!("`{}` has no trajectory: {why}", n.node);
         }
-        let Some(ate) = n.report.as_ref().and_then(|r| r.get("ate")) else { continue };
-        let f = |k: &str| ate.get(k).and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
-        let versus = match &reference {
-            Some((name, r)) if *r > 0.0 => format!(" ({:+.1} % vs `{name}`)", 100.0 * (f("rmse") / r - 1.0)),
+        let Some(ate) = summary.trackers.get(&n.node) else { continue };
+        let versus = match reference {
+            Some((name, r)) if r > 0.0 => format!(" ({:+.1} % vs `{name}`)", 100.0 * (ate.rmse / r - 1.0)),
             _ => String::new(),
         };
         say!(
             "ATE of `{}`{oracle} ({} poses, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m{versus}",
             n.node,
-            ate.get("pairs").and_then(serde_json::Value::as_u64).unwrap_or(0),
-            ate.get("align").and_then(serde_json::Value::as_str).unwrap_or("se3"),
-            f("rmse"),
-            f("mean"),
-            f("median"),
-            f("std")
+            ate.pairs,
+            ate.align.as_deref().unwrap_or("se3"),
+            ate.rmse,
+            ate.mean,
+            ate.median,
+            ate.std
         );
-        if reference.is_none() {
-            reference = Some((n.node.clone(), f("rmse")));
-            let mut a = ate.clone();
-            if let Some(o) = a.as_object_mut() {
-                o.insert("node".into(), serde_json::Value::from(n.node.clone()));
-            }
-            if let Some(obj) = summary.as_object_mut() {
-                obj.insert("ate".into(), a);
-            }
-        }
-        trackers.insert(n.node.clone(), ate.clone());
+        reference.get_or_insert((&n.node, ate.rmse));
     }
-    if !trackers.is_empty()
-        && let Some(obj) = summary.as_object_mut()
-    {
-        obj.insert("trackers".into(), serde_json::Value::Object(trackers));
+    if args.digest {
+        summary.digests = Some(digest.to_json());
     }
-    if args.digest
-        && let Some(obj) = summary.as_object_mut()
-    {
-        obj.insert("digests".into(), digest.to_json());
-    }
-    if let Some(recorders) = summary.get_mut("recorders") {
-        recording_costs(recorders, report.frames);
-    }
-    let path = args.out.join(format!("{stem}.summary.json"));
-    let written = serde_json::to_string_pretty(&summary)
-        .map_err(std::io::Error::other)
-        .and_then(|s| std::fs::write(&path, s + "\n"));
-    match written {
+    recording_costs(&summary.run.recorders);
+    let path = files.summary();
+    match summary.write(&path) {
         Ok(()) => tracing::info!("wrote {}", path.display()),
         Err(e) => {
             eprintln!("error: cannot write {}: {e}", path.display());
             return EXIT_FAILED;
         }
     }
+    let report = &summary.run;
     for f in &report.failures {
         eprintln!("error: node `{}` failed: {}", f.node, f.error);
     }
@@ -261,44 +236,22 @@ fn spawn_progress(options: &RunOptions) -> (indicatif::ProgressBar, tokio::task:
     (bar, task)
 }
 
-/// Add `bytes_per_frame` to each recorder and port of the summary's `recorders` and print
-/// what each file cost and its largest ports, so a user sees what recording takes.
-fn recording_costs(recorders: &mut serde_json::Value, frames: u64) {
-    use serde_json::Value;
-    let per_frame = |b: u64| b as f64 / frames.max(1) as f64;
+/// Print what each recording cost per frame and its largest ports, so a user sees what
+/// recording takes.
+fn recording_costs(recorders: &std::collections::BTreeMap<String, dynaflow_engine::sink::SinkReport>) {
     let kib = |b: f64| b / 1024.0;
-    let Some(map) = recorders.as_object_mut() else { return };
-    for (name, r) in map.iter_mut() {
-        let field = |p: &Value, k: &str| p.get(k).and_then(Value::as_u64).unwrap_or(0);
-        // (port, bytes, dropped, messages)
-        let mut ports: Vec<(String, u64, u64, u64)> = Vec::new();
-        if let Some(ps) = r.get_mut("ports").and_then(Value::as_object_mut) {
-            for (port, p) in ps.iter_mut() {
-                let bytes = field(p, "bytes");
-                ports.push((port.clone(), bytes, field(p, "dropped"), field(p, "messages")));
-                if let Some(o) = p.as_object_mut() {
-                    o.insert("bytes_per_frame".into(), Value::from(per_frame(bytes).round()));
-                }
-            }
-        }
-        let dropped: u64 = ports.iter().map(|p| p.2).sum();
-        let Some(file) = r.get("file_bytes").and_then(Value::as_u64) else {
-            let messages: u64 = ports.iter().map(|p| p.3).sum();
+    for (name, r) in recorders {
+        let dropped: u64 = r.ports.values().map(|p| p.dropped).sum();
+        let (Some(file), Some(per_frame)) = (r.file_bytes, r.bytes_per_frame) else {
+            let messages: u64 = r.ports.values().map(|p| p.messages).sum();
             say!("streamed {name}: {messages} messages, {dropped} dropped (per port in the summary)");
             continue;
         };
-        if let Some(o) = r.as_object_mut() {
-            o.insert("bytes_per_frame".into(), Value::from(per_frame(file).round()));
-        }
-        let mut line =
-            format!("recorded {name}: {:.1} MiB, {:.0} KiB/frame", file as f64 / 1048576.0, kib(per_frame(file)));
-        ports.sort_by_key(|p| std::cmp::Reverse(p.1));
-        let top: Vec<String> = ports
-            .iter()
-            .filter(|p| p.1 > 0)
-            .take(4)
-            .map(|(p, b, ..)| format!("{p} {:.0}", kib(per_frame(*b))))
-            .collect();
+        let mut line = format!("recorded {name}: {:.1} MiB, {:.0} KiB/frame", file as f64 / 1048576.0, kib(per_frame));
+        let mut ports: Vec<(&String, f64)> =
+            r.ports.iter().filter(|(_, p)| p.bytes > 0).map(|(n, p)| (n, p.bytes_per_frame.unwrap_or(0.0))).collect();
+        ports.sort_by(|a, b| b.1.total_cmp(&a.1));
+        let top: Vec<String> = ports.iter().take(4).map(|(p, b)| format!("{p} {:.0}", kib(*b))).collect();
         if !top.is_empty() {
             line += &format!("; largest ports before compression (KiB/frame): {}", top.join(", "));
         }

@@ -65,13 +65,22 @@ pub struct Context {
     /// The run's output directory, if any.
     pub out_dir: Option<PathBuf>,
     /// The run's file stem, `<graph>` or `<graph>-<variant>`: an operator's own files are
-    /// `<out_dir>/<stem>.<node>.<what>` so variants and nodes never overwrite each other.
+    /// `<out_dir>/<stem>.<node>.<what>` ([`Context::output_file`]).
     pub stem: Arc<str>,
     /// Whether the run is paced at sensor rate.
     pub realtime: bool,
     /// What the operator has to add to its node's entry in the run summary (e.g. a
     /// tracker's ATE against ground truth), set by the time `stop` returns.
     pub report: Option<serde_json::Value>,
+}
+
+impl Context {
+    /// Where this node writes its file `what` (`trajectory.txt`, `ot`, ...), if the run has an
+    /// output folder: `<out_dir>/<stem>.<node>.<what>` ([`crate::files::RunFiles`]).
+    pub fn output_file(&self, what: &str) -> Option<PathBuf> {
+        let dir = self.out_dir.as_ref()?;
+        Some(crate::files::RunFiles { dir: dir.clone(), stem: self.stem.to_string() }.node_file(&self.node, what))
+    }
 }
 
 /// The inputs of one frame, in declaration order; `None` where an input is absent this frame.

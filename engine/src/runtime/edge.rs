@@ -84,7 +84,7 @@ impl Shared {
 
 /// Counters of one edge, read after (or during) a run. All counts are of messages;
 /// watermarks are never counted.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 pub struct EdgeStats {
     /// Messages the producer sent.
     pub sent: u64,

@@ -101,7 +101,7 @@ impl Histogram {
 }
 
 /// Summary statistics of a set of durations, in milliseconds.
-#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LatencyStats {
     /// Mean.
     pub mean_ms: f64,
@@ -114,7 +114,7 @@ pub struct LatencyStats {
 }
 
 /// What one node did.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct NodeReport {
     /// Node id.
     pub node: String,
@@ -135,12 +135,12 @@ pub struct NodeReport {
     /// Messages dropped on the node's inputs.
     pub dropped: u64,
     /// What the operator reported (e.g. a tracker's ATE), if anything.
-    #[serde(skip_serializing_if = "Option::is_none")]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub report: Option<serde_json::Value>,
 }
 
 /// What one edge did.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct EdgeReport {
     /// `producer.port -> consumer/port`.
     pub edge: String,
@@ -150,7 +150,7 @@ pub struct EdgeReport {
 }
 
 /// How a run ended.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum RunStatus {
     /// All sources ended and every frame went through.
@@ -162,7 +162,7 @@ pub enum RunStatus {
 }
 
 /// A node (or sink) that failed.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct Failure {
     /// Node id, or `sink:<name>`.
     pub node: String,
@@ -171,7 +171,7 @@ pub struct Failure {
 }
 
 /// Everything measured in a run; written as `<out>/<name>.summary.json`.
-#[derive(Clone, Debug, serde::Serialize)]
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
 pub struct RunReport {
     /// Graph name.
     pub graph: String,

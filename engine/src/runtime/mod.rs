@@ -172,10 +172,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
         probes.push(probe);
     }
 
-    let stem: Arc<str> = match &graph.variant {
-        Some(v) => format!("{}-{v}", graph.name).into(),
-        None => graph.name.as_str().into(),
-    };
+    let stem: Arc<str> = crate::files::RunFiles::stem_of(&graph.name, graph.variant.as_deref()).into();
     let mut tasks = Vec::new();
     for (i, (node, inst)) in graph.nodes.iter().zip(instances).enumerate() {
         let seed = node_seed(graph.seed, &node.id);

@@ -508,7 +508,7 @@ const LABELS_B: In<PointLabels> = In::required("b", "second rule's labels");
 pub const COMBINE_LABELS: OpSpec = OpSpec {
     name: "combine_labels",
     family: "culling",
-    doc: "Combines two label sets of the same tracks: `or` (dynamic if either rule says so, e.g. MG-SLAM's S+G) or `and` (dynamic only if both do, e.g. a box AND a geometric check). The deciding label (reason, score) is `a`'s where it decides, else `b`'s. Chaining rule nodes through `static` is the sequence form.",
+    doc: doc_line(include_str!("docs/combine_labels.md")),
     kind: OpKind::Transform,
     inputs: &[In::<Tracks>::required("tracks", "the tracks both label sets index").spec, LABELS_A.spec, LABELS_B.spec],
     outputs: &[LABELS.spec, STATIC.spec, Out::<Scalars>::new("counts", "`dynamic`, `static`, `total`").spec],

@@ -38,7 +38,7 @@ const GT_POSE: Out<Pose> =
 pub(crate) const KITTI_ODOMETRY: OpSpec = OpSpec {
     name: "kitti_odometry",
     family: "decode",
-    doc: "Reads a KITTI odometry sequence folder: `calib.txt` (projection matrices P0..P3), `times.txt`, the grey (`image_0`/`image_1`) or colour (`image_2`/`image_3`) rectified stereo pair, and the ground-truth poses (`poses/NN.txt` two folders up, or `poses`). Poses are of the left camera of the chosen pair.",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/kitti_odometry.md")),
     kind: OpKind::Source,
     inputs: &[],
     outputs: &[LEFT.spec, RIGHT.spec, CAMERA_INFO.spec, STEREO.spec, GT_POSE.spec],

@@ -48,7 +48,7 @@ const GT_MASK: Out<SegmentationMask> = Out::ground_truth(
 pub(crate) const TUM_RGBD: OpSpec = OpSpec {
     name: "tum_rgbd",
     family: "decode",
-    doc: "Reads a TUM RGB-D sequence folder as published: `rgb.txt`, `depth.txt` and optional `groundtruth.txt` ('#' comments), associating colour and depth by nearest timestamp within `max_difference` (as TUM's associate.py). Ground truth is interpolated at each colour timestamp. Bad input names the file and line; with `on_error: skip` unreadable frames are skipped, counted and logged.",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/tum_rgbd.md")),
     kind: OpKind::Source,
     inputs: &[],
     outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec],

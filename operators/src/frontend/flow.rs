@@ -40,7 +40,7 @@ const TRACKS: Out<Tracks> = Out::new(
 pub const LK_FLOW: OpSpec = OpSpec {
     name: "lk_flow",
     family: "flow",
-    doc: "Pyramidal Lucas-Kanade tracking as OpenCV's calcOpticalFlowPyrLK (Scharr gradients, minimum-eigenvalue rejection, optional forward-backward check): tracks the previous frame's points into this frame with stable ids. When fewer than `min_points` remain it adds new points, from `points` when wired (e.g. ORB keypoints) or from FAST corners, at least `min_distance` from existing ones (as YG-SLAM re-detects).",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/lk_flow.md")),
     kind: OpKind::Transform,
     inputs: &[IMAGE.spec, POINTS.spec],
     outputs: &[TRACKS.spec],

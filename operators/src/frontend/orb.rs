@@ -38,7 +38,7 @@ const KEYPOINTS: Out<Keypoints> = Out::new(
 pub const ORB_EXTRACT: OpSpec = OpSpec {
     name: "orb_extract",
     family: "orb",
-    doc: "ORB features as ORB-SLAM2/3 extract them: an image pyramid, FAST-9 per 30-px cell (threshold `ini_threshold`, or `min_threshold` where a cell has none), a quadtree spreading exactly `features` keypoints over the image (or OpenCV's Harris ranking with `distribution: harris`), intensity-centroid orientation and 256-bit steered BRIEF with the learned ORB pattern. No keypoint lies on a non-zero pixel of `mask`.",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/orb_extract.md")),
     kind: OpKind::Transform,
     inputs: &[IMAGE.spec, MASK.spec],
     outputs: &[KEYPOINTS.spec],

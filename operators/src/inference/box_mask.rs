@@ -28,7 +28,7 @@ const MASK: Out<SegmentationMask> =
 pub const BOX_TO_MASK: OpSpec = OpSpec {
     name: "box_to_mask",
     family: "inference",
-    doc: "A segmentation mask from detector boxes and depth, so mask-based culling rules run with a detector: inside each box of a listed class, the pixels near the object's dominant foreground depth (the nearest depth-histogram bin holding at least half as many pixels as the fullest) are the object's. Class 1 is every masked pixel; instances are the boxes.",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/box_to_mask.md")),
     kind: OpKind::Transform,
     inputs: &[DETECTIONS.spec, DEPTH.spec],
     outputs: &[MASK.spec],

@@ -54,7 +54,7 @@ impl DecoderName {
 pub const DETECT: OpSpec = OpSpec {
     name: "detect",
     family: "inference",
-    doc: "Object detection with an ONNX model: YOLOX (letterbox, BGR 0..255, grid decoding, score obj x cls) or FastestDet (resize, BGR 0..1, tanh/sigmoid box decoding, score obj^0.6 x cls^0.4), then class-wise NMS; boxes in image pixels with COCO class names. The default model is the vendored YOLOX-nano (embedded in the binary). Backends: `cpu` (rten), `wgpu` (our WGSL executor), `reference` (plain loops); all checked against onnxruntime.",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/detect.md")),
     kind: OpKind::Transform,
     inputs: &[IMAGE.spec],
     outputs: &[DETECTIONS.spec],

@@ -26,7 +26,7 @@ const STATS: Out<Scalars> =
 pub const KEYFRAME_GATE: OpSpec = OpSpec {
     name: "keyframe_gate",
     family: "inference",
-    doc: "MG-SLAM's key segmentation frames: passes `image` on (to a detector or segmenter) only when the frame is the first, the previous frame was relocalised or was a tracking key frame (`tracking`, `delay: 1`), the previous frame's dynamic-point count fell below `dynamic_below` (`counts`, `delay: 1`: the dynamic objects may have left or changed), or `max_gap` frames passed without inference. Consumers of the inference result join it with `join: latest`. `stats.rule` says which rule fired; the summary counts them.",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/keyframe_gate.md")),
     kind: OpKind::Transform,
     inputs: &[IMAGE.spec, TRACKING.spec, COUNTS.spec],
     outputs: &[IMAGE_OUT.spec, STATS.spec],

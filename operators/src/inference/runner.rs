@@ -2,10 +2,13 @@
 //! oracle the others are tested against) or `wgpu` (our planned GPU executor; without an
 //! adapter, or for a model it cannot plan, the documented fallback to `cpu` with a warning).
 
+#[cfg(feature = "wgpu")]
 use dynaflow_gpu::{Gpu, GpuModel};
-use dynaflow_infer::cpu::{self, Tensor};
+use dynaflow_infer::Executor;
 use dynaflow_infer::onnx::Model;
+use dynaflow_infer::reference;
 use dynaflow_infer::rten_cpu::RtenModel;
+use dynaflow_infer::tensor::Tensor;
 
 dynaflow_engine::param_enum! {
     /// Where a model runs: the graph parameter and `dynaflow infer --backend` alike.
@@ -19,23 +22,12 @@ dynaflow_engine::param_enum! {
     }
 }
 
-/// A model ready to run.
-pub enum Runner {
-    /// rten on the CPU.
-    Cpu(Box<RtenModel>),
-    /// The reference executor.
-    Reference(Model),
-    /// The wgpu executor.
-    Gpu(Box<GpuModel>),
-}
+/// A model ready to run, on whichever executor the backend chose.
+pub struct Runner(Box<dyn Executor>);
 
 impl std::fmt::Debug for Runner {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Runner::Cpu(_) => f.write_str("Runner::Cpu"),
-            Runner::Reference(_) => f.write_str("Runner::Reference"),
-            Runner::Gpu(g) => write!(f, "Runner::Gpu({})", g.adapter()),
-        }
+        f.write_str("Runner")
     }
 }
 
@@ -47,40 +39,54 @@ impl Runner {
     pub fn new(bytes: &[u8], model: &Model, backend: Backend, allow_software: bool) -> Result<(Self, String), String> {
         match backend {
             Backend::Reference => {
-                cpu::check_ops(model).map_err(|e| e.to_string())?;
-                Ok((Runner::Reference(model.clone()), "reference".into()))
+                reference::check_ops(model).map_err(|e| e.to_string())?;
+                Ok((Runner(Box::new(model.clone())), "reference".into()))
             }
             Backend::Wgpu => {
-                // Planning names an op without a kernel (with its node) and any shape it
-                // cannot take; without an adapter there is nothing to plan on.
-                let why = match Gpu::new() {
-                    Ok(gpu) if gpu.software && !allow_software => format!(
-                        "the only adapter, `{}`, is a software renderer on the CPU (allow it with `allow_software: true` / `--allow-software`)",
-                        gpu.adapter
-                    ),
-                    Ok(gpu) => match GpuModel::new(gpu, model) {
-                        Ok(m) => {
-                            let name = format!("wgpu: {}", m.adapter());
-                            return Ok((Runner::Gpu(Box::new(m)), name));
-                        }
-                        Err(e) => e.to_string(),
-                    },
-                    Err(e) => e.to_string(),
+                let why = match wgpu_runner(model, allow_software) {
+                    Ok(runner) => return Ok(runner),
+                    Err(why) => why,
                 };
                 tracing::warn!("backend `wgpu` unavailable ({why}); running on the CPU");
-                let m = RtenModel::load(bytes.to_vec())?;
-                Ok((Runner::Cpu(Box::new(m)), format!("cpu (wgpu fallback: {why})")))
+                let m = RtenModel::load(bytes.to_vec()).map_err(|e| e.to_string())?;
+                Ok((Runner(Box::new(m)), format!("cpu (wgpu fallback: {why})")))
             }
-            Backend::Cpu => Ok((Runner::Cpu(Box::new(RtenModel::load(bytes.to_vec())?)), "cpu".into())),
+            Backend::Cpu => {
+                Ok((Runner(Box::new(RtenModel::load(bytes.to_vec()).map_err(|e| e.to_string())?)), "cpu".into()))
+            }
         }
     }
 
     /// Run on one named input; the model's outputs.
     pub fn run(&self, name: &str, input: Tensor) -> Result<Vec<Tensor>, String> {
-        match self {
-            Runner::Cpu(m) => m.run(&[(name, input)]),
-            Runner::Reference(m) => cpu::run(m, &[(name, input)]).map_err(|e| e.to_string()),
-            Runner::Gpu(m) => m.run(&[(name, input)]).map_err(|e| e.to_string()),
-        }
+        self.0.run(&[(name, input)]).map_err(|e| e.to_string())
     }
+}
+
+/// The model planned on a GPU adapter, or why not (no adapter, a software one not allowed, an
+/// op or shape the planner cannot take).
+#[cfg(feature = "wgpu")]
+fn wgpu_runner(model: &Model, allow_software: bool) -> Result<(Runner, String), String> {
+    // Planning names an op without a kernel (with its node) and any shape it cannot take;
+    // without an adapter there is nothing to plan on.
+    match Gpu::new() {
+        Ok(gpu) if gpu.software && !allow_software => Err(format!(
+            "the only adapter, `{}`, is a software renderer on the CPU (allow it with `allow_software: true` / `--allow-software`)",
+            gpu.adapter
+        )),
+        Ok(gpu) => match GpuModel::new(gpu, model) {
+            Ok(m) => {
+                let name = format!("wgpu: {}", m.adapter());
+                Ok((Runner(Box::new(m)), name))
+            }
+            Err(e) => Err(e.to_string()),
+        },
+        Err(e) => Err(e.to_string()),
+    }
+}
+
+/// Built without the `wgpu` feature: always the CPU, saying why.
+#[cfg(not(feature = "wgpu"))]
+fn wgpu_runner(_: &Model, _: bool) -> Result<(Runner, String), String> {
+    Err("dynaflow was built without its `wgpu` feature".into())
 }

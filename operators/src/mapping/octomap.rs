@@ -57,7 +57,7 @@ const MAP: Out<OctreeUpdate> = Out::new(
 pub const OCTOMAP: OpSpec = OpSpec {
     name: "octomap",
     family: "mapping",
-    doc: "A semantic OctoMap (OctoMap 1.9's semantics: log-odds hit/miss updates with clamping, free space ray-cast from the camera to every depth pixel, each voxel updated once per frame with end points winning, pruning). Depth pixels (every `subsample`-th in x and y) are back-projected with the intrinsics and placed with `pose`; pixels whose `mask` class is dynamic are not inserted at all, neither as end points nor as rays, so moving people leave no trace. Each voxel keeps a colour (from `image`, or its class's) as OctoMap's ColorOcTree does (`averageNodeColor` per point after the insertion, octomap_server's rule; the file equals liboctomap's for the same frames) and a class (from `mask`, the most frequent of the frame's points). At the end of the run writes `<out>/<graph>[-<variant>].<node>.ot` (ColorOcTree) and `.bt` (binary), which OctoMap's tools and octovis open.",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/octomap.md")),
     kind: OpKind::Transform,
     inputs: &[DEPTH.spec, CAMERA_INFO.spec, POSE.spec, IMAGE.spec, MASK.spec],
     outputs: &[UPDATES.spec, MAP.spec],
@@ -228,13 +228,11 @@ impl Operator for Octomap {
             "memory_bytes": self.tree.memory_bytes(),
             "dynamic_pixels_skipped": self.skipped,
         });
-        if let Some(dir) = &ctx.out_dir {
+        if let (Some(ot), Some(bt)) = (ctx.output_file("ot"), ctx.output_file("bt")) {
             let mut tree = self.tree.clone();
             if self.config.color == Colour::Class {
                 tree.recolor(class_color);
             }
-            let ot = dir.join(format!("{}.{}.ot", ctx.stem, ctx.node));
-            let bt = dir.join(format!("{}.{}.bt", ctx.stem, ctx.node));
             let io_err = |e: io::OctoError| OpError::Input(e.to_string());
             io::write_ot(&tree, &ot).map_err(io_err)?;
             io::write_bt(&tree, &bt).map_err(io_err)?;

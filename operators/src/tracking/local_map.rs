@@ -34,7 +34,7 @@ const STATS: Out<Scalars> = Out::new(
 pub const LOCAL_MAP: OpSpec = OpSpec {
     name: "local_map",
     family: "pnp_ba",
-    doc: "ORB-SLAM's local mapping: each key frame from `pnp_track` joins the map with its observations and new points; it and its best covisible key frames (the window) are refined with their points by local BA (sparse LM, Schur complement on the points, Huber; two stages with outliers dropped between), key frames outside the window that see its points held fixed; bad observations are erased and points seen by fewer than two key frames two key frames after their creation are culled. The refined window goes back to `pnp_track` on `map` (connect it with `delay: 1` and `join: latest`, so tracking never waits on it in `--realtime`).",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/local_map.md")),
     kind: OpKind::Transform,
     inputs: &[KEYFRAME.spec, CAMERA_INFO.spec],
     outputs: &[MAP.spec, POINTS.spec, STATS.spec],

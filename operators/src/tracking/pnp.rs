@@ -62,7 +62,7 @@ const STATS: Out<Scalars> = Out::new(
 pub const PNP_TRACK: OpSpec = OpSpec {
     name: "pnp_track",
     family: "pnp_ba",
-    doc: "ORB-SLAM-style RGB-D tracking against the local map: map points projected with a constant-velocity prediction are matched to the keypoints in a search radius (Hamming distance, ratio test), refined by motion-only BA (LM on SE(3), pixels plus depth as ORB-SLAM2's virtual right coordinate, Huber, four re-classification rounds); when too few survive, descriptor matching against the local map and P3P RANSAC relocalise. Dynamic keypoints (on `mask` pixels, or whose nearest labelled track within `label_radius` is marked dynamic) never reach the solver. Lost frames follow the motion model; after `reset_after` of them a new map starts at the dead-reckoned pose. Key frames (ORB-SLAM2's rules) go to `local_map`, whose refined map comes back on `map`. Writes `<out>/<graph>[-<variant>].<node>.trajectory.txt` (TUM format) and, with `gt_pose`, puts the ATE (SE(3)-aligned) in the summary.",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/pnp_track.md")),
     kind: OpKind::Transform,
     inputs: &[
         KEYPOINTS.spec,
@@ -303,14 +303,13 @@ impl PnpTrack {
     /// `<out>/<stem>.<node>.trajectory.txt`, and with `gt_pose` the ground truth of the same
     /// frames beside it (`.groundtruth.txt`), both TUM format (`dynaflow eval`, `dynaflow bench`).
     fn write_trajectory(&self, ctx: &Context) -> Result<(), OpError> {
-        let Some(dir) = &ctx.out_dir else { return Ok(()) };
         for (what, poses) in [("trajectory", &self.trajectory), ("groundtruth", &self.ground_truth)] {
             // The estimate's file is written even empty (a tracker that never initialised),
             // so a script finds it; the ground truth only when there is some.
             if poses.is_empty() && what == "groundtruth" {
                 continue;
             }
-            let path = dir.join(format!("{}.{}.{what}.txt", ctx.stem, ctx.node));
+            let Some(path) = ctx.output_file(&format!("{what}.txt")) else { return Ok(()) };
             let io = |source| OpError::Io { path: path.clone(), source };
             let mut f = std::io::BufWriter::new(std::fs::File::create(&path).map_err(io)?);
             writeln!(f, "# timestamp tx ty tz qx qy qz qw (world_from_cam, dynaflow pnp_track {what})").map_err(io)?;

@@ -216,13 +216,14 @@ impl Sink for McapSink {
             .iter()
             .map(|((node, port), id)| {
                 let (messages, bytes) = self.bytes.get(id).copied().unwrap_or_default();
-                (format!("{node}/{port}"), PortReport { messages, bytes, dropped: 0 })
+                (format!("{node}/{port}"), PortReport { messages, bytes, ..PortReport::default() })
             })
             .collect();
         SinkReport {
             path: Some(self.path.display().to_string()),
             file_bytes: std::fs::metadata(&self.path).ok().map(|m| m.len()),
             ports,
+            ..SinkReport::default()
         }
     }
 }

@@ -574,6 +574,7 @@ impl Sink for RrdSink {
             path: path.map(|p| p.display().to_string()),
             file_bytes: path.and_then(|p| std::fs::metadata(p).ok()).map(|m| m.len()),
             ports: self.ports.clone(),
+            ..SinkReport::default()
         }
     }
 }
