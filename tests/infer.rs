@@ -80,7 +80,7 @@ fn both_models_parse_and_use_only_supported_ops() {
         let out: Vec<i64> = m.outputs[0].shape.iter().map(|d| d.unwrap()).collect();
         assert_eq!(out, output.iter().map(|&d| d as i64).collect::<Vec<_>>());
         for n in &m.nodes {
-            assert!(SUPPORTED.contains(&n.op_type.as_str()), "{}: {}", path.display(), n.op_type);
+            assert!(SUPPORTED.contains(&n.op.name()), "{}: {}", path.display(), n.op);
         }
     }
 }

@@ -756,3 +756,40 @@ fn every_label_in_the_rrd_is_drawn_at_its_own_track() {
     }
     assert!(checked > 100, "only {checked} labels checked");
 }
+
+#[test]
+fn each_pose_stream_is_drawn_through_its_own_camera() {
+    // Issue 30: the recorder gave every pose stream the intrinsics it saw last, whichever
+    // camera they came from; each pose now takes its own node's camera (or what feeds the
+    // node's camera input). Two generators of different sizes, read back from the `.rrd`.
+    let dir = common::TempDir::new("rrd-cameras");
+    let graph = dir.path().join("two.yaml");
+    std::fs::write(
+        &graph,
+        "name: two\noracle: true\nnodes:\n  big: { op: synth, params: { frames: 2, width: 640, height: 480 } }\n  small: { op: synth, params: { frames: 2, width: 160, height: 120 } }\n",
+    )
+    .unwrap();
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "rrd", "--out"])
+        .arg(dir.path())
+        .arg(&graph)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::log::{Chunk, LogMsg};
+    let resolution = rerun::Pinhole::descriptor_resolution().component;
+    let mut seen = std::collections::BTreeMap::new();
+    let file = std::io::BufReader::new(std::fs::File::open(dir.path().join("two.rrd")).unwrap());
+    for msg in DecoderApp::decode_lazy(file) {
+        let LogMsg::ArrowMsg(_, arrow) = msg.unwrap() else { continue };
+        let chunk = Chunk::from_arrow_msg(&arrow).unwrap();
+        for r in chunk.iter_component::<rerun::components::Resolution>(resolution) {
+            if let Some(r) = r.first() {
+                seen.insert(chunk.entity_path().to_string(), [r.0.x(), r.0.y()]);
+            }
+        }
+    }
+    assert_eq!(seen.get("/world/big/gt_pose"), Some(&[640.0, 480.0]), "{seen:?}");
+    assert_eq!(seen.get("/world/small/gt_pose"), Some(&[160.0, 120.0]), "{seen:?}");
+}

@@ -15,6 +15,7 @@ pub mod op;
 pub mod runtime;
 pub mod sink;
 pub mod spec;
+pub mod testing;
 pub mod yaml;
 
 pub use dynaflow_msg as msg;

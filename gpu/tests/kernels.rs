@@ -29,7 +29,7 @@ fn values(n: usize, seed: u64) -> Vec<f32> {
 fn node(op: &str, inputs: &[&str], output: &str, attributes: &[(&str, Attribute)]) -> Node {
     Node {
         name: format!("{op}_{output}"),
-        op_type: op.into(),
+        op: dynaflow_infer::onnx::Op::parse(op),
         domain: String::new(),
         inputs: inputs.iter().map(|s| (*s).to_string()).collect(),
         outputs: vec![output.into()],

@@ -100,13 +100,137 @@ pub enum Attribute {
     Ints(Vec<i64>),
 }
 
+/// An ONNX operator, parsed once from the node's `op_type`: the ops dynaflow's executors know,
+/// and any other by name (an executor refuses it, naming it).
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub enum Op {
+    /// `Add`.
+    Add,
+    /// `AveragePool`.
+    AveragePool,
+    /// `Concat`.
+    Concat,
+    /// `Constant`.
+    Constant,
+    /// `Conv`.
+    Conv,
+    /// `Gather`.
+    Gather,
+    /// `MaxPool`.
+    MaxPool,
+    /// `Mul`.
+    Mul,
+    /// `Pad`.
+    Pad,
+    /// `Relu`.
+    Relu,
+    /// `Reshape`.
+    Reshape,
+    /// `Resize`.
+    Resize,
+    /// `Shape`.
+    Shape,
+    /// `Sigmoid`.
+    Sigmoid,
+    /// `Slice`.
+    Slice,
+    /// `Softmax`.
+    Softmax,
+    /// `Transpose`.
+    Transpose,
+    /// `Unsqueeze`.
+    Unsqueeze,
+    /// An op no executor here runs.
+    Other(String),
+}
+
+impl Op {
+    /// Every op the executors know, by ONNX name.
+    pub const NAMES: &'static [&'static str] = &[
+        "Add",
+        "AveragePool",
+        "Concat",
+        "Constant",
+        "Conv",
+        "Gather",
+        "MaxPool",
+        "Mul",
+        "Pad",
+        "Relu",
+        "Reshape",
+        "Resize",
+        "Shape",
+        "Sigmoid",
+        "Slice",
+        "Softmax",
+        "Transpose",
+        "Unsqueeze",
+    ];
+
+    /// The op named `op_type`.
+    pub fn parse(op_type: &str) -> Self {
+        match op_type {
+            "Add" => Op::Add,
+            "AveragePool" => Op::AveragePool,
+            "Concat" => Op::Concat,
+            "Constant" => Op::Constant,
+            "Conv" => Op::Conv,
+            "Gather" => Op::Gather,
+            "MaxPool" => Op::MaxPool,
+            "Mul" => Op::Mul,
+            "Pad" => Op::Pad,
+            "Relu" => Op::Relu,
+            "Reshape" => Op::Reshape,
+            "Resize" => Op::Resize,
+            "Shape" => Op::Shape,
+            "Sigmoid" => Op::Sigmoid,
+            "Slice" => Op::Slice,
+            "Softmax" => Op::Softmax,
+            "Transpose" => Op::Transpose,
+            "Unsqueeze" => Op::Unsqueeze,
+            other => Op::Other(other.to_owned()),
+        }
+    }
+
+    /// The ONNX name.
+    pub fn name(&self) -> &str {
+        match self {
+            Op::Add => "Add",
+            Op::AveragePool => "AveragePool",
+            Op::Concat => "Concat",
+            Op::Constant => "Constant",
+            Op::Conv => "Conv",
+            Op::Gather => "Gather",
+            Op::MaxPool => "MaxPool",
+            Op::Mul => "Mul",
+            Op::Pad => "Pad",
+            Op::Relu => "Relu",
+            Op::Reshape => "Reshape",
+            Op::Resize => "Resize",
+            Op::Shape => "Shape",
+            Op::Sigmoid => "Sigmoid",
+            Op::Slice => "Slice",
+            Op::Softmax => "Softmax",
+            Op::Transpose => "Transpose",
+            Op::Unsqueeze => "Unsqueeze",
+            Op::Other(name) => name,
+        }
+    }
+}
+
+impl std::fmt::Display for Op {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
 /// A graph node.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Node {
     /// Node name (may be empty).
     pub name: String,
-    /// Operator type, e.g. `Conv`.
-    pub op_type: String,
+    /// Operator, e.g. `Conv`.
+    pub op: Op,
     /// Operator domain (empty: the default ONNX domain).
     pub domain: String,
     /// Input value names (empty string: an omitted optional input).
@@ -149,9 +273,9 @@ impl Node {
     /// How the node is named in messages: its name, or its op type and first output.
     pub fn label(&self) -> String {
         if self.name.is_empty() {
-            format!("{} -> {}", self.op_type, self.outputs.first().map_or("?", String::as_str))
+            format!("{} -> {}", self.op, self.outputs.first().map_or("?", String::as_str))
         } else {
-            format!("{} ({})", self.name, self.op_type)
+            format!("{} ({})", self.name, self.op)
         }
     }
 }
@@ -186,65 +310,11 @@ pub struct Model {
     pub outputs: Vec<ValueInfo>,
 }
 
-/// A cursor over protobuf bytes.
-struct Reader<'a> {
-    buf: &'a [u8],
-    pos: usize,
-}
+use dynaflow_msg::wire::{Reader, Value};
 
-enum Value<'a> {
-    Varint(u64),
-    Fixed64(u64),
-    Bytes(&'a [u8]),
-    Fixed32(u32),
-}
-
-impl<'a> Reader<'a> {
-    fn new(buf: &'a [u8]) -> Self {
-        Self { buf, pos: 0 }
-    }
-    fn done(&self) -> bool {
-        self.pos >= self.buf.len()
-    }
-    fn varint(&mut self) -> Result<u64, OnnxError> {
-        let mut v = 0u64;
-        for shift in (0..64).step_by(7) {
-            let b = *self.buf.get(self.pos).ok_or_else(|| bad("truncated varint"))?;
-            self.pos += 1;
-            v |= u64::from(b & 0x7f) << shift;
-            if b & 0x80 == 0 {
-                return Ok(v);
-            }
-        }
-        Err(bad("varint longer than 10 bytes"))
-    }
-    fn take(&mut self, n: usize) -> Result<&'a [u8], OnnxError> {
-        let end = self.pos.checked_add(n).filter(|&e| e <= self.buf.len()).ok_or_else(|| bad("truncated field"))?;
-        let s = &self.buf[self.pos..end];
-        self.pos = end;
-        Ok(s)
-    }
-    /// The next field: (number, value).
-    fn field(&mut self) -> Result<(u64, Value<'a>), OnnxError> {
-        let key = self.varint()?;
-        let (num, wire) = (key >> 3, key & 7);
-        let v = match wire {
-            0 => Value::Varint(self.varint()?),
-            1 => {
-                let b = self.take(8)?;
-                Value::Fixed64(u64::from_le_bytes(b.try_into().map_err(|_| bad("fixed64"))?))
-            }
-            2 => {
-                let n = usize::try_from(self.varint()?).map_err(|_| bad("length overflows"))?;
-                Value::Bytes(self.take(n)?)
-            }
-            5 => {
-                let b = self.take(4)?;
-                Value::Fixed32(u32::from_le_bytes(b.try_into().map_err(|_| bad("fixed32"))?))
-            }
-            w => return Err(bad(format!("unknown wire type {w} for field {num}"))),
-        };
-        Ok((num, v))
+impl From<dynaflow_msg::wire::WireError> for OnnxError {
+    fn from(e: dynaflow_msg::wire::WireError) -> Self {
+        bad(e.0)
     }
 }
 
@@ -419,9 +489,10 @@ fn attribute(buf: &[u8]) -> Result<(String, Attribute), OnnxError> {
 
 fn node(buf: &[u8]) -> Result<Node, OnnxError> {
     let mut r = Reader::new(buf);
+    let mut op_type = String::new();
     let mut n = Node {
         name: String::new(),
-        op_type: String::new(),
+        op: Op::Other(String::new()),
         domain: String::new(),
         inputs: Vec::new(),
         outputs: Vec::new(),
@@ -433,7 +504,7 @@ fn node(buf: &[u8]) -> Result<Node, OnnxError> {
             1 => n.inputs.push(string(&v)?),
             2 => n.outputs.push(string(&v)?),
             3 => n.name = string(&v)?,
-            4 => n.op_type = string(&v)?,
+            4 => op_type = string(&v)?,
             5 => {
                 if let Value::Bytes(b) = v {
                     let (k, a) = attribute(b)?;
@@ -444,7 +515,8 @@ fn node(buf: &[u8]) -> Result<Node, OnnxError> {
             _ => {}
         }
     }
-    if n.op_type.is_empty() {
+    n.op = Op::parse(&op_type);
+    if op_type.is_empty() {
         return Err(bad(format!("node `{}` has no op_type", n.name)));
     }
     Ok(n)

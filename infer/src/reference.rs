@@ -5,7 +5,7 @@
 
 use std::collections::HashMap;
 
-use crate::onnx::{Attribute, Model, Node};
+use crate::onnx::{Attribute, Model, Node, Op};
 pub use crate::tensor::Tensor;
 use crate::tensor::{norm_axis, reshape_shape, strides};
 
@@ -36,33 +36,15 @@ pub enum RunError {
     MissingInput(String),
 }
 
-/// Ops this executor runs (the union of YOLOX-nano's and FastestDet's).
-pub const SUPPORTED: &[&str] = &[
-    "Add",
-    "AveragePool",
-    "Concat",
-    "Constant",
-    "Conv",
-    "Gather",
-    "MaxPool",
-    "Mul",
-    "Pad",
-    "Relu",
-    "Reshape",
-    "Resize",
-    "Shape",
-    "Sigmoid",
-    "Slice",
-    "Softmax",
-    "Transpose",
-    "Unsqueeze",
-];
+/// Ops this executor runs (the union of YOLOX-nano's and FastestDet's): every [`Op`] but
+/// `Other`.
+pub const SUPPORTED: &[&str] = Op::NAMES;
 
 /// Check every node's op before running anything.
 pub fn check_ops(model: &Model) -> Result<(), RunError> {
     for n in &model.nodes {
-        if !SUPPORTED.contains(&n.op_type.as_str()) || !(n.domain.is_empty() || n.domain == "ai.onnx") {
-            return Err(RunError::UnsupportedOp { op: n.op_type.clone(), node: n.label() });
+        if matches!(n.op, Op::Other(_)) || !(n.domain.is_empty() || n.domain == "ai.onnx") {
+            return Err(RunError::UnsupportedOp { op: n.op.name().to_owned(), node: n.label() });
         }
     }
     Ok(())
@@ -164,27 +146,27 @@ pub fn eval_node(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, Stri
 
 fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
     let one = |t: Tensor| Ok(vec![t]);
-    match n.op_type.as_str() {
-        "Constant" => match n.attributes.get("value") {
+    match &n.op {
+        Op::Constant => match n.attributes.get("value") {
             Some(Attribute::Tensor(t)) => one(Tensor::from_data(t)),
             _ => Err("Constant without a tensor `value`".into()),
         },
-        "Add" => one(binary(args, |a, b| a + b)?),
-        "Mul" => one(binary(args, |a, b| a * b)?),
-        "Relu" => {
+        Op::Add => one(binary(args, |a, b| a + b)?),
+        Op::Mul => one(binary(args, |a, b| a * b)?),
+        Op::Relu => {
             let (s, x) = f32_arg(args, 0)?;
             one(Tensor::F32 { shape: s.to_vec(), data: x.iter().map(|v| v.max(0.0)).collect() })
         }
-        "Sigmoid" => {
+        Op::Sigmoid => {
             let (s, x) = f32_arg(args, 0)?;
             one(Tensor::F32 { shape: s.to_vec(), data: x.iter().map(|v| 1.0 / (1.0 + (-v).exp())).collect() })
         }
-        "Conv" => one(conv(n, args)?),
-        "MaxPool" | "AveragePool" => one(pool(n, args)?),
-        "Concat" => one(concat(n, args)?),
-        "Slice" => one(slice(args)?),
-        "Resize" => one(resize(n, args)?),
-        "Reshape" => {
+        Op::Conv => one(conv(n, args)?),
+        Op::MaxPool | Op::AveragePool => one(pool(n, args)?),
+        Op::Concat => one(concat(n, args)?),
+        Op::Slice => one(slice(args)?),
+        Op::Resize => one(resize(n, args)?),
+        Op::Reshape => {
             let t = args.first().copied().flatten().ok_or("missing data")?;
             let spec = int_arg(args, 1).ok_or("missing shape")?;
             let shape = reshape_shape(t.shape(), &spec)?;
@@ -193,7 +175,7 @@ fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
                 Tensor::I64 { data, .. } => Tensor::I64 { shape, data: data.clone() },
             })
         }
-        "Transpose" => {
+        Op::Transpose => {
             let (s, x) = f32_arg(args, 0)?;
             let perm: Vec<usize> = n
                 .ints("perm")
@@ -214,7 +196,7 @@ fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
             }
             one(Tensor::F32 { shape, data })
         }
-        "Softmax" => {
+        Op::Softmax => {
             let (s, x) = f32_arg(args, 0)?;
             let axis = norm_axis(n.int("axis", -1), s.len())?;
             let st = strides(s);
@@ -232,12 +214,12 @@ fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
             }
             one(Tensor::F32 { shape: s.to_vec(), data })
         }
-        "Shape" => {
+        Op::Shape => {
             let t = args.first().copied().flatten().ok_or("missing data")?;
             let dims: Vec<i64> = t.shape().iter().map(|&d| d as i64).collect();
             one(Tensor::I64 { shape: vec![dims.len()], data: dims })
         }
-        "Unsqueeze" => {
+        Op::Unsqueeze => {
             let t = args.first().copied().flatten().ok_or("missing data")?;
             let axes = n.ints("axes").map(<[i64]>::to_vec).or_else(|| int_arg(args, 1)).ok_or("no axes")?;
             let rank = t.shape().len() + axes.len();
@@ -252,8 +234,8 @@ fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
                 Tensor::I64 { data, .. } => Tensor::I64 { shape, data: data.clone() },
             })
         }
-        "Gather" => one(gather(n, args)?),
-        "Pad" => one(pad(n, args)?),
+        Op::Gather => one(gather(n, args)?),
+        Op::Pad => one(pad(n, args)?),
         other => Err(format!("op {other} is not implemented")),
     }
 }
@@ -369,7 +351,7 @@ pub fn pool_plan(n: &Node, shape: &[usize]) -> Result<PoolPlan, String> {
 fn pool(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
     let (xs, x) = f32_arg(args, 0)?;
     let PoolPlan { kernel: [kh, kw], strides: [sh, sw], pads: p, out: [oh, ow] } = pool_plan(n, xs)?;
-    let max = n.op_type == "MaxPool";
+    let max = n.op == Op::MaxPool;
     let count_pad = n.int("count_include_pad", 0) != 0;
     let (nb, c, h, w) = (xs[0], xs[1], xs[2], xs[3]);
     let mut out = vec![0.0f32; nb * c * oh * ow];
@@ -595,7 +577,7 @@ mod tests {
             producer: String::new(),
             nodes: vec![Node {
                 name: "odd_node".into(),
-                op_type: op.into(),
+                op: Op::parse(op),
                 domain: String::new(),
                 inputs: vec!["x".into()],
                 outputs: vec!["y".into()],
@@ -623,7 +605,7 @@ mod tests {
         attrs.insert("kernel_shape".into(), Attribute::Ints(vec![2, 2]));
         let n = Node {
             name: String::new(),
-            op_type: "Conv".into(),
+            op: Op::parse("Conv"),
             domain: String::new(),
             inputs: vec![],
             outputs: vec![],
@@ -635,7 +617,7 @@ mod tests {
         assert_eq!(y.shape(), &[1, 1, 2, 4]);
         assert_eq!(y.floats(), vec![12.0, 16.0, 20.0, 24.0, 32.0, 36.0, 40.0, 44.0]);
         let mut p = n.clone();
-        p.op_type = "MaxPool".into();
+        p.op = Op::parse("MaxPool");
         p.attributes.insert("pads".into(), Attribute::Ints(vec![1, 1, 1, 1]));
         p.attributes.insert("kernel_shape".into(), Attribute::Ints(vec![3, 3]));
         let y = pool(&p, &[Some(&xt)]).unwrap();
@@ -650,7 +632,7 @@ mod tests {
         assert_eq!(y.floats(), vec![0.0, 2.0, 4.0, 5.0, 7.0, 9.0, 10.0, 12.0, 14.0]);
         // Nearest x2 resize, asymmetric, floor.
         let mut r = n.clone();
-        r.op_type = "Resize".into();
+        r.op = Op::parse("Resize");
         r.attributes.insert("mode".into(), Attribute::String(b"nearest".to_vec()));
         r.attributes.insert("coordinate_transformation_mode".into(), Attribute::String(b"asymmetric".to_vec()));
         r.attributes.insert("nearest_mode".into(), Attribute::String(b"floor".to_vec()));

@@ -16,8 +16,10 @@ mod digest;
 mod features;
 mod geometry;
 mod image;
+pub mod rng;
 mod scalar;
 mod semantic;
+pub mod wire;
 
 use std::fmt;
 use std::sync::Arc;

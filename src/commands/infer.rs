@@ -63,7 +63,7 @@ pub fn infer(args: &InferArgs) -> u8 {
     let decoder = args.decoder.decoder();
     // Without an adapter (or for a model it cannot plan) `wgpu` warns and runs on the CPU.
     let ready = loaded.map_err(|e| e.to_string()).and_then(|(m, bytes)| {
-        let (runner, _) = Runner::new(&bytes, &m, args.backend, args.allow_software)?;
+        let (runner, _) = Runner::new(&bytes, &m, args.backend, args.allow_software).map_err(|e| e.to_string())?;
         let which =
             args.model.as_ref().map_or_else(|| "the embedded YOLOX-nano".to_owned(), |p| p.display().to_string());
         Ok((Detector::new(m, decoder).map_err(|e| format!("{which}: {e}"))?, runner))

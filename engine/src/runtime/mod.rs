@@ -114,11 +114,8 @@ pub fn node_seed(graph_seed: u64, node: &str) -> u64 {
     for b in (node.len() as u64).to_le_bytes().iter().chain(node.as_bytes()) {
         h = (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
     }
-    let mut z = graph_seed ^ h;
-    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
-    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-    z ^ (z >> 31)
+    // One SplitMix64 step from `graph_seed ^ h`.
+    crate::msg::rng::SplitMix64::new(graph_seed ^ h).next_u64()
 }
 
 /// A recorded message on its way to the sink thread.

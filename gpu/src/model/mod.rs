@@ -24,7 +24,7 @@ use std::sync::{Arc, Mutex};
 
 mod plan;
 
-use dynaflow_infer::onnx::Model;
+use dynaflow_infer::onnx::{Model, Op};
 use dynaflow_infer::reference::eval_node;
 use dynaflow_infer::tensor::Tensor;
 
@@ -110,8 +110,8 @@ impl GpuModel {
         model
             .nodes
             .iter()
-            .find(|n| !GPU_OPS.contains(&n.op_type.as_str()) && !HOST_OPS.contains(&n.op_type.as_str()))
-            .map(|n| format!("op `{}` at node {} has no GPU kernel yet", n.op_type, n.label()))
+            .find(|n| !GPU_OPS.contains(&n.op.name()) && !HOST_OPS.contains(&n.op.name()))
+            .map(|n| format!("op `{}` at node {} has no GPU kernel yet", n.op, n.label()))
     }
 
     /// Plan `model` for the input shapes its file declares (all fixed).
@@ -164,7 +164,7 @@ impl GpuModel {
                 return Err(err("an input is not computed before this node".into()));
             }
             let on_gpu = args.iter().flatten().any(|(_, v)| matches!(v, PVal::Gpu(_)));
-            if !on_gpu || n.op_type == "Shape" {
+            if !on_gpu || n.op == Op::Shape {
                 let host: Vec<Option<Tensor>> = args
                     .iter()
                     .map(|a| {

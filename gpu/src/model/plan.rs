@@ -6,7 +6,7 @@
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
-use dynaflow_infer::onnx::{Model, Node};
+use dynaflow_infer::onnx::{Model, Node, Op};
 use dynaflow_infer::reference::{pool_plan, slice_plan};
 use dynaflow_infer::tensor::{Tensor, norm_axis, reshape_shape, strides};
 
@@ -122,12 +122,12 @@ pub(super) fn fuse(model: &Model) -> (Vec<Node>, Vec<Activation>, usize) {
     let mut dropped = vec![false; nodes.len()];
     let mut fused = 0;
     for i in 0..nodes.len() {
-        if nodes[i].op_type != "Conv" || nodes[i].outputs.len() != 1 || !private(&nodes[i].outputs[0]) {
+        if nodes[i].op != Op::Conv || nodes[i].outputs.len() != 1 || !private(&nodes[i].outputs[0]) {
             continue;
         }
         let y = nodes[i].outputs[0].clone();
         let r = readers(&y);
-        let op = |j: usize| model.nodes[j].op_type.as_str();
+        let op = |j: usize| model.nodes[j].op.name();
         let single = |j: usize| model.nodes[j].outputs.len() == 1 && !dropped[j];
         let (act, gone): (Activation, Vec<usize>) = match r.as_slice() {
             [j] if single(*j) && op(*j) == "Relu" => (Activation::Relu, vec![*j]),
@@ -350,8 +350,8 @@ pub(super) fn lower(
         let words = u32s(&[d[0], d[1], d[2], d[3], s[0], s[1], s[2], s[3], base, len, 0, 0])?;
         Ok::<_, GpuError>((kernel(Kind::Gather, vec![x], words, len), out_shape))
     };
-    match n.op_type.as_str() {
-        "Conv" => {
+    match &n.op {
+        Op::Conv => {
             let (x, xs) = gpu_arg(0)?;
             let wname = n.inputs.get(1).cloned().unwrap_or_default();
             let ws = match host(1) {
@@ -424,26 +424,26 @@ pub(super) fn lower(
             };
             Ok((Lowered::Kernel { kind, inputs: vec![x], weights: vec![w, b], words, grid }, out))
         }
-        "Sigmoid" | "Relu" => {
+        Op::Sigmoid | Op::Relu => {
             let (x, xs) = gpu_arg(0)?;
             let len: usize = xs.iter().product();
-            let op = if n.op_type == "Sigmoid" { 2 } else { 3 };
+            let op = if n.op == Op::Sigmoid { 2 } else { 3 };
             Ok((kernel(Kind::Unary, vec![x], vec![u32s(&[len])?[0], op, 0, 0], len), xs))
         }
-        "Add" | "Mul" => {
+        Op::Add | Op::Mul => {
             let (a, sa) = gpu_arg(0)?;
             let (b, sb) = gpu_arg(1)?;
             if sa != sb {
                 return Err(GpuError::Shape(format!(
                     "{} of {sa:?} and {sb:?}: broadcasting is not on the GPU yet",
-                    n.op_type
+                    n.op
                 )));
             }
             let len: usize = sa.iter().product();
-            let op = u32::from(n.op_type == "Mul");
+            let op = u32::from(n.op == Op::Mul);
             Ok((kernel(Kind::Binary, vec![a, b], vec![u32s(&[len])?[0], op, 0, 0], len), sa))
         }
-        "Concat" => {
+        Op::Concat => {
             let parts: Vec<(String, Vec<usize>)> = (0..args.len()).map(gpu_arg).collect::<Result<_, _>>()?;
             let first = &parts.first().ok_or_else(|| GpuError::Shape("Concat of nothing".into()))?.1;
             let axis = norm_axis(n.int("axis", 0), first.len()).map_err(GpuError::Shape)?;
@@ -456,13 +456,13 @@ pub(super) fn lower(
             shape[axis] = parts.iter().map(|p| p.1[axis]).sum();
             Ok((Lowered::Concat { parts, axis }, shape))
         }
-        "Slice" | "Transpose" => {
+        Op::Slice | Op::Transpose => {
             let (x, xs) = gpu_arg(0)?;
             if xs.len() > 4 {
-                return Err(GpuError::Shape(format!("{} of rank {} (4 at most on the GPU)", n.op_type, xs.len())));
+                return Err(GpuError::Shape(format!("{} of rank {} (4 at most on the GPU)", n.op, xs.len())));
             }
             let si = strides(&xs);
-            if n.op_type == "Transpose" {
+            if n.op == Op::Transpose {
                 let perm: Vec<usize> = n
                     .ints("perm")
                     .map_or_else(|| (0..xs.len()).rev().collect(), |p| p.iter().map(|&v| v as usize).collect());
@@ -482,7 +482,7 @@ pub(super) fn lower(
             let st: Vec<usize> = si.iter().zip(&step).map(|(s, k)| s * k).collect();
             gather(x, shape, &st, base)
         }
-        "MaxPool" | "AveragePool" => {
+        Op::MaxPool | Op::AveragePool => {
             let (x, xs) = gpu_arg(0)?;
             if attr("pads", vec![]).iter().any(|&v| v < 0) {
                 return Err(GpuError::Shape("negative pooling attribute".into()));
@@ -491,15 +491,15 @@ pub(super) fn lower(
             let ([kh, kw], [sh, sw], [pt, pl, _, _], [oh, ow]) = (plan.kernel, plan.strides, plan.pads, plan.out);
             let (h, w) = (xs[2], xs[3]);
             let planes = xs[0] * xs[1];
-            let mode = match n.op_type.as_str() {
-                "MaxPool" => 0,
+            let mode = match &n.op {
+                Op::MaxPool => 0,
                 _ if n.int("count_include_pad", 0) != 0 => 2,
                 _ => 1,
             };
             let words = u32s(&[planes, h, w, oh, ow, kh, kw, sh, sw, pt, pl, mode])?;
             Ok((kernel(Kind::Pool, vec![x], words, planes * oh * ow), vec![xs[0], xs[1], oh, ow]))
         }
-        "Resize" => {
+        Op::Resize => {
             let (x, xs) = gpu_arg(0)?;
             let scales: Option<Vec<f32>> = host(2).map(Tensor::floats).filter(|v| v.len() == 4);
             let mode = (
@@ -520,13 +520,13 @@ pub(super) fn lower(
             words.extend([sc[2].to_bits(), sc[3].to_bits(), 0]);
             Ok((kernel(Kind::Resize, vec![x], words, planes * oh * ow), vec![xs[0], xs[1], oh, ow]))
         }
-        "Reshape" => {
+        Op::Reshape => {
             let (x, xs) = gpu_arg(0)?;
             let spec = ints(1).ok_or_else(|| GpuError::Shape("Reshape needs a constant shape".into()))?;
             let shape = reshape_shape(&xs, &spec).map_err(GpuError::Shape)?;
             Ok((Lowered::Alias { input: x }, shape))
         }
-        "Pad" => {
+        Op::Pad => {
             let (x, xs) = gpu_arg(0)?;
             let pads = n.ints("pads").map(<[i64]>::to_vec).or_else(|| ints(1)).unwrap_or_default();
             let value = match host(2) {
@@ -548,7 +548,7 @@ pub(super) fn lower(
             words.extend([value.to_bits(), 0, 0]);
             Ok((kernel(Kind::Pad, vec![x], words, len), out_shape))
         }
-        "Softmax" => {
+        Op::Softmax => {
             let (x, xs) = gpu_arg(0)?;
             let axis = norm_axis(n.int("axis", -1), xs.len()).map_err(GpuError::Shape)?;
             let step: usize = xs[axis + 1..].iter().product();
@@ -556,7 +556,7 @@ pub(super) fn lower(
             let rows = total / xs[axis].max(1);
             Ok((kernel(Kind::Softmax, vec![x], u32s(&[rows, xs[axis], step, 0])?, rows), xs))
         }
-        "Gather" => {
+        Op::Gather => {
             // A float tensor indexed by one constant index (ShuffleNet's channel split): a
             // strided gather that drops the axis.
             let (x, xs) = gpu_arg(0)?;

@@ -74,8 +74,8 @@ pub const DETECT: OpSpec = OpSpec {
         let which = if embedded { "the embedded YOLOX-nano".to_owned() } else { c.model.display().to_string() };
         let detector = Detector::new(model, decoder).map_err(|e| OpError::Input(format!("{which}: {e}")))?;
         let names: Vec<Arc<str>> = COCO_NAMES.lines().map(Arc::from).collect();
-        let (runner, backend) =
-            Runner::new(&bytes, detector.model(), c.backend, c.allow_software).map_err(OpError::Input)?;
+        let (runner, backend) = Runner::new(&bytes, detector.model(), c.backend, c.allow_software)
+            .map_err(|e| OpError::Input(e.to_string()))?;
         Ok(Instance::Transform(Box::new(Detect { config: c, detector, names, runner, backend })))
     },
 };
@@ -107,7 +107,7 @@ impl Operator for Detect {
         let found = self
             .detector
             .detect_with(rgb, w, h, classes, score, iou, |name, input| runner.run(name, input))
-            .map_err(OpError::Input)?;
+            .map_err(|e| OpError::Input(e.to_string()))?;
         let detections = found
             .into_iter()
             .map(|d| Detection {

@@ -6,7 +6,7 @@
 use dynaflow_gpu::{Gpu, GpuModel};
 use dynaflow_infer::Executor;
 use dynaflow_infer::onnx::Model;
-use dynaflow_infer::reference;
+use dynaflow_infer::reference::{self, RunError};
 use dynaflow_infer::rten_cpu::RtenModel;
 use dynaflow_infer::tensor::Tensor;
 
@@ -36,10 +36,15 @@ impl Runner {
     /// reports (which backend really runs, and why a fallback happened). A software adapter
     /// (a renderer on the CPU, 40x slower than rten on the same cores) counts as no GPU unless
     /// `allow_software` (the tests' lavapipe runs).
-    pub fn new(bytes: &[u8], model: &Model, backend: Backend, allow_software: bool) -> Result<(Self, String), String> {
+    pub fn new(
+        bytes: &[u8],
+        model: &Model,
+        backend: Backend,
+        allow_software: bool,
+    ) -> Result<(Self, String), RunError> {
         match backend {
             Backend::Reference => {
-                reference::check_ops(model).map_err(|e| e.to_string())?;
+                reference::check_ops(model)?;
                 Ok((Runner(Box::new(model.clone())), "reference".into()))
             }
             Backend::Wgpu => {
@@ -48,18 +53,16 @@ impl Runner {
                     Err(why) => why,
                 };
                 tracing::warn!("backend `wgpu` unavailable ({why}); running on the CPU");
-                let m = RtenModel::load(bytes.to_vec()).map_err(|e| e.to_string())?;
+                let m = RtenModel::load(bytes.to_vec())?;
                 Ok((Runner(Box::new(m)), format!("cpu (wgpu fallback: {why})")))
             }
-            Backend::Cpu => {
-                Ok((Runner(Box::new(RtenModel::load(bytes.to_vec()).map_err(|e| e.to_string())?)), "cpu".into()))
-            }
+            Backend::Cpu => Ok((Runner(Box::new(RtenModel::load(bytes.to_vec())?)), "cpu".into())),
         }
     }
 
     /// Run on one named input; the model's outputs.
-    pub fn run(&self, name: &str, input: Tensor) -> Result<Vec<Tensor>, String> {
-        self.0.run(&[(name, input)]).map_err(|e| e.to_string())
+    pub fn run(&self, name: &str, input: Tensor) -> Result<Vec<Tensor>, RunError> {
+        self.0.run(&[(name, input)])
     }
 }
 

@@ -1,13 +1,10 @@
 //! Per-frame utility operators.
 
-use std::time::{Duration, Instant};
-
-use dynaflow_engine::msg::{Body, Header, Scalars, SegmentationMask};
+use dynaflow_engine::msg::{Body, Scalars, SegmentationMask};
 use dynaflow_engine::op::{
     Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params, PortSpec,
 };
-use dynaflow_engine::{param_enum, params};
-use rand_core::Rng;
+use dynaflow_engine::params;
 use std::collections::BTreeSet;
 
 const INPUT: In<Body> = In::required("input", "any message");
@@ -43,100 +40,6 @@ impl Operator for Passthrough {
     }
 }
 
-// --- simulate_work ---------------------------------------------------------------------
-
-params! {
-    struct WorkConfig {
-        /// time spent per frame, microseconds
-        work_us: u64 [0, 60_000_000] = 1000,
-        /// busy-wait instead of sleeping
-        spin: bool = false,
-    }
-}
-
-pub(super) const SIMULATE_WORK: OpSpec = OpSpec {
-    name: "testing.simulate_work",
-    family: "testing",
-    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input after spending `work_us` on the blocking pool (sleeping, or spinning with `spin`). Models a slow consumer.",
-    kind: OpKind::Transform,
-    inputs: ANY_IN,
-    outputs: SAME_OUT,
-    params: WorkConfig::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(SimulateWork(WorkConfig::from_params(p)?)))),
-};
-
-struct SimulateWork(WorkConfig);
-
-impl Operator for SimulateWork {
-    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let d = Duration::from_micros(self.0.work_us);
-        if self.0.spin {
-            let t = Instant::now();
-            while t.elapsed() < d {
-                std::hint::spin_loop();
-            }
-        } else {
-            std::thread::sleep(d);
-        }
-        forward(inputs)
-    }
-}
-
-// --- random_scalar ---------------------------------------------------------------------
-
-param_enum! {
-    enum Distribution { Uniform = "uniform", Normal = "normal" }
-}
-
-params! {
-    struct RandomConfig {
-        /// uniform in [0, scale) or normal with σ = scale
-        distribution: Distribution = Distribution::Uniform,
-        /// range or standard deviation
-        scale: f64 [0.0, 1e12] = 1.0,
-    }
-}
-
-const TRIGGER: In<Body> = In::required("trigger", "any message; one value is drawn per frame");
-const VALUE: Out<Scalars> = Out::new("value", "`value`: the draw");
-
-pub(super) const RANDOM_SCALAR: OpSpec = OpSpec {
-    name: "testing.random_scalar",
-    family: "testing",
-    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Emits one random number per frame from the node's seeded RNG (`value`). Shows that runs with the same seed are identical.",
-    kind: OpKind::Transform,
-    inputs: &[TRIGGER.spec],
-    outputs: &[VALUE.spec],
-    params: RandomConfig::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(RandomScalar(RandomConfig::from_params(p)?)))),
-};
-
-struct RandomScalar(RandomConfig);
-
-fn unit(rng: &mut impl Rng) -> f64 {
-    // 53 random bits → [0, 1).
-    (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-}
-
-impl Operator for RandomScalar {
-    fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let header = TRIGGER.require(inputs)?.0.header.clone();
-        let v = match self.0.distribution {
-            Distribution::Normal => {
-                // Box–Muller; 1 - u keeps the log argument in (0, 1].
-                let (u1, u2) = (1.0 - unit(&mut ctx.rng), unit(&mut ctx.rng));
-                (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos() * self.0.scale
-            }
-            Distribution::Uniform => unit(&mut ctx.rng) * self.0.scale,
-        };
-        Ok(Outputs::new().send(&VALUE, header, Scalars::one("value", v)))
-    }
-}
-
 // --- gate ------------------------------------------------------------------------------
 
 params! {
@@ -166,92 +69,6 @@ struct Gate(GateConfig);
 impl Operator for Gate {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         if inputs.seq % self.0.every == self.0.offset % self.0.every { forward(inputs) } else { Ok(Outputs::new()) }
-    }
-}
-
-// --- scalar_sum ------------------------------------------------------------------------
-
-pub(super) const SCALAR_SUM: OpSpec = OpSpec {
-    name: "testing.scalar_sum",
-    family: "testing",
-    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Sums the first value of `a` and, when present, of `b` into `sum`; also reports whether `b` was present (`b_present`). Exercises joins and feedback.",
-    kind: OpKind::Transform,
-    inputs: &[A.spec, B.spec],
-    outputs: &[SUM.spec],
-    params: &[],
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    build: |_| Ok(Instance::Transform(Box::new(ScalarSum))),
-};
-
-const A: In<Scalars> = In::required("a", "first addend (required)");
-const B: In<Scalars> = In::optional("b", "second addend (optional)");
-const SUM: Out<Scalars> = Out::new("sum", "`sum`, `b_present`, `b_seq` (frame of `b`, -1 if absent)");
-
-struct ScalarSum;
-
-fn first(s: &Scalars) -> Result<f64, OpError> {
-    s.values.first().map(|(_, v)| *v).ok_or_else(|| OpError::Input("empty scalars".into()))
-}
-
-impl Operator for ScalarSum {
-    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        let (a_msg, a) = A.require(inputs)?;
-        let b_msg = B.message(inputs)?;
-        let b = B.get(inputs)?;
-        let sum = first(a)? + b.map(first).transpose()?.unwrap_or(0.0);
-        let values = vec![
-            ("sum".into(), sum),
-            ("b_present".into(), f64::from(u8::from(b.is_some()))),
-            ("b_seq".into(), b_msg.map_or(-1.0, |m| m.header.seq as f64)),
-        ];
-        let header = Header { ..a_msg.header.clone() };
-        Ok(Outputs::new().send(&SUM, header, Scalars { values }))
-    }
-}
-
-// --- fault -----------------------------------------------------------------------------
-
-param_enum! {
-    enum FaultMode { Error = "error", Panic = "panic" }
-}
-
-params! {
-    struct FaultConfig {
-        /// frame at which to fail
-        at_frame: u64 [0, i64::MAX],
-        /// return an error or panic
-        mode: FaultMode = FaultMode::Error,
-    }
-}
-
-pub(super) const FAULT: OpSpec = OpSpec {
-    name: "testing.fault",
-    family: "testing",
-    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input until frame `at_frame`, then fails with an error or a panic. Tests shutdown on operator failure.",
-    kind: OpKind::Transform,
-    inputs: ANY_IN,
-    outputs: SAME_OUT,
-    params: FaultConfig::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(Fault(FaultConfig::from_params(p)?)))),
-};
-
-struct Fault(FaultConfig);
-
-impl Operator for Fault {
-    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        if inputs.seq >= self.0.at_frame {
-            if self.0.mode == FaultMode::Panic {
-                #[allow(clippy::panic)]
-                {
-                    panic!("fault injected at frame {}", inputs.seq);
-                }
-            }
-            return Err(OpError::Failed(format!("fault injected at frame {}", inputs.seq)));
-        }
-        forward(inputs)
     }
 }
 

@@ -16,7 +16,6 @@
 pub const PAYLOAD_FIELD: u32 = 1000;
 
 const VARINT: u32 = 0;
-const FIXED64: u32 = 1;
 const LEN: u32 = 2;
 const FIXED32: u32 = 5;
 
@@ -112,45 +111,20 @@ pub enum Field<'a> {
     Bytes(u32, &'a [u8]),
 }
 
-/// The fields of an encoded message, in order; `Err` names the first malformed byte.
-pub fn fields(mut data: &[u8]) -> Result<Vec<Field<'_>>, String> {
-    fn varint(data: &mut &[u8]) -> Result<u64, String> {
-        let mut v = 0u64;
-        for shift in (0..64).step_by(7) {
-            let (&b, rest) = data.split_first().ok_or("truncated varint")?;
-            *data = rest;
-            v |= u64::from(b & 0x7f) << shift;
-            if b < 0x80 {
-                return Ok(v);
-            }
-        }
-        Err("varint longer than 10 bytes".into())
-    }
-    fn take<'a>(data: &mut &'a [u8], n: usize) -> Result<&'a [u8], String> {
-        if data.len() < n {
-            return Err(format!("field of {n} bytes, {} left", data.len()));
-        }
-        let (head, rest) = data.split_at(n);
-        *data = rest;
-        Ok(head)
-    }
-    let mut out = Vec::new();
-    while !data.is_empty() {
-        let key = varint(&mut data)?;
-        let field = u32::try_from(key >> 3).map_err(|_| "field number out of range".to_string())?;
-        let field = match (key & 7) as u32 {
-            VARINT => Field::Varint(field, varint(&mut data)?),
-            FIXED64 => Field::Fixed64(field, u64::from_le_bytes(take(&mut data, 8)?.try_into().unwrap_or_default())),
-            LEN => {
-                let n = usize::try_from(varint(&mut data)?).map_err(|_| "length out of range".to_string())?;
-                Field::Bytes(field, take(&mut data, n)?)
-            }
-            FIXED32 => Field::Fixed32(field, u32::from_le_bytes(take(&mut data, 4)?.try_into().unwrap_or_default())),
-            w => return Err(format!("unsupported wire type {w} (field {field})")),
-        };
-        out.push(field);
-    }
-    Ok(out)
+/// The fields of an encoded message, in order (the workspace's one wire reader,
+/// `dynaflow_engine::msg::wire`); `Err` names the first malformed byte.
+pub fn fields(data: &[u8]) -> Result<Vec<Field<'_>>, String> {
+    use dynaflow_engine::msg::wire::Value;
+    let read = dynaflow_engine::msg::wire::fields(data).map_err(|e| e.0)?;
+    Ok(read
+        .into_iter()
+        .map(|(n, v)| match v {
+            Value::Varint(x) => Field::Varint(n, x),
+            Value::Fixed64(x) => Field::Fixed64(n, x),
+            Value::Fixed32(x) => Field::Fixed32(n, x),
+            Value::Bytes(b) => Field::Bytes(n, b),
+        })
+        .collect())
 }
 
 /// A `google.protobuf.Timestamp` from seconds (negative or non-finite → 0).

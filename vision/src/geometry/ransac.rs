@@ -5,33 +5,7 @@
 use super::Mat3;
 use super::fundamental::{eight_point, epipolar_error, seven_point};
 
-/// A small, fast, seedable generator (SplitMix64): every RANSAC run is reproducible from
-/// its seed, which the operator draws from its node's RNG.
-#[derive(Clone, Debug)]
-pub struct SplitMix64(u64);
-
-impl SplitMix64 {
-    /// A generator from `seed`.
-    pub fn new(seed: u64) -> Self {
-        Self(seed)
-    }
-    /// The next 64 random bits.
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    /// Uniform in `[0, 1)`.
-    pub fn uniform(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    /// Uniform in `0..n` (`n > 0`).
-    pub fn below(&mut self, n: usize) -> usize {
-        ((u128::from(self.next_u64()) * n as u128) >> 64) as usize
-    }
-}
+pub use dynaflow_msg::rng::SplitMix64;
 
 /// RANSAC settings; the defaults are OpenCV's `findFundamentalMat(FM_RANSAC)` ones.
 #[derive(Clone, Debug, PartialEq)]

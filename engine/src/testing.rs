@@ -1,0 +1,291 @@
+//! Operators that exist to exercise the engine (its tests, benchmarks and smoke runs), named
+//! `testing.*`: a test-pattern source, a seeded random scalar, a sum that joins an optional
+//! input, simulated work and fault injection. They carry no vision algorithm; `register` adds
+//! them to a registry (dynaflow's own registry includes them).
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use rand_core::Rng;
+
+use crate::msg::{Body, Header, Image, PixelFormat, Scalars};
+use crate::op::{
+    Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params, PortSpec, Registry, Source,
+};
+use crate::{param_enum, params};
+
+/// Add the `testing.*` operators to `r`.
+pub fn register(r: &mut Registry) {
+    r.register(TEST_PATTERN);
+    r.register(SIMULATE_WORK);
+    r.register(RANDOM_SCALAR);
+    r.register(SCALAR_SUM);
+    r.register(FAULT);
+}
+
+/// A registry of the `testing.*` operators alone (engine tests without the operator crates).
+pub fn registry() -> Registry {
+    let mut r = Registry::new();
+    register(&mut r);
+    r
+}
+
+const INPUT: In<Body> = In::required("input", "any message");
+const OUTPUT: Out<Body> = Out::like("output", "input", "the input message, unchanged");
+const ANY_IN: &[PortSpec] = &[INPUT.spec];
+const SAME_OUT: &[PortSpec] = &[OUTPUT.spec];
+
+fn forward(inputs: &Inputs) -> Result<Outputs, OpError> {
+    let (msg, body) = INPUT.require(inputs)?;
+    Ok(Outputs::new().send(&OUTPUT, msg.header.clone(), body.clone()))
+}
+
+// --- test_pattern ----------------------------------------------------------------------
+
+params! {
+    /// `testing.test_pattern` configuration.
+    struct Config {
+        /// number of frames
+        frames: u64 [1, 100_000_000] = 300,
+        /// image width in pixels
+        width: u32 [1, 8192] = 64,
+        /// image height in pixels
+        height: u32 [1, 8192] = 48,
+        /// frame rate that sets the stamps (and pacing with --realtime)
+        rate_hz: f64 [0.001, 10_000.0] = 30.0,
+    }
+}
+
+const IMAGE: Out<Image> = Out::new("image", "RGB8 gradient shifted by one pixel per frame");
+const TICK: Out<Scalars> = Out::new("tick", "`frame` = sequence number, `time` = stamp in seconds");
+
+/// `testing.test_pattern`: a moving gradient and a frame counter.
+pub const TEST_PATTERN: OpSpec = OpSpec {
+    name: "testing.test_pattern",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): A moving RGB gradient and a frame counter at a fixed rate. For engine tests and smoke runs; it is not a camera model and feeds no SLAM result.",
+    kind: OpKind::Source,
+    inputs: &[],
+    outputs: &[IMAGE.spec, TICK.spec],
+    params: Config::PARAMS,
+    cpu_heavy: false,
+    ground_truth_outputs: None,
+    build: build_test_pattern,
+};
+
+fn build_test_pattern(params: &Params) -> Result<Instance, OpError> {
+    let config = Config::from_params(params)?;
+    Ok(Instance::Source(Box::new(TestPattern { config, frame_id: "camera".into() })))
+}
+
+struct TestPattern {
+    config: Config,
+    frame_id: Arc<str>,
+}
+
+impl Source for TestPattern {
+    fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
+        if seq >= self.config.frames {
+            return Ok(None);
+        }
+        let (w, h) = (self.config.width, self.config.height);
+        let mut img = Image::zeros(w, h, PixelFormat::Rgb8);
+        for (i, px) in img.data.chunks_exact_mut(3).enumerate() {
+            let x = (i as u64 % u64::from(w) + seq) as u8;
+            let y = (i as u64 / u64::from(w)) as u8;
+            px.copy_from_slice(&[x, y, x ^ y]);
+        }
+        let stamp = seq as f64 / self.config.rate_hz;
+        let header = Header { seq, stamp, frame_id: self.frame_id.clone() };
+        let tick = Scalars { values: vec![("frame".into(), seq as f64), ("time".into(), stamp)] };
+        Ok(Some(Outputs::new().send(&IMAGE, header.clone(), img).send(&TICK, header, tick)))
+    }
+
+    fn len_hint(&self) -> Option<u64> {
+        Some(self.config.frames)
+    }
+}
+
+// --- simulate_work ---------------------------------------------------------------------
+
+params! {
+    struct WorkConfig {
+        /// time spent per frame, microseconds
+        work_us: u64 [0, 60_000_000] = 1000,
+        /// busy-wait instead of sleeping
+        spin: bool = false,
+    }
+}
+
+/// `testing.simulate_work`: a slow consumer.
+pub const SIMULATE_WORK: OpSpec = OpSpec {
+    name: "testing.simulate_work",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input after spending `work_us` on the blocking pool (sleeping, or spinning with `spin`). Models a slow consumer.",
+    kind: OpKind::Transform,
+    inputs: ANY_IN,
+    outputs: SAME_OUT,
+    params: WorkConfig::PARAMS,
+    cpu_heavy: true,
+    ground_truth_outputs: None,
+    build: |p: &Params| Ok(Instance::Transform(Box::new(SimulateWork(WorkConfig::from_params(p)?)))),
+};
+
+struct SimulateWork(WorkConfig);
+
+impl Operator for SimulateWork {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let d = Duration::from_micros(self.0.work_us);
+        if self.0.spin {
+            let t = Instant::now();
+            while t.elapsed() < d {
+                std::hint::spin_loop();
+            }
+        } else {
+            std::thread::sleep(d);
+        }
+        forward(inputs)
+    }
+}
+
+// --- random_scalar ---------------------------------------------------------------------
+
+param_enum! {
+    enum Distribution { Uniform = "uniform", Normal = "normal" }
+}
+
+params! {
+    struct RandomConfig {
+        /// uniform in [0, scale) or normal with σ = scale
+        distribution: Distribution = Distribution::Uniform,
+        /// range or standard deviation
+        scale: f64 [0.0, 1e12] = 1.0,
+    }
+}
+
+const TRIGGER: In<Body> = In::required("trigger", "any message; one value is drawn per frame");
+const VALUE: Out<Scalars> = Out::new("value", "`value`: the draw");
+
+/// `testing.random_scalar`: one seeded draw per frame.
+pub const RANDOM_SCALAR: OpSpec = OpSpec {
+    name: "testing.random_scalar",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Emits one random number per frame from the node's seeded RNG (`value`). Shows that runs with the same seed are identical.",
+    kind: OpKind::Transform,
+    inputs: &[TRIGGER.spec],
+    outputs: &[VALUE.spec],
+    params: RandomConfig::PARAMS,
+    cpu_heavy: false,
+    ground_truth_outputs: None,
+    build: |p: &Params| Ok(Instance::Transform(Box::new(RandomScalar(RandomConfig::from_params(p)?)))),
+};
+
+struct RandomScalar(RandomConfig);
+
+fn unit(rng: &mut impl Rng) -> f64 {
+    // 53 random bits → [0, 1).
+    (rng.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+}
+
+impl Operator for RandomScalar {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let header = TRIGGER.require(inputs)?.0.header.clone();
+        let v = match self.0.distribution {
+            Distribution::Normal => {
+                // Box–Muller; 1 - u keeps the log argument in (0, 1].
+                let (u1, u2) = (1.0 - unit(&mut ctx.rng), unit(&mut ctx.rng));
+                (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos() * self.0.scale
+            }
+            Distribution::Uniform => unit(&mut ctx.rng) * self.0.scale,
+        };
+        Ok(Outputs::new().send(&VALUE, header, Scalars::one("value", v)))
+    }
+}
+
+// --- scalar_sum ------------------------------------------------------------------------
+
+/// `testing.scalar_sum`: a join with an optional input.
+pub const SCALAR_SUM: OpSpec = OpSpec {
+    name: "testing.scalar_sum",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Sums the first value of `a` and, when present, of `b` into `sum`; also reports whether `b` was present (`b_present`). Exercises joins and feedback.",
+    kind: OpKind::Transform,
+    inputs: &[A.spec, B.spec],
+    outputs: &[SUM.spec],
+    params: &[],
+    cpu_heavy: false,
+    ground_truth_outputs: None,
+    build: |_| Ok(Instance::Transform(Box::new(ScalarSum))),
+};
+
+const A: In<Scalars> = In::required("a", "first addend (required)");
+const B: In<Scalars> = In::optional("b", "second addend (optional)");
+const SUM: Out<Scalars> = Out::new("sum", "`sum`, `b_present`, `b_seq` (frame of `b`, -1 if absent)");
+
+struct ScalarSum;
+
+fn first(s: &Scalars) -> Result<f64, OpError> {
+    s.values.first().map(|(_, v)| *v).ok_or_else(|| OpError::Input("empty scalars".into()))
+}
+
+impl Operator for ScalarSum {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (a_msg, a) = A.require(inputs)?;
+        let b_msg = B.message(inputs)?;
+        let b = B.get(inputs)?;
+        let sum = first(a)? + b.map(first).transpose()?.unwrap_or(0.0);
+        let values = vec![
+            ("sum".into(), sum),
+            ("b_present".into(), f64::from(u8::from(b.is_some()))),
+            ("b_seq".into(), b_msg.map_or(-1.0, |m| m.header.seq as f64)),
+        ];
+        let header = Header { ..a_msg.header.clone() };
+        Ok(Outputs::new().send(&SUM, header, Scalars { values }))
+    }
+}
+
+// --- fault -----------------------------------------------------------------------------
+
+param_enum! {
+    enum FaultMode { Error = "error", Panic = "panic" }
+}
+
+params! {
+    struct FaultConfig {
+        /// frame at which to fail
+        at_frame: u64 [0, i64::MAX],
+        /// return an error or panic
+        mode: FaultMode = FaultMode::Error,
+    }
+}
+
+/// `testing.fault`: an error or a panic at a given frame.
+pub const FAULT: OpSpec = OpSpec {
+    name: "testing.fault",
+    family: "testing",
+    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input until frame `at_frame`, then fails with an error or a panic. Tests shutdown on operator failure.",
+    kind: OpKind::Transform,
+    inputs: ANY_IN,
+    outputs: SAME_OUT,
+    params: FaultConfig::PARAMS,
+    cpu_heavy: false,
+    ground_truth_outputs: None,
+    build: |p: &Params| Ok(Instance::Transform(Box::new(Fault(FaultConfig::from_params(p)?)))),
+};
+
+struct Fault(FaultConfig);
+
+impl Operator for Fault {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        if inputs.seq >= self.0.at_frame {
+            if self.0.mode == FaultMode::Panic {
+                #[allow(clippy::panic)]
+                {
+                    panic!("fault injected at frame {}", inputs.seq);
+                }
+            }
+            return Err(OpError::Failed(format!("fault injected at frame {}", inputs.seq)));
+        }
+        forward(inputs)
+    }
+}
