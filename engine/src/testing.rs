@@ -32,10 +32,13 @@ pub fn registry() -> Registry {
 
 const INPUT: In<Body> = In::required("input", "any message");
 const OUTPUT: Out<Body> = Out::like("output", "input", "the input message, unchanged");
-const ANY_IN: &[PortSpec] = &[INPUT.spec];
-const SAME_OUT: &[PortSpec] = &[OUTPUT.spec];
+/// The one input of a forwarding operator: `input`, any message.
+pub const ANY_IN: &[PortSpec] = &[INPUT.spec];
+/// The one output of a forwarding operator: `output`, the input's type.
+pub const SAME_OUT: &[PortSpec] = &[OUTPUT.spec];
 
-fn forward(inputs: &Inputs) -> Result<Outputs, OpError> {
+/// Forward `input` to `output` unchanged (the forwarding operators' frame).
+pub fn forward(inputs: &Inputs) -> Result<Outputs, OpError> {
     let (msg, body) = INPUT.require(inputs)?;
     Ok(Outputs::new().send(&OUTPUT, msg.header.clone(), body.clone()))
 }

@@ -89,28 +89,26 @@ fn check_typed(
         );
         None
     };
+    let out_of_range = |diags: &mut Vec<Diagnostic>,
+                        v: &dyn std::fmt::Display,
+                        min: &dyn std::fmt::Display,
+                        max: &dyn std::fmt::Display| {
+        diags.push(
+            Diagnostic::error("param-range", value.span, format!("{what} = {v} is out of range {min}..={max}"))
+                .with_hint(doc.to_owned()),
+        );
+        None
+    };
     match *ty {
         ParamType::Bool => json.is_boolean().then_some(json).or_else(|| bad_type(diags)),
         ParamType::Int { min, max } => match json.as_i64() {
             Some(v) if (min..=max).contains(&v) => Some(json),
-            Some(v) => {
-                diags.push(
-                    Diagnostic::error("param-range", value.span, format!("{what} = {v} is out of range {min}..={max}"))
-                        .with_hint(doc.to_owned()),
-                );
-                None
-            }
+            Some(v) => out_of_range(diags, &v, &min, &max),
             None => bad_type(diags),
         },
         ParamType::Float { min, max } => match json.as_f64() {
             Some(v) if (min..=max).contains(&v) => Some(json),
-            Some(v) => {
-                diags.push(
-                    Diagnostic::error("param-range", value.span, format!("{what} = {v} is out of range {min}..={max}"))
-                        .with_hint(doc.to_owned()),
-                );
-                None
-            }
+            Some(v) => out_of_range(diags, &v, &min, &max),
             None => match value.as_str() {
                 // `.nan`/`.inf` and friends: numbers, but never in range.
                 Some(s)

@@ -1,21 +1,13 @@
 //! Per-frame utility operators.
 
-use dynaflow_engine::msg::{Body, Scalars, SegmentationMask};
+use dynaflow_engine::msg::{Scalars, SegmentationMask};
 use dynaflow_engine::op::{
-    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params, PortSpec,
+    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
 };
 use dynaflow_engine::params;
 use std::collections::BTreeSet;
 
-const INPUT: In<Body> = In::required("input", "any message");
-const OUTPUT: Out<Body> = Out::like("output", "input", "the input message, unchanged");
-const ANY_IN: &[PortSpec] = &[INPUT.spec];
-const SAME_OUT: &[PortSpec] = &[OUTPUT.spec];
-
-fn forward(inputs: &Inputs) -> Result<Outputs, OpError> {
-    let (msg, body) = INPUT.require(inputs)?;
-    Ok(Outputs::new().send(&OUTPUT, msg.header.clone(), body.clone()))
-}
+use dynaflow_engine::testing::{ANY_IN, SAME_OUT, forward};
 
 // --- passthrough -----------------------------------------------------------------------
 
