@@ -165,8 +165,9 @@ impl<T: Param> Param for Vec<T> {
     }
 }
 
-/// A map in the order written: a YAML mapping, or (the older form) one string of
-/// comma-separated `key=value` pairs. A key given twice keeps its last value.
+/// A map: a YAML mapping, or (the older form) one string of comma-separated `key=value`
+/// pairs. Validated values reach the operator with their keys in name order (no operator may
+/// depend on the order written); a key given twice keeps its last value.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ParamMap<K, V>(pub Vec<(K, V)>);
 
