@@ -9,16 +9,12 @@ use std::sync::Arc;
 
 use dynaflow_engine::LoadRequest;
 use dynaflow_engine::msg::{Body, Message};
-use dynaflow_engine::runtime::{self, RunOptions, RunReport, RunStatus};
-use dynaflow_engine::sink::{MemorySink, Sink};
+use dynaflow_engine::runtime::{RunOptions, RunReport, RunStatus};
+use dynaflow_engine::sink::MemorySink;
 use dynaflow_engine::spec::ResolvedGraph;
 
 fn run_with(graph: &ResolvedGraph, options: RunOptions) -> (RunReport, MemorySink) {
-    let sink = MemorySink::default();
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
-    let sinks: Vec<Box<dyn Sink>> = vec![Box::new(sink.clone())];
-    let report = rt.block_on(runtime::run(graph, options, sinks)).unwrap();
-    (report, sink)
+    dynaflow_engine::testing::run_to_memory(graph, options).unwrap()
 }
 
 fn run(graph: &ResolvedGraph) -> (RunReport, MemorySink) {

@@ -42,6 +42,13 @@ pub enum Error {
     /// Files that do not fit together (sizes, stamps); the message names them.
     #[error("{0}")]
     Data(String),
+    /// A folder's camera cannot be told (no known name, no `calibration.txt`): the caller has
+    /// to give the intrinsics.
+    #[error("{}: cannot tell the camera: the folder is not named `rgbd_dataset_freiburgN_*` and has no calibration.txt; set `intrinsics: fr1|fr2|fr3|fx,fy,cx,cy` (or `--intrinsics`)", dir.display())]
+    UnknownCamera {
+        /// The folder.
+        dir: PathBuf,
+    },
 }
 
 impl Error {

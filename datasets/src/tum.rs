@@ -270,10 +270,7 @@ pub fn folder_intrinsics(dir: &Path) -> Result<Intrinsics, Error> {
     if let Some(calibrated) = read_calibration(dir) {
         return calibrated;
     }
-    Err(Error::file(
-        dir,
-        "cannot tell the camera: the folder is not named `rgbd_dataset_freiburgN_*` and has no calibration.txt; set `intrinsics: fr1|fr2|fr3|fx,fy,cx,cy` (or `--intrinsics`)",
-    ))
+    Err(Error::UnknownCamera { dir: dir.to_path_buf() })
 }
 
 impl TumSequence {

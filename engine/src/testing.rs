@@ -30,6 +30,20 @@ pub fn registry() -> Registry {
     r
 }
 
+/// Run `graph` to completion on a two-worker runtime, every recorded message kept in memory
+/// (engine and operator tests). Panics if the machine cannot start a tokio runtime.
+pub fn run_to_memory(
+    graph: &crate::spec::ResolvedGraph,
+    options: crate::runtime::RunOptions,
+) -> Result<(crate::runtime::RunReport, crate::sink::MemorySink), crate::runtime::RunError> {
+    let sink = crate::sink::MemorySink::default();
+    let rt =
+        tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("a tokio runtime");
+    let sinks: Vec<Box<dyn crate::sink::Sink>> = vec![Box::new(sink.clone())];
+    let report = rt.block_on(crate::runtime::run(graph, options, sinks))?;
+    Ok((report, sink))
+}
+
 const INPUT: In<Body> = In::required("input", "any message");
 const OUTPUT: Out<Body> = Out::like("output", "input", "the input message, unchanged");
 /// The one input of a forwarding operator: `input`, any message.
@@ -234,13 +248,12 @@ fn first(s: &Scalars) -> Result<f64, OpError> {
 impl Operator for ScalarSum {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (a_msg, a) = A.require(inputs)?;
-        let b_msg = B.message(inputs)?;
-        let b = B.get(inputs)?;
-        let sum = first(a)? + b.map(first).transpose()?.unwrap_or(0.0);
+        let b = B.find(inputs)?;
+        let sum = first(a)? + b.map(|(_, s)| first(s)).transpose()?.unwrap_or(0.0);
         let values = vec![
             ("sum".into(), sum),
             ("b_present".into(), f64::from(u8::from(b.is_some()))),
-            ("b_seq".into(), b_msg.map_or(-1.0, |m| m.header.seq as f64)),
+            ("b_seq".into(), b.map_or(-1.0, |(m, _)| m.header.seq as f64)),
         ];
         let header = Header { ..a_msg.header.clone() };
         Ok(Outputs::new().send(&SUM, header, Scalars { values }))

@@ -176,28 +176,6 @@ impl fmt::Display for PortType {
     }
 }
 
-impl Body {
-    /// The port type this payload travels on.
-    pub fn port_type(&self) -> PortType {
-        match self {
-            Body::Image(_) => PortType::Image,
-            Body::Depth(_) => PortType::Depth,
-            Body::CameraInfo(_) => PortType::CameraInfo,
-            Body::Keypoints(_) => PortType::Keypoints,
-            Body::Tracks(_) => PortType::Tracks,
-            Body::Detections(_) => PortType::Detections,
-            Body::Mask(_) => PortType::Mask,
-            Body::PointLabels(_) => PortType::PointLabels,
-            Body::Pose(_) => PortType::Pose,
-            Body::Trajectory(_) => PortType::Trajectory,
-            Body::PointCloud(_) => PortType::PointCloud,
-            Body::OctreeUpdate(_) => PortType::OctreeUpdate,
-            Body::Map(_) => PortType::Map,
-            Body::Scalars(_) => PortType::Scalars,
-        }
-    }
-}
-
 /// A payload type: what a typed port handle (the engine's `op::In`, `op::Out`) carries.
 pub trait Payload: Sized {
     /// The port type it travels on.
@@ -208,8 +186,16 @@ pub trait Payload: Sized {
     fn into_body(self) -> Body;
 }
 
+/// One line per body variant: its payload type, and (the same name) its port type.
 macro_rules! payload {
-    ($($variant:ident($ty:ty)),* $(,)?) => {$(
+    ($($variant:ident($ty:ty)),* $(,)?) => {
+        impl Body {
+            /// The port type this payload travels on.
+            pub fn port_type(&self) -> PortType {
+                match self { $( Body::$variant(_) => PortType::$variant, )* }
+            }
+        }
+        $(
         impl Payload for $ty {
             const PORT: PortType = PortType::$variant;
             fn of(body: &Body) -> Option<&Self> {
@@ -222,7 +208,8 @@ macro_rules! payload {
                 Body::$variant(self)
             }
         }
-    )*};
+    )*
+    };
 }
 
 payload!(

@@ -199,7 +199,19 @@ impl<K: Param + PartialEq, V: Param> Param for ParamMap<K, V> {
 /// The items of a comma-separated list (trimmed, empty items dropped: an empty string is an
 /// empty list).
 pub(crate) fn split_list(s: &str) -> impl Iterator<Item = &str> {
-    s.split(',').map(str::trim).filter(|s| !s.is_empty())
+    comma_items(s).map(|(_, item)| item)
+}
+
+/// The trimmed, non-empty items of a comma-separated string, each with its byte offset in
+/// `s` (validation turns the offsets into file positions).
+pub(crate) fn comma_items(s: &str) -> impl Iterator<Item = (usize, &str)> {
+    s.split(',')
+        .scan(0, |pos, part| {
+            let at = *pos + part.len() - part.trim_start().len();
+            *pos += part.len() + 1;
+            Some((at, part.trim()))
+        })
+        .filter(|(_, item)| !item.is_empty())
 }
 
 /// `key=value` pairs of a comma-separated string.
@@ -381,16 +393,21 @@ impl<T: Payload> In<T> {
     pub fn message<'a>(&self, inputs: &'a Inputs) -> Result<Option<&'a Arc<Message>>, OpError> {
         inputs.declared(self.spec.name)
     }
+    /// The message and its payload on this port this frame, if any; a message of another
+    /// type is an error.
+    pub fn find<'a>(&self, inputs: &'a Inputs) -> Result<Option<(&'a Arc<Message>, &'a T)>, OpError> {
+        self.message(inputs)?.map(|m| Ok((m, self.payload(m)?))).transpose()
+    }
     /// The payload on this port this frame, if any; a message of another type is an error.
     pub fn get<'a>(&self, inputs: &'a Inputs) -> Result<Option<&'a T>, OpError> {
-        self.message(inputs)?.map(|m| self.payload(m)).transpose()
+        Ok(self.find(inputs)?.map(|(_, t)| t))
     }
     /// The message and payload on this port; absent is an error naming the port.
     pub fn require<'a>(&self, inputs: &'a Inputs) -> Result<(&'a Message, &'a T), OpError> {
-        let msg = self
-            .message(inputs)?
+        let (msg, t) = self
+            .find(inputs)?
             .ok_or_else(|| OpError::Input(format!("input `{}` is absent at frame {}", self.spec.name, inputs.seq)))?;
-        Ok((msg, self.payload(msg)?))
+        Ok((msg, t))
     }
     fn payload<'a>(&self, msg: &'a Message) -> Result<&'a T, OpError> {
         T::of(&msg.body).ok_or_else(|| {

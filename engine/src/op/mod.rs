@@ -14,6 +14,7 @@ use std::sync::Arc;
 
 use rand_chacha::ChaCha8Rng;
 
+pub(crate) use declare::comma_items;
 pub use declare::{In, Out, Param, ParamMap, Seeded, doc_line, ranged};
 pub use params::Params;
 pub use registry::Registry;

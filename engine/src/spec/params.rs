@@ -229,16 +229,7 @@ fn comma_items(text: &str, quoted: bool, span: Span) -> Vec<(String, Span)> {
         Some(d) if d >= 2 && !text.contains(['\\', '\'']) => Some(span.offset + 1),
         _ => None,
     };
-    let mut pos = 0;
-    let mut out = Vec::new();
-    for part in text.split(',') {
-        let lead = part.len() - part.trim_start().len();
-        let item = part.trim();
-        if !item.is_empty() {
-            let s = start.map_or(span, |o| Span::new(o + pos + lead, item.len()));
-            out.push((item.to_owned(), s));
-        }
-        pos += part.len() + 1;
-    }
-    out
+    crate::op::comma_items(text)
+        .map(|(at, item)| (item.to_owned(), start.map_or(span, |o| Span::new(o + at, item.len()))))
+        .collect()
 }

@@ -67,7 +67,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
     let sequence = TumSequence::open(&c.path, given, c.max_difference, c.depth_factor, c.frames as usize).map_err(
         |e| match e {
             // The camera could not be told: the parameter to set.
-            dynaflow_datasets::Error::File { ref message, .. } if message.contains("cannot tell the camera") => {
+            dynaflow_datasets::Error::UnknownCamera { .. } => {
                 OpError::Config { key: "intrinsics".into(), message: e.to_string() }
             }
             e => super::input(e),

@@ -68,9 +68,7 @@ impl Operator for MatchOp {
         let mut ids: Vec<Option<u64>> = vec![None; cur.points.len()];
         let mut tracks = Vec::new();
         let mut prev_seq = cur_msg.header.seq;
-        if let Some(prev_msg) = PREVIOUS.message(inputs)?
-            && let Some(prev) = PREVIOUS.get(inputs)?
-        {
+        if let Some((prev_msg, prev)) = PREVIOUS.find(inputs)? {
             prev_seq = prev_msg.header.seq;
             let prev_desc = descriptors(prev);
             // Ids of the previous keypoints, if this node saw that frame.

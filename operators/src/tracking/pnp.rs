@@ -200,12 +200,10 @@ impl Operator for PnpTrack {
             self.tracker = Some(Tracker::new(tc, cam, k.width as usize, k.height as usize, ctx.rng.next_u64()));
         }
         let Some(tracker) = self.tracker.as_mut() else { return Ok(Outputs::new()) };
-        if let Some(m) = MAP.message(inputs)?
+        if let Some((m, update)) = MAP.find(inputs)?
             && self.last_map.as_ref().is_none_or(|last| !Arc::ptr_eq(last, m))
         {
-            if let Some(update) = MAP.get(inputs)? {
-                tracker.apply_map_update(&convert::from_msg(update));
-            }
+            tracker.apply_map_update(&convert::from_msg(update));
             self.last_map = Some(m.clone());
         }
         let uv: Vec<[f32; 2]> = kp.points.iter().map(|p| [p.x, p.y]).collect();
