@@ -9,7 +9,7 @@
 
 #[path = "../tests/common/mod.rs"]
 mod common;
-#[path = "../tests/common/frontend.rs"]
+#[path = "../vision/tests/common/frontend.rs"]
 mod frontend;
 
 use std::time::Instant;

@@ -5,6 +5,8 @@ mod common;
 
 use std::time::{Duration, Instant};
 
+use dynaflow_engine::runtime::RunStatus;
+
 fn read_json(path: &std::path::Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()))).unwrap()
 }
@@ -21,15 +23,18 @@ fn default_graph_runs_and_writes_summary_and_log() {
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("detector") && stdout.contains("p95 ms"), "{stdout}");
-    let summary = read_json(&dir.path().join("engine_smoke.summary.json"));
-    assert_eq!(summary["status"], "completed");
-    assert_eq!(summary["frames"], 300);
-    let nodes = summary["nodes"].as_array().unwrap();
-    assert_eq!(nodes.len(), 5);
+    let path = dir.path().join("engine_smoke.summary.json");
+    let summary = common::summary(&path);
+    assert_eq!(summary.run.status, RunStatus::Completed);
+    assert_eq!(summary.run.frames, 300);
+    assert_eq!(summary.run.nodes.len(), 5);
+    // The file's format as users read it (the key names docs/recordings.md lists).
+    let raw = read_json(&path);
     for key in ["frames", "skipped", "latency", "busy_s", "max_queue", "dropped"] {
-        assert!(nodes[0].get(key).is_some(), "summary lacks {key}");
+        assert!(raw["nodes"][0].get(key).is_some(), "summary lacks {key}");
     }
-    assert_eq!(summary["digests"]["detector/value"]["count"], 60);
+    let digests = summary.digests.clone().unwrap();
+    assert_eq!(digests["detector/value"]["count"], 60);
     let log = std::fs::read_to_string(dir.path().join("engine_smoke.messages.jsonl")).unwrap();
     let lines: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(lines.first().unwrap()["kind"], "run");
@@ -45,7 +50,7 @@ fn default_graph_runs_and_writes_summary_and_log() {
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(0));
-    assert_eq!(read_json(&dir2.path().join("engine_smoke.summary.json"))["digests"], summary["digests"]);
+    assert_eq!(common::summary(&dir2.path().join("engine_smoke.summary.json")).digests, Some(digests));
 }
 
 #[test]
@@ -61,8 +66,8 @@ fn failing_operator_exits_1_and_names_the_node() {
         .unwrap();
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("node `bad` failed"));
-    let summary = read_json(&dir.path().join("fail.summary.json"));
-    assert_eq!(summary["status"], "failed");
+    let summary = common::summary(&dir.path().join("fail.summary.json"));
+    assert_eq!(summary.run.status, RunStatus::Failed);
     let log = std::fs::read_to_string(dir.path().join("fail.messages.jsonl")).unwrap();
     assert!(log.lines().last().unwrap().contains("\"kind\":\"end\""), "log not closed after a panic");
     let mcap = dynaflow_recordings::diff::read_mcap(&dir.path().join("fail.mcap")).unwrap();
@@ -117,9 +122,9 @@ fn sigint_finishes_in_flight_frames_and_closes_sinks() {
     assert!(status.success());
     let out = child.wait_with_output().unwrap();
     assert_eq!(out.status.code(), Some(130), "{}", String::from_utf8_lossy(&out.stderr));
-    let summary = read_json(&dir.path().join("long.summary.json"));
-    assert_eq!(summary["status"], "interrupted");
-    let frames = summary["frames"].as_u64().unwrap();
+    let summary = common::summary(&dir.path().join("long.summary.json"));
+    assert_eq!(summary.run.status, RunStatus::Interrupted);
+    let frames = summary.run.frames;
     assert!(frames > 0 && frames < 1_000_000);
     let text = std::fs::read_to_string(&log).unwrap();
     let lines: Vec<serde_json::Value> = text.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
@@ -212,7 +217,7 @@ fn seed_flag_changes_the_default_scene_and_the_same_seed_repeats_it() {
             ["run", "--no-progress", "--record", "none", "--digest", "--frames", "2", "--seed", seed, "--out", out_s];
         let (code, _, err) = dynaflow(&[&args[..], &[graph.to_str().unwrap()]].concat(), &[]);
         assert_eq!(code, Some(0), "{err}");
-        read_json(&out.join("default.summary.json"))["digests"].clone()
+        common::summary(&out.join("default.summary.json")).digests.unwrap()
     };
     let (a, b, c) = (digests("3", "a"), digests("3", "b"), digests("7", "c"));
     assert_eq!(a, b, "same --seed, different scene");

@@ -5,6 +5,7 @@
 
 mod common;
 
+/// Run a variant with `--digest`; its per-port digests.
 fn run(variant: &str, out: &std::path::Path, record: &str) -> serde_json::Value {
     let o = common::bin()
         .args(["run", "--no-progress", "--digest", "--frames", "6", "--variant", variant, "--record", record, "--out"])
@@ -13,8 +14,7 @@ fn run(variant: &str, out: &std::path::Path, record: &str) -> serde_json::Value 
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(0), "{variant}: {}", String::from_utf8_lossy(&o.stderr));
-    let path = out.join(format!("culling-{variant}.summary.json"));
-    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+    common::summary(&out.join(format!("culling-{variant}.summary.json"))).digests.unwrap()
 }
 
 /// The variants of graphs/culling.yaml, as the graph file lists them.
@@ -46,11 +46,11 @@ fn every_variant_runs_reproducibly_and_does_what_it_is_for() {
     for variant in &all {
         let a = run(variant, &dir.path().join("a"), "mcap");
         let b = run(variant, &dir.path().join("b"), "none");
-        let labels = &a["digests"]["cull/labels"];
+        let labels = &a["cull/labels"];
         assert_eq!(labels["count"], 6, "{variant}: one label set per frame: {labels}");
-        assert_eq!(labels, &b["digests"]["cull/labels"], "{variant}: labels differ between two runs");
-        assert_eq!(a["digests"]["fundamental/model"], b["digests"]["fundamental/model"]);
-        assert_eq!(a["digests"]["homography/model"], b["digests"]["homography/model"]);
+        assert_eq!(labels, &b["cull/labels"], "{variant}: labels differ between two runs");
+        assert_eq!(a["fundamental/model"], b["fundamental/model"]);
+        assert_eq!(a["homography/model"], b["homography/model"]);
         let rec = dynaflow_recordings::diff::read_mcap(&dir.path().join(format!("a/culling-{variant}.mcap"))).unwrap();
         let cull = flags(&rec, "/cull/labels");
         assert_eq!(cull.len(), 6, "{variant}");
@@ -63,7 +63,7 @@ fn every_variant_runs_reproducibly_and_does_what_it_is_for() {
         match variant.as_str() {
             "pspnet" => {
                 // The screening sees only what the flow rule kept.
-                assert_eq!(a["digests"]["screen/counts"], b["digests"]["screen/counts"]);
+                assert_eq!(a["screen/counts"], b["screen/counts"]);
                 let kept = count(&rec, "/cull/counts", "static");
                 let screened = count(&rec, "/screen/counts", "total");
                 assert_eq!(screened, kept, "{variant}: the screening got other tracks than the flow rule kept");
@@ -71,7 +71,7 @@ fn every_variant_runs_reproducibly_and_does_what_it_is_for() {
             }
             "mask" => mask_labels = Some(cull.clone()),
             "mask_or_epipolar" => {
-                assert_eq!(a["digests"]["combined/labels"], b["digests"]["combined/labels"]);
+                assert_eq!(a["combined/labels"], b["combined/labels"]);
                 let (geometric, combined) = (flags(&rec, "/geometric/labels"), flags(&rec, "/combined/labels"));
                 assert_eq!(combined.len(), 6);
                 let mut added = 0;

@@ -4,7 +4,7 @@
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 mod common;
-#[path = "common/frontend.rs"]
+#[path = "../vision/tests/common/frontend.rs"]
 mod frontend;
 
 use std::path::{Path, PathBuf};
@@ -247,9 +247,8 @@ fn the_ate_a_run_prints_on_a_tum_folder_is_evos() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("orb_baseline.summary.json")).unwrap()).unwrap();
-    let printed = summary["ate"]["rmse"].as_f64().unwrap();
+    let ate = common::summary(&out.join("orb_baseline.summary.json")).ate.unwrap();
+    let printed = ate.rmse;
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains(&format!("rmse {printed:.4} m")), "{stdout}");
     let job = serde_json::json!([{
@@ -264,7 +263,7 @@ fn the_ate_a_run_prints_on_a_tum_folder_is_evos() {
     let evo: Vec<serde_json::Value> = serde_json::from_slice(&o.stdout).unwrap();
     let theirs = evo[0]["ate_se3"]["rmse"].as_f64().unwrap();
     eprintln!("run's ATE {printed:.9} m, evo_ape on the folder {theirs:.9} m over {} poses", evo[0]["matched"]);
-    assert_eq!(summary["ate"]["pairs"].as_u64(), evo[0]["matched"].as_u64());
+    assert_eq!(Some(ate.pairs), evo[0]["matched"].as_u64());
     assert!((printed - theirs).abs() <= 1e-6 * theirs.max(1e-3), "run {printed}, evo {theirs}");
 }
 

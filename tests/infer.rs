@@ -5,14 +5,15 @@
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 mod common;
-#[path = "common/frontend.rs"]
+#[path = "../vision/tests/common/frontend.rs"]
 mod frontend;
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use dynaflow_infer::Error;
 use dynaflow_infer::detect::{decode_yolox, letterbox_bgr, nms};
-use dynaflow_infer::onnx::{OnnxError, load, parse};
+use dynaflow_infer::onnx::{load, parse};
 use dynaflow_infer::reference::{SUPPORTED, run};
 use dynaflow_infer::rten_cpu::RtenModel;
 use dynaflow_infer::tensor::Tensor;
@@ -162,7 +163,7 @@ fn corrupt_and_truncated_models_are_errors_not_panics() {
     // Every prefix length class: header, inside the graph, inside an initializer, near the end.
     for cut in [0, 1, 7, 100, 1000, 50_000, bytes.len() / 2, bytes.len() - 10, bytes.len() - 1] {
         match parse(&bytes[..cut]) {
-            Err(OnnxError::Malformed(_)) => {}
+            Err(Error::Malformed(_)) => {}
             other => panic!("cut at {cut}: {:?}", other.map(|m| m.nodes.len())),
         }
     }
@@ -171,7 +172,7 @@ fn corrupt_and_truncated_models_are_errors_not_panics() {
         flipped[i] ^= 0x5a;
         let _ = parse(&flipped);
     }
-    assert!(matches!(load(Path::new("/nonexistent/model.onnx")), Err(OnnxError::Io { .. })));
+    assert!(matches!(load(Path::new("/nonexistent/model.onnx")), Err(Error::Io { .. })));
     let text = load(&common::repo().join("README.md"));
     assert!(text.is_err(), "a text file is not a model");
 }
@@ -319,23 +320,22 @@ fn detector_gate_graph_runs_and_reports_its_gate() {
         .output()
         .unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
-    let s: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("detector_gate.summary.json")).unwrap()).unwrap();
-    let gate = s["nodes"].as_array().unwrap().iter().find(|n| n["node"] == "gate").unwrap();
-    let rules = gate["report"]["rules"].as_object().unwrap();
+    let s = common::summary(&dir.path().join("detector_gate.summary.json"));
+    let gate = s.node_report("gate").unwrap();
+    let rules = gate["rules"].as_object().unwrap();
     let rule = |k: &str| rules[k].as_u64().unwrap();
     assert_eq!(rules.values().map(|v| v.as_u64().unwrap()).sum::<u64>(), 8);
-    assert_eq!(gate["report"]["frames"], 8);
+    assert_eq!(gate["frames"], 8);
     // The gate both skips and infers, and not only by its clock: the tracker's key frames and
     // relocalisations and the culling's dynamic count (its feedback inputs) open it too.
-    let inferred = gate["report"]["inferred"].as_u64().unwrap();
+    let inferred = gate["inferred"].as_u64().unwrap();
     assert!(rule("skipped") > 0 && inferred > 1, "{rules:?}");
     assert_eq!(inferred, 8 - rule("skipped"));
     assert!(rule("keyframe") + rule("relocalised") + rule("few_dynamic") > 0, "no feedback rule fired: {rules:?}");
     // The detector ran on exactly the frames the gate passed.
-    let detector = s["nodes"].as_array().unwrap().iter().find(|n| n["node"] == "detector").unwrap();
-    assert_eq!(detector["frames"].as_u64(), Some(inferred), "{detector}");
-    assert!(s["ate"]["rmse"].as_f64().is_some());
+    let detector = s.run.nodes.iter().find(|n| n.node == "detector").unwrap();
+    assert_eq!(detector.frames, inferred, "{detector:?}");
+    assert!(s.ate.is_some_and(|a| a.rmse.is_finite()));
 }
 
 #[test]

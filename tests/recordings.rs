@@ -5,10 +5,12 @@
 
 mod common;
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 
+use dynaflow_engine::sink::{PortReport, SinkReport};
 use dynaflow_recordings::diff::read_mcap;
 
 fn run_default(dir: &Path, extra: &[&str]) -> std::process::Output {
@@ -336,16 +338,16 @@ fn default_synthetic_scene_recording_verifies() {
         assert!(rows.get("/world/track/pose_path/0").is_some_and(|n| *n >= 1), "{rows:?}");
     }
     // The summary says what each recorder wrote, per port and per frame.
-    let summary: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.path().join("default.summary.json")).unwrap()).unwrap();
+    let summary = common::summary(&dir.path().join("default.summary.json"));
     let mcap_bytes = std::fs::metadata(dir.path().join("default.mcap")).unwrap().len();
-    assert_eq!(summary["recorders"]["mcap"]["file_bytes"], mcap_bytes);
-    let depth = &summary["recorders"]["mcap"]["ports"]["camera/depth"];
-    assert_eq!(depth["messages"], 30);
+    let recorders = &summary.run.recorders;
+    assert_eq!(recorders["mcap"].file_bytes, Some(mcap_bytes));
+    let depth = &recorders["mcap"].ports["camera/depth"];
+    assert_eq!(depth.messages, 30);
     // 640x480 f32 samples plus the protobuf fields and the payload.
-    let per_frame = depth["bytes_per_frame"].as_f64().unwrap();
+    let per_frame = depth.bytes_per_frame.unwrap();
     assert!((640.0 * 480.0 * 4.0..640.0 * 480.0 * 4.0 + 2048.0).contains(&per_frame), "{per_frame}");
-    assert_eq!(summary["recorders"]["rerun"]["ports"]["camera/rgb"]["messages"], 30);
+    assert_eq!(recorders["rerun"].ports["camera/rgb"].messages, 30);
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("recorded mcap:") && stdout.contains("camera/depth"), "{stdout}");
 }
@@ -581,16 +583,12 @@ fn rows_per_entity(rerun: &Path, file: &Path) -> std::collections::BTreeMap<Stri
     rows
 }
 
-fn live_summary(dir: &Path) -> serde_json::Value {
-    let summary: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir.join("default.summary.json")).unwrap()).unwrap();
-    summary["recorders"].clone()
+fn live_summary(dir: &Path) -> BTreeMap<String, SinkReport> {
+    common::summary(&dir.join("default.summary.json")).run.recorders
 }
 
-fn totals(ports: &serde_json::Value) -> (u64, u64) {
-    let ports = ports.as_object().unwrap();
-    let sum = |k: &str| ports.values().map(|p| p[k].as_u64().unwrap()).sum();
-    (sum("messages"), sum("dropped"))
+fn totals(ports: &BTreeMap<String, PortReport>) -> (u64, u64) {
+    (ports.values().map(|p| p.messages).sum(), ports.values().map(|p| p.dropped).sum())
 }
 
 #[test]
@@ -611,9 +609,9 @@ fn live_stream_reaches_a_headless_receiver_with_what_the_file_has() {
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     receiver.finish();
     let recorders = live_summary(dir.path());
-    let (sent, dropped) = totals(&recorders["live"]["ports"]);
+    let (sent, dropped) = totals(&recorders["live"].ports);
     assert_eq!(dropped, 0, "a local receiver keeps up with 20 frames");
-    assert_eq!(sent, totals(&recorders["rerun"]["ports"]).0, "the stream carried every recorded message");
+    assert_eq!(sent, totals(&recorders["rerun"].ports).0, "the stream carried every recorded message");
     // The received stream has no footer (the receiver was stopped); it must still verify.
     let v = rerun_rrd(&rerun, &["verify", "--check-footers", "false"], &receiver.file);
     assert!(v.status.success(), "{}{}", String::from_utf8_lossy(&v.stdout), String::from_utf8_lossy(&v.stderr));
@@ -661,10 +659,10 @@ fn live_stream_survives_a_killed_receiver_and_counts_what_it_dropped() {
     peers_accept(&dir.path().join("default.rrd"), &dir.path().join("default.mcap"));
     // What the stream could not deliver is counted, per port.
     let recorders = live_summary(dir.path());
-    let (sent, dropped) = totals(&recorders["live"]["ports"]);
+    let (sent, dropped) = totals(&recorders["live"].ports);
     assert!(sent > 0 && dropped > 0, "sent {sent}, dropped {dropped}");
-    assert_eq!(sent + dropped, totals(&recorders["mcap"]["ports"]).0, "every recorded message is sent or counted");
-    assert!(recorders["live"]["ports"]["camera/rgb"]["dropped"].as_u64().unwrap() > 0);
+    assert_eq!(sent + dropped, totals(&recorders["mcap"].ports).0, "every recorded message is sent or counted");
+    assert!(recorders["live"].ports["camera/rgb"].dropped > 0);
 }
 
 #[test]

@@ -5,16 +5,17 @@
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 mod common;
-#[path = "common/frontend.rs"]
+#[path = "../vision/tests/common/frontend.rs"]
 mod frontend;
 
 use std::path::Path;
 
+use dynaflow::summary::Summary;
 use dynaflow_datasets::tum::read_trajectory;
 use dynaflow_slam::eval::{Align, evaluate};
 
 /// Run a variant; return the summary's ATE RMSE and the trajectory file's.
-fn run(variant: Option<&str>, motion: &str, dir: &Path, frames: &str) -> (serde_json::Value, f64) {
+fn run(variant: Option<&str>, motion: &str, dir: &Path, frames: &str) -> (Summary, f64) {
     let name = variant.unwrap_or("walking");
     let out = dir.join(name);
     let mut cmd = common::bin();
@@ -27,8 +28,7 @@ fn run(variant: Option<&str>, motion: &str, dir: &Path, frames: &str) -> (serde_
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(stdout.contains("ATE of `track`"), "{stdout}");
     let stem = variant.map_or("orb_baseline".to_string(), |v| format!("orb_baseline-{v}"));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join(format!("{stem}.summary.json"))).unwrap()).unwrap();
+    let summary = common::summary(&out.join(format!("{stem}.summary.json")));
 
     let gt_dir = dir.join(format!("gt-{motion}"));
     if !gt_dir.join("groundtruth.txt").exists() {
@@ -54,18 +54,19 @@ fn baseline_meets_the_ate_bounds_on_static_scenes() {
         [("static_scene", "xyz", 0.01), ("halfsphere", "halfsphere", 0.02), ("rpy", "rpy", 0.02)]
     {
         let (summary, rmse) = run(Some(variant), motion, dir.path(), "300");
-        let reported = summary["ate"]["rmse"].as_f64().unwrap();
+        let ate = summary.ate.clone().unwrap();
+        let reported = ate.rmse;
         eprintln!("{variant}: ATE RMSE {rmse:.4} m (summary {reported:.4} m)");
         assert!(rmse <= bound, "{variant}: ATE RMSE {rmse} m > {bound} m");
         // The summary's ATE is the same evaluation of the same poses.
         assert!((reported - rmse).abs() < 1e-6, "{reported} vs {rmse}");
-        assert_eq!(summary["ate"]["align"], "se3");
-        assert_eq!(summary["ate"]["node"], "track");
-        let track = summary["nodes"].as_array().unwrap().iter().find(|n| n["node"] == "track").unwrap();
-        assert_eq!(track["report"]["frames"]["lost"], 0, "{variant}");
-        assert_eq!(track["report"]["maps"], 1, "{variant}");
-        let mapping = summary["nodes"].as_array().unwrap().iter().find(|n| n["node"] == "mapping").unwrap();
-        assert!(mapping["frames"].as_u64().unwrap() >= 3, "key frames reached local mapping");
+        assert_eq!(ate.align.as_deref(), Some("se3"));
+        assert_eq!(ate.node.as_deref(), Some("track"));
+        let track = summary.node_report("track").unwrap();
+        assert_eq!(track["frames"]["lost"], 0, "{variant}");
+        assert_eq!(track["maps"], 1, "{variant}");
+        let mapping = summary.run.nodes.iter().find(|n| n.node == "mapping").unwrap();
+        assert!(mapping.frames >= 3, "key frames reached local mapping");
     }
 }
 
@@ -161,7 +162,7 @@ fn relative_poses_on_the_slambook2_frames_match_the_given_ones() {
 }
 
 /// Run `graphs/orb_baseline.yaml` with `extra` arguments into `out`; its summary.
-fn baseline_summary(extra: &[&str], out: &Path) -> serde_json::Value {
+fn baseline_summary(extra: &[&str], out: &Path) -> Summary {
     let o = common::bin()
         .args(["run", "--no-progress", "--record", "none"])
         .args(extra)
@@ -171,14 +172,13 @@ fn baseline_summary(extra: &[&str], out: &Path) -> serde_json::Value {
         .output()
         .unwrap();
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
-    serde_json::from_str(&std::fs::read_to_string(out.join("orb_baseline.summary.json")).unwrap()).unwrap()
+    common::summary(&out.join("orb_baseline.summary.json"))
 }
 
 #[test]
 fn baseline_is_deterministic_in_lockstep_and_runs_in_realtime() {
     let dir = common::TempDir::new("tracking-determinism");
-    let digests =
-        |sub: &str| baseline_summary(&["--digest", "--frames", "40"], &dir.path().join(sub))["digests"].clone();
+    let digests = |sub: &str| baseline_summary(&["--digest", "--frames", "40"], &dir.path().join(sub)).digests.unwrap();
     let (a, b) = (digests("a"), digests("b"));
     for port in ["track/pose", "track/keyframe", "track/stats", "mapping/points", "mapping/stats"] {
         assert!(a[port]["count"].as_u64().unwrap() > 0, "{port}: {a}");
@@ -188,12 +188,12 @@ fn baseline_is_deterministic_in_lockstep_and_runs_in_realtime() {
     // Paced at sensor rate, tracking reads the newest map it has (`join: latest`) and never
     // waits for local mapping; the run completes and still reports its ATE.
     let s = baseline_summary(&["--realtime", "--frames", "30"], &dir.path().join("rt"));
-    assert!(s["ate"]["rmse"].as_f64().is_some(), "{s}");
+    assert!(s.ate.as_ref().is_some_and(|a| a.rmse.is_finite()), "{s:?}");
 }
 
 /// Run `graphs/default.yaml` (`variant`, at most `frames`) into `out`, nothing recorded: what it
 /// printed and its summary.
-fn default_run(variant: Option<&str>, frames: Option<u64>, out: &Path) -> (String, serde_json::Value) {
+fn default_run(variant: Option<&str>, frames: Option<u64>, out: &Path) -> (String, Summary) {
     let mut cmd = common::bin();
     cmd.args(["run", "--no-progress", "--record", "none", "--out"]).arg(out);
     if let Some(v) = variant {
@@ -205,8 +205,7 @@ fn default_run(variant: Option<&str>, frames: Option<u64>, out: &Path) -> (Strin
     let o = cmd.arg(common::repo().join("graphs/default.yaml")).output().unwrap();
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     let stem = variant.map_or_else(|| "default".to_owned(), |v| format!("default-{v}"));
-    let summary = std::fs::read_to_string(out.join(format!("{stem}.summary.json"))).unwrap();
-    (String::from_utf8_lossy(&o.stdout).into_owned(), serde_json::from_str(&summary).unwrap())
+    (String::from_utf8_lossy(&o.stdout).into_owned(), common::summary(&out.join(format!("{stem}.summary.json"))))
 }
 
 #[test]
@@ -219,17 +218,17 @@ fn default_graph_prints_mg_slam_next_to_the_baseline() {
     assert!(stdout.contains("ATE of `baseline` (150 poses"), "{stdout}");
     let line = stdout.lines().find(|l| l.starts_with("ATE of `track`")).unwrap_or_default();
     assert!(line.contains("% vs `baseline`)"), "{stdout}");
-    let (baseline, mg) = (&s["trackers"]["baseline"], &s["trackers"]["track"]);
-    assert_eq!(s["ate"]["node"], "baseline", "the first tracker is the reference");
-    assert_eq!(baseline["pairs"], 150);
-    assert_eq!(mg["pairs"], 150);
-    let (b, m) = (baseline["rmse"].as_f64().unwrap(), mg["rmse"].as_f64().unwrap());
+    let (baseline, mg) = (&s.trackers["baseline"], &s.trackers["track"]);
+    assert_eq!(s.ate.as_ref().and_then(|a| a.node.as_deref()), Some("baseline"), "the first tracker is the reference");
+    assert_eq!(baseline.pairs, 150);
+    assert_eq!(mg.pairs, 150);
+    let (b, m) = (baseline.rmse, mg.rmse);
     assert!(stdout.lines().all(|l| !l.contains("(oracle)")), "the default graph decides without ground truth");
     // The bound on culling, computed here: the same graph and frames with the generator's
     // masks in place of the detector's (`masked`, an oracle), whose tracker sees no walker.
     let (printed, s) = default_run(Some("masked"), Some(150), &dir.path().join("masked"));
     assert!(printed.contains("ATE of `track` (oracle)"), "the oracle run says so: {printed}");
-    let oracle = s["trackers"]["track"]["rmse"].as_f64().unwrap();
+    let oracle = s.trackers["track"].rmse;
     eprintln!("150 frames: baseline {b:.4} m, MG-SLAM {m:.4} m, with ground-truth masks {oracle:.4} m");
     // MG-SLAM within twice what perfect masks give, and the walkers' damage to the baseline
     // at least ten times what is left to MG-SLAM (README: 69.8 cm against 0.7 cm at 300).

@@ -41,7 +41,11 @@ impl Intrinsics {
     }
 
     /// `fr1`, `fr2`, `fr3`, or `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`.
-    pub fn parse(text: &str) -> Result<Self, String> {
+    pub fn parse(text: &str) -> Result<Self, Error> {
+        Self::parse_msg(text).map_err(Error::Intrinsics)
+    }
+
+    fn parse_msg(text: &str) -> Result<Self, String> {
         match text.trim() {
             "fr1" => return Ok(FR1),
             "fr2" => return Ok(FR2),

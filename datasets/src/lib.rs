@@ -42,6 +42,10 @@ pub enum Error {
     /// Files that do not fit together (sizes, stamps); the message names them.
     #[error("{0}")]
     Data(String),
+    /// Intrinsics written by a user (a graph parameter, a flag, a `calibration.txt` line) are
+    /// not a preset name or positive focal lengths and a principal point.
+    #[error("{0}")]
+    Intrinsics(String),
     /// A folder's camera cannot be told (no known name, no `calibration.txt`): the caller has
     /// to give the intrinsics.
     #[error("{}: cannot tell the camera: the folder is not named `rgbd_dataset_freiburgN_*` and has no calibration.txt; set `intrinsics: fr1|fr2|fr3|fx,fy,cx,cy` (or `--intrinsics`)", dir.display())]

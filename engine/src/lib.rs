@@ -10,6 +10,7 @@
 
 pub mod diag;
 pub mod files;
+pub mod flow;
 mod load;
 pub mod op;
 pub mod runtime;

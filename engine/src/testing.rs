@@ -10,7 +10,7 @@ use rand_core::Rng;
 
 use crate::msg::{Body, Header, Image, PixelFormat, Scalars};
 use crate::op::{
-    Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params, PortSpec, Registry, Source,
+    Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params, Registry, Source,
 };
 use crate::{param_enum, params};
 
@@ -23,9 +23,11 @@ pub fn register(r: &mut Registry) {
     r.register(FAULT);
 }
 
-/// A registry of the `testing.*` operators alone (engine tests without the operator crates).
+/// A registry of the `testing.*` operators and the flow operators (`passthrough`, `gate`):
+/// engine tests without the operator crates.
 pub fn registry() -> Registry {
     let mut r = Registry::new();
+    crate::flow::register(&mut r);
     register(&mut r);
     r
 }
@@ -44,18 +46,7 @@ pub fn run_to_memory(
     Ok((report, sink))
 }
 
-const INPUT: In<Body> = In::required("input", "any message");
-const OUTPUT: Out<Body> = Out::like("output", "input", "the input message, unchanged");
-/// The one input of a forwarding operator: `input`, any message.
-pub const ANY_IN: &[PortSpec] = &[INPUT.spec];
-/// The one output of a forwarding operator: `output`, the input's type.
-pub const SAME_OUT: &[PortSpec] = &[OUTPUT.spec];
-
-/// Forward `input` to `output` unchanged (the forwarding operators' frame).
-pub fn forward(inputs: &Inputs) -> Result<Outputs, OpError> {
-    let (msg, body) = INPUT.require(inputs)?;
-    Ok(Outputs::new().send(&OUTPUT, msg.header.clone(), body.clone()))
-}
+use crate::flow::{ANY_IN, SAME_OUT, forward};
 
 // --- test_pattern ----------------------------------------------------------------------
 

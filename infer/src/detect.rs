@@ -26,23 +26,25 @@ pub struct Letterbox {
 }
 
 /// Bilinear resize of RGB8 (`width x height`) to `nw x nh` with pixel centres aligned
-/// (OpenCV's `INTER_LINEAR`), written top-left into BGR planes of side `size`, each value
-/// passed through `map`.
-fn resize_into(
+/// (OpenCV's `INTER_LINEAR`), written top-left into three planes of `pw x ph` (RGB order, or
+/// BGR with `bgr`), each value passed through `map`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn resize_planes(
     rgb: &[u8],
     width: usize,
     height: usize,
     (nw, nh): (usize, usize),
-    size: usize,
+    (pw, ph): (usize, usize),
+    bgr: bool,
     out: &mut [f32],
     map: impl Fn(f32) -> f32,
 ) {
     let (fx, fy) = (width as f32 / nw.max(1) as f32, height as f32 / nh.max(1) as f32);
-    for y in 0..nh {
+    for y in 0..nh.min(ph) {
         let sy = ((y as f32 + 0.5) * fy - 0.5).clamp(0.0, (height - 1) as f32);
         let (y0, wy) = (sy.floor() as usize, sy - sy.floor());
         let y1 = (y0 + 1).min(height - 1);
-        for x in 0..nw {
+        for x in 0..nw.min(pw) {
             let sx = ((x as f32 + 0.5) * fx - 0.5).clamp(0.0, (width - 1) as f32);
             let (x0, wx) = (sx.floor() as usize, sx - sx.floor());
             let x1 = (x0 + 1).min(width - 1);
@@ -50,8 +52,8 @@ fn resize_into(
                 let p = |yy: usize, xx: usize| f32::from(rgb[(yy * width + xx) * 3 + c]);
                 let v = (1.0 - wy) * ((1.0 - wx) * p(y0, x0) + wx * p(y0, x1))
                     + wy * ((1.0 - wx) * p(y1, x0) + wx * p(y1, x1));
-                // BGR planes: plane 0 is blue (source channel 2).
-                out[(2 - c) * size * size + y * size + x] = map(v);
+                let plane = if bgr { 2 - c } else { c };
+                out[plane * pw * ph + y * pw + x] = map(v);
             }
         }
     }
@@ -67,7 +69,7 @@ pub fn letterbox_bgr(rgb: &[u8], width: usize, height: usize, size: usize) -> (V
     }
     let scale = (size as f32 / width as f32).min(size as f32 / height as f32);
     let (nw, nh) = (((width as f32 * scale) as usize).min(size), ((height as f32 * scale) as usize).min(size));
-    resize_into(rgb, width, height, (nw, nh), size, &mut out, f32::round);
+    resize_planes(rgb, width, height, (nw, nh), (size, size), true, &mut out, f32::round);
     (out, Letterbox { scale, size })
 }
 
@@ -150,7 +152,7 @@ pub fn resize_bgr_unit(rgb: &[u8], width: usize, height: usize, size: usize) -> 
     if width == 0 || height == 0 || rgb.len() < 3 * width * height {
         return out;
     }
-    resize_into(rgb, width, height, (size, size), size, &mut out, |v| v / 255.0);
+    resize_planes(rgb, width, height, (size, size), (size, size), true, &mut out, |v| v / 255.0);
     out
 }
 
@@ -213,19 +215,19 @@ pub struct Detector {
 impl Detector {
     /// Check that `model` takes a fixed `1x3xSxS` input (which ops it uses is the executor's
     /// business).
-    pub fn new(model: crate::onnx::Model, decoder: Decoder) -> Result<Self, String> {
-        let input = model.inputs.first().ok_or("the model has no input")?;
+    pub fn new(model: crate::onnx::Model, decoder: Decoder) -> Result<Self, crate::Error> {
+        let input = model.inputs.first().ok_or_else(|| crate::Error::Contract("the model has no input".into()))?;
         let dims: Vec<usize> = input.shape.iter().map(|d| d.unwrap_or(0).max(0) as usize).collect();
         let side = match dims.as_slice() {
             [1, 3, h, w] if h == w && *h > 0 => *h,
             _ => {
-                return Err(format!(
+                return Err(crate::Error::Contract(format!(
                     "model input `{}` has shape {:?}; a detector takes a fixed square 1x3xSxS input",
                     input.name, input.shape
-                ));
+                )));
             }
         };
-        check_output(&model, decoder, side)?;
+        check_output(&model, decoder, side).map_err(crate::Error::Contract)?;
         Ok(Self { input_name: input.name.clone(), model, side, decoder })
     }
 

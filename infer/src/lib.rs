@@ -8,25 +8,29 @@
 //!   here, checked against onnxruntime, and what GPU kernels are tested against.
 //! - `rten_cpu`: the CPU backend, models run by rten (fast, multi-threaded; chosen over tract
 //!   by measurement).
+//! - `Error`: the crate's one error type (reading, checking and running a model).
 //! - `detect`: detector pre- and post-processing: YOLOX letterbox, decoding, class-wise NMS.
 
 pub mod detect;
+mod error;
 pub mod onnx;
 pub mod reference;
 pub mod rten_cpu;
 pub mod tensor;
+
+pub use error::Error;
 
 /// What runs a model: the reference executor (an [`onnx::Model`] itself), rten
 /// ([`rten_cpu::RtenModel`]) or, in `dynaflow-gpu`, the WGSL executor. The `detect` operator
 /// and `dynaflow infer` hold one of them behind this trait.
 pub trait Executor: Send + Sync {
     /// Run on the named inputs; every graph output, in the model's order.
-    fn run(&self, inputs: &[(&str, tensor::Tensor)]) -> Result<Vec<tensor::Tensor>, reference::RunError>;
+    fn run(&self, inputs: &[(&str, tensor::Tensor)]) -> Result<Vec<tensor::Tensor>, crate::Error>;
 }
 
 /// The reference executor runs a parsed model as it is.
 impl Executor for onnx::Model {
-    fn run(&self, inputs: &[(&str, tensor::Tensor)]) -> Result<Vec<tensor::Tensor>, reference::RunError> {
+    fn run(&self, inputs: &[(&str, tensor::Tensor)]) -> Result<Vec<tensor::Tensor>, crate::Error> {
         reference::run(self, inputs)
     }
 }

@@ -7,27 +7,10 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-/// What can be wrong with a model file.
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum OnnxError {
-    /// The file cannot be read.
-    #[error("cannot read {path}: {message}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The OS error.
-        message: String,
-    },
-    /// The bytes are not a valid ONNX protobuf.
-    #[error("not a valid ONNX model: {0}")]
-    Malformed(String),
-    /// A construct the reader does not take (external data, an unsupported tensor type...).
-    #[error("unsupported ONNX content: {0}")]
-    Unsupported(String),
-}
+use crate::Error;
 
-fn bad(msg: impl Into<String>) -> OnnxError {
-    OnnxError::Malformed(msg.into())
+fn bad(msg: impl Into<String>) -> Error {
+    Error::Malformed(msg.into())
 }
 
 /// Element type of a tensor (ONNX `TensorProto.DataType`).
@@ -100,122 +83,68 @@ pub enum Attribute {
     Ints(Vec<i64>),
 }
 
-/// An ONNX operator, parsed once from the node's `op_type`: the ops dynaflow's executors know,
-/// and any other by name (an executor refuses it, naming it).
-#[derive(Clone, Debug, PartialEq, Eq, Hash)]
-pub enum Op {
-    /// `Add`.
-    Add,
-    /// `AveragePool`.
-    AveragePool,
-    /// `Concat`.
-    Concat,
-    /// `Constant`.
-    Constant,
-    /// `Conv`.
-    Conv,
-    /// `Gather`.
-    Gather,
-    /// `MaxPool`.
-    MaxPool,
-    /// `Mul`.
-    Mul,
-    /// `Pad`.
-    Pad,
-    /// `Relu`.
-    Relu,
-    /// `Reshape`.
-    Reshape,
-    /// `Resize`.
-    Resize,
-    /// `Shape`.
-    Shape,
-    /// `Sigmoid`.
-    Sigmoid,
-    /// `Slice`.
-    Slice,
-    /// `Softmax`.
-    Softmax,
-    /// `Transpose`.
-    Transpose,
-    /// `Unsqueeze`.
-    Unsqueeze,
-    /// An op no executor here runs.
-    Other(String),
+/// The ops dynaflow's executors know, each named once: the enum variant is the ONNX
+/// `op_type`.
+macro_rules! onnx_ops {
+    ($($op:ident),* $(,)?) => {
+        /// An ONNX operator, parsed once from the node's `op_type`: the ops dynaflow's executors
+        /// know, and any other by name (an executor refuses it, naming it).
+        #[derive(Clone, Debug, PartialEq, Eq, Hash)]
+        pub enum Op {
+            $(#[doc = concat!("`", stringify!($op), "`.")] $op,)*
+            /// An op no executor here runs.
+            Other(String),
+        }
+
+        impl Op {
+            /// Every op the executors know, by ONNX name.
+            pub const NAMES: &'static [&'static str] = &[$(stringify!($op)),*];
+
+            /// The op named `op_type`.
+            pub fn parse(op_type: &str) -> Self {
+                match op_type {
+                    $(stringify!($op) => Op::$op,)*
+                    other => Op::Other(other.to_owned()),
+                }
+            }
+
+            /// The ONNX name.
+            pub fn name(&self) -> &str {
+                match self {
+                    $(Op::$op => stringify!($op),)*
+                    Op::Other(name) => name,
+                }
+            }
+        }
+    };
 }
 
-impl Op {
-    /// Every op the executors know, by ONNX name.
-    pub const NAMES: &'static [&'static str] = &[
-        "Add",
-        "AveragePool",
-        "Concat",
-        "Constant",
-        "Conv",
-        "Gather",
-        "MaxPool",
-        "Mul",
-        "Pad",
-        "Relu",
-        "Reshape",
-        "Resize",
-        "Shape",
-        "Sigmoid",
-        "Slice",
-        "Softmax",
-        "Transpose",
-        "Unsqueeze",
-    ];
-
-    /// The op named `op_type`.
-    pub fn parse(op_type: &str) -> Self {
-        match op_type {
-            "Add" => Op::Add,
-            "AveragePool" => Op::AveragePool,
-            "Concat" => Op::Concat,
-            "Constant" => Op::Constant,
-            "Conv" => Op::Conv,
-            "Gather" => Op::Gather,
-            "MaxPool" => Op::MaxPool,
-            "Mul" => Op::Mul,
-            "Pad" => Op::Pad,
-            "Relu" => Op::Relu,
-            "Reshape" => Op::Reshape,
-            "Resize" => Op::Resize,
-            "Shape" => Op::Shape,
-            "Sigmoid" => Op::Sigmoid,
-            "Slice" => Op::Slice,
-            "Softmax" => Op::Softmax,
-            "Transpose" => Op::Transpose,
-            "Unsqueeze" => Op::Unsqueeze,
-            other => Op::Other(other.to_owned()),
-        }
-    }
-
-    /// The ONNX name.
-    pub fn name(&self) -> &str {
-        match self {
-            Op::Add => "Add",
-            Op::AveragePool => "AveragePool",
-            Op::Concat => "Concat",
-            Op::Constant => "Constant",
-            Op::Conv => "Conv",
-            Op::Gather => "Gather",
-            Op::MaxPool => "MaxPool",
-            Op::Mul => "Mul",
-            Op::Pad => "Pad",
-            Op::Relu => "Relu",
-            Op::Reshape => "Reshape",
-            Op::Resize => "Resize",
-            Op::Shape => "Shape",
-            Op::Sigmoid => "Sigmoid",
-            Op::Slice => "Slice",
-            Op::Softmax => "Softmax",
-            Op::Transpose => "Transpose",
-            Op::Unsqueeze => "Unsqueeze",
-            Op::Other(name) => name,
-        }
-    }
+onnx_ops! {
+    Add,
+    AveragePool,
+    Clip,
+    Concat,
+    Constant,
+    Conv,
+    ConvTranspose,
+    Div,
+    Gather,
+    GlobalAveragePool,
+    HardSigmoid,
+    HardSwish,
+    MaxPool,
+    Mul,
+    Pad,
+    Relu,
+    Reshape,
+    Resize,
+    Shape,
+    Sigmoid,
+    Slice,
+    Softmax,
+    Sub,
+    Transpose,
+    Unsqueeze,
 }
 
 impl std::fmt::Display for Op {
@@ -312,20 +241,20 @@ pub struct Model {
 
 use dynaflow_msg::wire::{Reader, Value};
 
-impl From<dynaflow_msg::wire::WireError> for OnnxError {
+impl From<dynaflow_msg::wire::WireError> for Error {
     fn from(e: dynaflow_msg::wire::WireError) -> Self {
         bad(e.0)
     }
 }
 
-fn string(v: &Value<'_>) -> Result<String, OnnxError> {
+fn string(v: &Value<'_>) -> Result<String, Error> {
     match v {
         Value::Bytes(b) => Ok(String::from_utf8_lossy(b).into_owned()),
         _ => Err(bad("expected a string")),
     }
 }
 
-fn int(v: &Value<'_>) -> Result<i64, OnnxError> {
+fn int(v: &Value<'_>) -> Result<i64, Error> {
     match v {
         Value::Varint(x) => Ok(*x as i64),
         _ => Err(bad("expected an integer")),
@@ -333,7 +262,7 @@ fn int(v: &Value<'_>) -> Result<i64, OnnxError> {
 }
 
 /// Repeated int64: packed bytes or one varint.
-fn push_ints(v: &Value<'_>, out: &mut Vec<i64>) -> Result<(), OnnxError> {
+fn push_ints(v: &Value<'_>, out: &mut Vec<i64>) -> Result<(), Error> {
     match v {
         Value::Varint(x) => out.push(*x as i64),
         Value::Bytes(b) => {
@@ -348,7 +277,7 @@ fn push_ints(v: &Value<'_>, out: &mut Vec<i64>) -> Result<(), OnnxError> {
 }
 
 /// Repeated float: packed bytes or one fixed32.
-fn push_floats(v: &Value<'_>, out: &mut Vec<f32>) -> Result<(), OnnxError> {
+fn push_floats(v: &Value<'_>, out: &mut Vec<f32>) -> Result<(), Error> {
     match v {
         Value::Fixed32(x) => out.push(f32::from_bits(*x)),
         Value::Bytes(b) => {
@@ -362,7 +291,7 @@ fn push_floats(v: &Value<'_>, out: &mut Vec<f32>) -> Result<(), OnnxError> {
     Ok(())
 }
 
-fn tensor(buf: &[u8]) -> Result<TensorData, OnnxError> {
+fn tensor(buf: &[u8]) -> Result<TensorData, Error> {
     let mut r = Reader::new(buf);
     let mut t = TensorData {
         name: String::new(),
@@ -398,7 +327,7 @@ fn tensor(buf: &[u8]) -> Result<TensorData, OnnxError> {
         }
     }
     if external {
-        return Err(OnnxError::Unsupported(format!("tensor `{}` keeps its data in an external file", t.name)));
+        return Err(Error::Unsupported(format!("tensor `{}` keeps its data in an external file", t.name)));
     }
     if t.dims.iter().any(|&d| d < 0) {
         return Err(bad(format!("tensor `{}` has a negative dimension", t.name)));
@@ -409,7 +338,7 @@ fn tensor(buf: &[u8]) -> Result<TensorData, OnnxError> {
             DataType::Float | DataType::Int32 => 4,
             DataType::Int64 | DataType::Double => 8,
             DataType::Other(c) => {
-                return Err(OnnxError::Unsupported(format!("tensor `{}` has element type {c}", t.name)));
+                return Err(Error::Unsupported(format!("tensor `{}` has element type {c}", t.name)));
             }
         };
         if raw.len() != n.checked_mul(width).ok_or_else(|| bad("tensor too large"))? {
@@ -441,7 +370,7 @@ fn tensor(buf: &[u8]) -> Result<TensorData, OnnxError> {
     Ok(t)
 }
 
-fn attribute(buf: &[u8]) -> Result<(String, Attribute), OnnxError> {
+fn attribute(buf: &[u8]) -> Result<(String, Attribute), Error> {
     let mut r = Reader::new(buf);
     let (mut name, mut ty) = (String::new(), 0i64);
     let (mut f, mut i, mut s, mut t) = (None, None, None, None);
@@ -487,7 +416,7 @@ fn attribute(buf: &[u8]) -> Result<(String, Attribute), OnnxError> {
     Ok((name, a))
 }
 
-fn node(buf: &[u8]) -> Result<Node, OnnxError> {
+fn node(buf: &[u8]) -> Result<Node, Error> {
     let mut r = Reader::new(buf);
     let mut op_type = String::new();
     let mut n = Node {
@@ -522,7 +451,7 @@ fn node(buf: &[u8]) -> Result<Node, OnnxError> {
     Ok(n)
 }
 
-fn value_info(buf: &[u8]) -> Result<ValueInfo, OnnxError> {
+fn value_info(buf: &[u8]) -> Result<ValueInfo, Error> {
     let mut r = Reader::new(buf);
     let mut vi = ValueInfo { name: String::new(), elem_type: 0, shape: Vec::new() };
     while !r.done() {
@@ -566,7 +495,7 @@ fn value_info(buf: &[u8]) -> Result<ValueInfo, OnnxError> {
 }
 
 /// Decode a model from its bytes.
-pub fn parse(bytes: &[u8]) -> Result<Model, OnnxError> {
+pub fn parse(bytes: &[u8]) -> Result<Model, Error> {
     let mut r = Reader::new(bytes);
     let mut m = Model {
         ir_version: 0,
@@ -635,17 +564,17 @@ pub fn parse(bytes: &[u8]) -> Result<Model, OnnxError> {
 }
 
 /// Read and decode a model file.
-pub fn load(path: &Path) -> Result<Model, OnnxError> {
+pub fn load(path: &Path) -> Result<Model, Error> {
     load_with_bytes(path).map(|(m, _)| m)
 }
 
 /// Read and decode a model file; the model and the file's bytes (for another runtime).
-pub fn load_with_bytes(path: &Path) -> Result<(Model, Vec<u8>), OnnxError> {
+pub fn load_with_bytes(path: &Path) -> Result<(Model, Vec<u8>), Error> {
     let bytes =
-        std::fs::read(path).map_err(|e| OnnxError::Io { path: path.display().to_string(), message: e.to_string() })?;
+        std::fs::read(path).map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })?;
     let model = parse(&bytes).map_err(|e| match e {
-        OnnxError::Malformed(m) => OnnxError::Malformed(format!("{}: {m}", path.display())),
-        OnnxError::Unsupported(m) => OnnxError::Unsupported(format!("{}: {m}", path.display())),
+        Error::Malformed(m) => Error::Malformed(format!("{}: {m}", path.display())),
+        Error::Unsupported(m) => Error::Unsupported(format!("{}: {m}", path.display())),
         io => io,
     })?;
     Ok((model, bytes))

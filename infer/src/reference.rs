@@ -5,53 +5,34 @@
 
 use std::collections::HashMap;
 
+mod conv_transpose;
+mod pool;
+mod resize;
+
+pub use pool::{PoolPlan, pool_plan};
+
 use crate::onnx::{Attribute, Model, Node, Op};
 pub use crate::tensor::Tensor;
 use crate::tensor::{norm_axis, reshape_shape, strides};
 
-/// Why a model cannot run.
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum RunError {
-    /// An op the executor does not have.
-    #[error("unsupported ONNX op `{op}` at node {node}")]
-    UnsupportedOp {
-        /// Op type.
-        op: String,
-        /// Node label.
-        node: String,
-    },
-    /// Shapes or values the op cannot take.
-    #[error("node {node}: {message}")]
-    Invalid {
-        /// Node label.
-        node: String,
-        /// What is wrong.
-        message: String,
-    },
-    /// A backend refused the model or a run (its message).
-    #[error("{0}")]
-    Backend(String),
-    /// An input the model needs was not given.
-    #[error("input `{0}` not given")]
-    MissingInput(String),
-}
+use crate::Error;
 
 /// Ops this executor runs (the union of YOLOX-nano's and FastestDet's): every [`Op`] but
 /// `Other`.
 pub const SUPPORTED: &[&str] = Op::NAMES;
 
 /// Check every node's op before running anything.
-pub fn check_ops(model: &Model) -> Result<(), RunError> {
+pub fn check_ops(model: &Model) -> Result<(), Error> {
     for n in &model.nodes {
         if matches!(n.op, Op::Other(_)) || !(n.domain.is_empty() || n.domain == "ai.onnx") {
-            return Err(RunError::UnsupportedOp { op: n.op.name().to_owned(), node: n.label() });
+            return Err(Error::UnsupportedOp { op: n.op.name().to_owned(), node: n.label() });
         }
     }
     Ok(())
 }
 
 /// Run `model` on the named inputs; returns the graph outputs in order.
-pub fn run(model: &Model, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, RunError> {
+pub fn run(model: &Model, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, Error> {
     check_ops(model)?;
     let mut env: HashMap<String, Tensor> = HashMap::new();
     for (k, t) in &model.initializers {
@@ -61,7 +42,7 @@ pub fn run(model: &Model, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, RunE
         env.insert((*k).to_string(), t.clone());
     }
     for n in &model.nodes {
-        let err = |m: String| RunError::Invalid { node: n.label(), message: m };
+        let err = |m: String| Error::Invalid { node: n.label(), message: m };
         let args: Vec<Option<&Tensor>> =
             n.inputs.iter().map(|i| if i.is_empty() { None } else { env.get(i) }).collect();
         if n.inputs.iter().zip(&args).any(|(i, a)| !i.is_empty() && a.is_none()) {
@@ -77,12 +58,12 @@ pub fn run(model: &Model, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, RunE
         .iter()
         .map(|o| {
             env.remove(&o.name)
-                .ok_or_else(|| RunError::Invalid { node: o.name.clone(), message: "output never computed".into() })
+                .ok_or_else(|| Error::Invalid { node: o.name.clone(), message: "output never computed".into() })
         })
         .collect()
 }
 
-fn f32_arg<'a>(args: &[Option<&'a Tensor>], i: usize) -> Result<(&'a [usize], &'a [f32]), String> {
+pub(super) fn f32_arg<'a>(args: &[Option<&'a Tensor>], i: usize) -> Result<(&'a [usize], &'a [f32]), String> {
     match args.get(i).copied().flatten() {
         Some(Tensor::F32 { shape, data }) => Ok((shape, data)),
         Some(Tensor::I64 { .. }) => Err(format!("input {i} is an integer tensor, expected float")),
@@ -135,13 +116,58 @@ fn binary(args: &[Option<&Tensor>], f: impl Fn(f32, f32) -> f32) -> Result<Tenso
     Ok(Tensor::F32 { shape, data })
 }
 
-fn pads_of(n: &Node, k: usize) -> Vec<usize> {
+fn unary(args: &[Option<&Tensor>], f: impl Fn(f32) -> f32) -> Result<Tensor, String> {
+    let (s, x) = f32_arg(args, 0)?;
+    Ok(Tensor::F32 { shape: s.to_vec(), data: x.iter().map(|&v| f(v)).collect() })
+}
+
+/// `Clip` (opset 11+): bounds from the optional second and third inputs, each absent bound
+/// unbounded.
+fn clip(args: &[Option<&Tensor>]) -> Result<Tensor, String> {
+    let bound = |i: usize, default: f32| -> Result<f32, String> {
+        match args.get(i).copied().flatten() {
+            None => Ok(default),
+            Some(t) => t.floats().first().copied().ok_or_else(|| format!("Clip bound {i} is empty")),
+        }
+    };
+    let (lo, hi) = (bound(1, f32::NEG_INFINITY)?, bound(2, f32::INFINITY)?);
+    unary(args, |v| v.max(lo).min(hi))
+}
+
+/// The padding (top, left, bottom, right) of a 2-D `Conv` or pooling node on an input of
+/// `hw` with kernel `k`, strides `s` and dilations `d`: explicit `pads`, or what `auto_pad`
+/// (`SAME_UPPER`, `SAME_LOWER`, `VALID`) makes them (the output `ceil(in / stride)`; the odd
+/// pixel at the end for `SAME_UPPER`, at the start for `SAME_LOWER`).
+pub fn conv_pads(n: &Node, hw: [usize; 2], k: [usize; 2], s: [usize; 2], d: [usize; 2]) -> Result<[usize; 4], Error> {
+    let same = |i: usize| {
+        let out = hw[i].div_ceil(s[i].max(1));
+        ((out.max(1) - 1) * s[i].max(1) + (k[i].max(1) - 1) * d[i].max(1) + 1).saturating_sub(hw[i])
+    };
+    match n.string("auto_pad", "NOTSET").as_str() {
+        "NOTSET" => {
+            let p = pads_of(n, 2);
+            match p.as_slice() {
+                [a, b, c, e] => Ok([*a, *b, *c, *e]),
+                _ => Err(Error::Shape(format!("pads {p:?}: four values (top, left, bottom, right) expected"))),
+            }
+        }
+        "VALID" => Ok([0; 4]),
+        mode @ ("SAME_UPPER" | "SAME_LOWER") => {
+            let (th, tw) = (same(0), same(1));
+            let begin = |t: usize| if mode == "SAME_UPPER" { t / 2 } else { t - t / 2 };
+            Ok([begin(th), begin(tw), th - begin(th), tw - begin(tw)])
+        }
+        other => Err(Error::Shape(format!("auto_pad `{other}` is not an ONNX padding mode"))),
+    }
+}
+
+pub(super) fn pads_of(n: &Node, k: usize) -> Vec<usize> {
     n.ints("pads").map_or(vec![0; 2 * k], |p| p.iter().map(|&v| v.max(0) as usize).collect())
 }
 
 /// One node on host tensors (also what a GPU executor uses for shape arithmetic).
-pub fn eval_node(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
-    eval(n, args)
+pub fn eval_node(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, Error> {
+    eval(n, args).map_err(|message| Error::Invalid { node: n.label(), message })
 }
 
 fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
@@ -153,19 +179,23 @@ fn eval(n: &Node, args: &[Option<&Tensor>]) -> Result<Vec<Tensor>, String> {
         },
         Op::Add => one(binary(args, |a, b| a + b)?),
         Op::Mul => one(binary(args, |a, b| a * b)?),
-        Op::Relu => {
-            let (s, x) = f32_arg(args, 0)?;
-            one(Tensor::F32 { shape: s.to_vec(), data: x.iter().map(|v| v.max(0.0)).collect() })
-        }
-        Op::Sigmoid => {
-            let (s, x) = f32_arg(args, 0)?;
-            one(Tensor::F32 { shape: s.to_vec(), data: x.iter().map(|v| 1.0 / (1.0 + (-v).exp())).collect() })
-        }
+        Op::Relu => one(unary(args, |v| v.max(0.0))?),
+        Op::Sigmoid => one(unary(args, |v| 1.0 / (1.0 + (-v).exp()))?),
         Op::Conv => one(conv(n, args)?),
-        Op::MaxPool | Op::AveragePool => one(pool(n, args)?),
+        Op::MaxPool | Op::AveragePool => one(pool::pool(n, args)?),
         Op::Concat => one(concat(n, args)?),
         Op::Slice => one(slice(args)?),
-        Op::Resize => one(resize(n, args)?),
+        Op::Resize => one(resize::resize(n, args)?),
+        Op::ConvTranspose => one(conv_transpose::conv_transpose(n, args)?),
+        Op::Div => one(binary(args, |a, b| a / b)?),
+        Op::Sub => one(binary(args, |a, b| a - b)?),
+        Op::Clip => one(clip(args)?),
+        Op::HardSigmoid => {
+            let (alpha, beta) = (n.float("alpha", 0.2), n.float("beta", 0.5));
+            one(unary(args, |v| (alpha * v + beta).clamp(0.0, 1.0))?)
+        }
+        Op::HardSwish => one(unary(args, |v| v * (v / 6.0 + 0.5).clamp(0.0, 1.0))?),
+        Op::GlobalAveragePool => one(pool::global_average_pool(args)?),
         Op::Reshape => {
             let t = args.first().copied().flatten().ok_or("missing data")?;
             let spec = int_arg(args, 1).ok_or("missing shape")?;
@@ -258,8 +288,11 @@ fn conv(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
     }
     let st = n.ints("strides").map_or(vec![1, 1], <[i64]>::to_vec);
     let dl = n.ints("dilations").map_or(vec![1, 1], <[i64]>::to_vec);
-    let p = pads_of(n, 2);
+    if st.len() != 2 || dl.len() != 2 {
+        return Err(format!("Conv strides {st:?} and dilations {dl:?}: two values each expected"));
+    }
     let (sh, sw, dh, dw) = (st[0].max(1) as usize, st[1].max(1) as usize, dl[0].max(1) as usize, dl[1].max(1) as usize);
+    let p = conv_pads(n, [h, wd], [kh, kw], [sh, sw], [dh, dw])?;
     let oh = (h + p[0] + p[2]).checked_sub(dh * (kh - 1) + 1).ok_or("Conv kernel larger than input")? / sh + 1;
     let ow = (wd + p[1] + p[3]).checked_sub(dw * (kw - 1) + 1).ok_or("Conv kernel larger than input")? / sw + 1;
     let mg = m / group;
@@ -314,71 +347,6 @@ fn conv(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
     Ok(Tensor::F32 { shape: vec![nb, m, oh, ow], data: out })
 }
 
-/// Geometry of a 2-D pooling node (MaxPool, AveragePool) on an NCHW input: what the reference
-/// and the GPU executor both compute from the node's attributes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PoolPlan {
-    /// Kernel height and width.
-    pub kernel: [usize; 2],
-    /// Strides (y, x).
-    pub strides: [usize; 2],
-    /// Pads top, left, bottom, right (negative ones count as 0).
-    pub pads: [usize; 4],
-    /// Output height and width.
-    pub out: [usize; 2],
-}
-
-/// The [`PoolPlan`] of node `n` on an input of `shape`.
-pub fn pool_plan(n: &Node, shape: &[usize]) -> Result<PoolPlan, String> {
-    if shape.len() != 4 {
-        return Err(format!("pooling wants 4-D input, got {shape:?}"));
-    }
-    if n.int("ceil_mode", 0) != 0 {
-        return Err("ceil_mode pooling is not supported".into());
-    }
-    let k = n.ints("kernel_shape").ok_or("no kernel_shape")?.to_vec();
-    let st = n.ints("strides").map_or(vec![1, 1], <[i64]>::to_vec);
-    let p = pads_of(n, 2);
-    if k.len() != 2 || st.len() != 2 || p.len() != 4 || k.iter().chain(&st).any(|&v| v < 0) {
-        return Err(format!("pooling attributes kernel {k:?}, strides {st:?}, pads {p:?}"));
-    }
-    let (kh, kw, sh, sw) = (k[0] as usize, k[1] as usize, st[0].max(1) as usize, st[1].max(1) as usize);
-    let oh = (shape[2] + p[0] + p[2]).checked_sub(kh).ok_or("pool kernel larger than input")? / sh + 1;
-    let ow = (shape[3] + p[1] + p[3]).checked_sub(kw).ok_or("pool kernel larger than input")? / sw + 1;
-    Ok(PoolPlan { kernel: [kh, kw], strides: [sh, sw], pads: [p[0], p[1], p[2], p[3]], out: [oh, ow] })
-}
-
-fn pool(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
-    let (xs, x) = f32_arg(args, 0)?;
-    let PoolPlan { kernel: [kh, kw], strides: [sh, sw], pads: p, out: [oh, ow] } = pool_plan(n, xs)?;
-    let max = n.op == Op::MaxPool;
-    let count_pad = n.int("count_include_pad", 0) != 0;
-    let (nb, c, h, w) = (xs[0], xs[1], xs[2], xs[3]);
-    let mut out = vec![0.0f32; nb * c * oh * ow];
-    for bc in 0..nb * c {
-        let xin = &x[bc * h * w..(bc + 1) * h * w];
-        for oy in 0..oh {
-            for ox in 0..ow {
-                let (mut acc, mut cnt) = (if max { f32::NEG_INFINITY } else { 0.0 }, 0usize);
-                for ky in 0..kh {
-                    for kx in 0..kw {
-                        let iy = (oy * sh + ky) as isize - p[0] as isize;
-                        let ix = (ox * sw + kx) as isize - p[1] as isize;
-                        if iy >= 0 && ix >= 0 && iy < h as isize && ix < w as isize {
-                            let v = xin[iy as usize * w + ix as usize];
-                            acc = if max { acc.max(v) } else { acc + v };
-                            cnt += 1;
-                        }
-                    }
-                }
-                let div = if count_pad { kh * kw } else { cnt.max(1) };
-                out[(bc * oh + oy) * ow + ox] = if max { acc } else { acc / div as f32 };
-            }
-        }
-    }
-    Ok(Tensor::F32 { shape: vec![nb, c, oh, ow], data: out })
-}
-
 fn concat(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
     let parts: Vec<(&[usize], &[f32])> = (0..args.len()).map(|i| f32_arg(args, i)).collect::<Result<_, _>>()?;
     let first = parts.first().ok_or("Concat of nothing")?.0;
@@ -408,6 +376,16 @@ pub type SlicePlan = (Vec<usize>, Vec<usize>, Vec<usize>);
 
 /// Plan a `Slice` (see [`SlicePlan`]); ends are clamped as ONNX does, steps must be positive.
 pub fn slice_plan(
+    s: &[usize],
+    starts: &[i64],
+    ends: &[i64],
+    axes: Option<&[i64]>,
+    steps: Option<&[i64]>,
+) -> Result<SlicePlan, Error> {
+    slice_plan_msg(s, starts, ends, axes, steps).map_err(Error::Shape)
+}
+
+fn slice_plan_msg(
     s: &[usize],
     starts: &[i64],
     ends: &[i64],
@@ -454,44 +432,6 @@ fn slice(args: &[Option<&Tensor>]) -> Result<Tensor, String> {
         })
         .collect();
     Ok(Tensor::F32 { shape, data })
-}
-
-fn resize(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
-    let (s, x) = f32_arg(args, 0)?;
-    if s.len() != 4 {
-        return Err(format!("Resize wants 4-D input, got {s:?}"));
-    }
-    let mode = n.string("mode", "nearest");
-    let ctm = n.string("coordinate_transformation_mode", "half_pixel");
-    let nearest_mode = n.string("nearest_mode", "round_prefer_floor");
-    let scales = args.get(2).copied().flatten().map(Tensor::floats).filter(|v| v.len() == 4);
-    let sizes = args.get(3).copied().flatten().map(Tensor::ints).filter(|v| v.len() == 4);
-    let (oh, ow, fy, fx) = match (sizes, scales) {
-        (Some(z), _) => (z[2] as usize, z[3] as usize, z[2] as f32 / s[2] as f32, z[3] as f32 / s[3] as f32),
-        (None, Some(sc)) => {
-            ((s[2] as f32 * sc[2]).floor() as usize, (s[3] as f32 * sc[3]).floor() as usize, sc[2], sc[3])
-        }
-        _ => return Err("Resize needs scales or sizes".into()),
-    };
-    if mode != "nearest" || ctm != "asymmetric" || !(nearest_mode == "floor" || nearest_mode == "round_prefer_floor") {
-        return Err(format!("Resize mode {mode}/{ctm}/{nearest_mode} is not supported (nearest, asymmetric)"));
-    }
-    let (h, w) = (s[2], s[3]);
-    let src = |o: usize, f: f32, lim: usize| {
-        let v = o as f32 / f;
-        let i = if nearest_mode == "floor" { v.floor() } else { (v - 0.5).ceil() };
-        (i.max(0.0) as usize).min(lim - 1)
-    };
-    let mut data = Vec::with_capacity(s[0] * s[1] * oh * ow);
-    for bc in 0..s[0] * s[1] {
-        for oy in 0..oh {
-            let iy = src(oy, fy, h);
-            for ox in 0..ow {
-                data.push(x[(bc * h + iy) * w + src(ox, fx, w)]);
-            }
-        }
-    }
-    Ok(Tensor::F32 { shape: vec![s[0], s[1], oh, ow], data })
 }
 
 fn gather(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
@@ -620,7 +560,7 @@ mod tests {
         p.op = Op::parse("MaxPool");
         p.attributes.insert("pads".into(), Attribute::Ints(vec![1, 1, 1, 1]));
         p.attributes.insert("kernel_shape".into(), Attribute::Ints(vec![3, 3]));
-        let y = pool(&p, &[Some(&xt)]).unwrap();
+        let y = pool::pool(&p, &[Some(&xt)]).unwrap();
         assert_eq!(y.shape(), &[1, 1, 3, 5]);
         assert_eq!(y.floats()[0], 6.0);
         assert_eq!(y.floats()[14], 14.0);
@@ -637,7 +577,7 @@ mod tests {
         r.attributes.insert("coordinate_transformation_mode".into(), Attribute::String(b"asymmetric".to_vec()));
         r.attributes.insert("nearest_mode".into(), Attribute::String(b"floor".to_vec()));
         let scales = Tensor::F32 { shape: vec![4], data: vec![1.0, 1.0, 2.0, 2.0] };
-        let y = resize(&r, &[Some(&xt), None, Some(&scales)]).unwrap();
+        let y = resize::resize(&r, &[Some(&xt), None, Some(&scales)]).unwrap();
         assert_eq!(y.shape(), &[1, 1, 6, 10]);
         assert_eq!(y.floats()[..4], [0.0, 0.0, 1.0, 1.0]);
     }

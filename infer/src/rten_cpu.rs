@@ -7,7 +7,7 @@
 use rten::{Model, NodeId};
 use rten_tensor::prelude::*;
 
-use crate::reference::RunError;
+use crate::Error;
 use crate::tensor::Tensor;
 
 /// A model loaded into rten.
@@ -26,8 +26,8 @@ impl std::fmt::Debug for RtenModel {
 impl RtenModel {
     /// Load an ONNX model from its bytes (rten's own checks: unsupported ops and malformed
     /// files are errors, with rten's message).
-    pub fn load(bytes: Vec<u8>) -> Result<Self, RunError> {
-        let model = Model::load(bytes).map_err(|e| RunError::Backend(format!("rten: {e}")))?;
+    pub fn load(bytes: Vec<u8>) -> Result<Self, Error> {
+        let model = Model::load(bytes).map_err(|e| Error::Backend(format!("rten: {e}")))?;
         let inputs = model
             .input_ids()
             .iter()
@@ -41,7 +41,7 @@ impl RtenModel {
     }
 
     /// Run on the named float inputs; every graph output, in the model's order.
-    pub fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, RunError> {
+    pub fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, Error> {
         let tensors: Vec<(NodeId, rten_tensor::Tensor<f32>)> = self
             .inputs
             .iter()
@@ -50,16 +50,16 @@ impl RtenModel {
                     .iter()
                     .find(|(n, _)| n == name)
                     .map(|(_, t)| t)
-                    .ok_or_else(|| RunError::MissingInput(name.clone()))?;
+                    .ok_or_else(|| Error::MissingInput(name.clone()))?;
                 Ok((*id, rten_tensor::Tensor::from_data(t.shape(), t.floats())))
             })
-            .collect::<Result<_, RunError>>()?;
+            .collect::<Result<_, Error>>()?;
         let views = tensors.iter().map(|(id, t)| (*id, t.view().into())).collect();
-        let outs = self.model.run(views, &self.outputs, None).map_err(|e| RunError::Backend(format!("rten: {e}")))?;
+        let outs = self.model.run(views, &self.outputs, None).map_err(|e| Error::Backend(format!("rten: {e}")))?;
         outs.into_iter()
             .map(|v| {
                 let t: rten_tensor::Tensor<f32> =
-                    v.try_into().map_err(|_| RunError::Backend("rten: a model output is not a float tensor".into()))?;
+                    v.try_into().map_err(|_| Error::Backend("rten: a model output is not a float tensor".into()))?;
                 Ok(Tensor::F32 { shape: t.shape().to_vec(), data: t.to_vec() })
             })
             .collect()
@@ -67,7 +67,7 @@ impl RtenModel {
 }
 
 impl crate::Executor for RtenModel {
-    fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, RunError> {
+    fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, Error> {
         RtenModel::run(self, inputs)
     }
 }

@@ -1,6 +1,8 @@
 //! Tensors and the shape arithmetic every executor shares (the reference executor, the GPU
 //! planner, the rten bridge).
 
+use crate::Error;
+
 use crate::onnx::TensorData;
 
 /// A tensor: float data or integer data (shapes, indices), row-major.
@@ -64,14 +66,22 @@ pub fn strides(shape: &[usize]) -> Vec<usize> {
 }
 
 /// An ONNX axis (negative counts from the end) as an index, checked against `rank`.
-pub fn norm_axis(a: i64, rank: usize) -> Result<usize, String> {
+pub fn norm_axis(a: i64, rank: usize) -> Result<usize, Error> {
     let r = rank as i64;
     let v = if a < 0 { a + r } else { a };
-    if (0..r).contains(&v) { Ok(v as usize) } else { Err(format!("axis {a} out of range for rank {rank}")) }
+    if (0..r).contains(&v) {
+        Ok(v as usize)
+    } else {
+        Err(Error::Shape(format!("axis {a} out of range for rank {rank}")))
+    }
 }
 /// The output shape of ONNX `Reshape` of `input` to `spec` (`0` copies a dimension, `-1`
 /// takes what is left).
-pub fn reshape_shape(input: &[usize], spec: &[i64]) -> Result<Vec<usize>, String> {
+pub fn reshape_shape(input: &[usize], spec: &[i64]) -> Result<Vec<usize>, Error> {
+    reshape_shape_msg(input, spec).map_err(Error::Shape)
+}
+
+fn reshape_shape_msg(input: &[usize], spec: &[i64]) -> Result<Vec<usize>, String> {
     let total: usize = input.iter().product();
     let mut shape: Vec<usize> = Vec::new();
     let mut infer = None;

@@ -12,33 +12,13 @@
 
 use std::path::Path;
 
+use crate::Error;
 use crate::key::DEPTH;
 use crate::tree::{EXISTS, NONE, Node, OcTree, Params};
 
 const OT_HEADER: &str = "# Octomap OcTree file";
 const BT_HEADER: &str = "# Octomap OcTree binary file";
 const COMMENT: &str = "# (feel free to add / change comments, but leave the first line as it is!)\n#\n";
-
-/// What can be wrong with an octree file.
-#[derive(Debug, thiserror::Error, PartialEq)]
-pub enum OctoError {
-    /// Cannot read or write the file.
-    #[error("{path}: {message}")]
-    Io {
-        /// The file.
-        path: String,
-        /// The OS error.
-        message: String,
-    },
-    /// Not an OctoMap file, or a corrupt or truncated one.
-    #[error("{path}: {message}")]
-    Format {
-        /// The file.
-        path: String,
-        /// What is wrong.
-        message: String,
-    },
-}
 
 /// `%g` with six significant digits, as C++'s default stream output of a double.
 fn cpp_double(v: f64) -> String {
@@ -151,21 +131,21 @@ pub fn bt_bytes(tree: &OcTree) -> Vec<u8> {
     out
 }
 
-fn write_file(path: &Path, bytes: &[u8]) -> Result<(), OctoError> {
+fn write_file(path: &Path, bytes: &[u8]) -> Result<(), Error> {
     // Write beside, then rename: an interrupted run never leaves half a file.
     let tmp = path.with_extension("partial");
     std::fs::write(&tmp, bytes)
         .and_then(|()| std::fs::rename(&tmp, path))
-        .map_err(|e| OctoError::Io { path: path.display().to_string(), message: e.to_string() })
+        .map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })
 }
 
 /// Write `tree` as an OctoMap `.ot` file.
-pub fn write_ot(tree: &OcTree, path: &Path) -> Result<(), OctoError> {
+pub fn write_ot(tree: &OcTree, path: &Path) -> Result<(), Error> {
     write_file(path, &ot_bytes(tree))
 }
 
 /// Write `tree` as an OctoMap `.bt` file.
-pub fn write_bt(tree: &OcTree, path: &Path) -> Result<(), OctoError> {
+pub fn write_bt(tree: &OcTree, path: &Path) -> Result<(), Error> {
     write_file(path, &bt_bytes(tree))
 }
 
@@ -288,13 +268,13 @@ fn assemble(params: Params, semantic: bool, nodes: &[Raw]) -> Result<OcTree, Str
         n
     }
     let root = if nodes.is_empty() { Node::ABSENT } else { place(0, nodes, &mut blocks) };
-    OcTree::from_parts(params, semantic, root, blocks)
+    OcTree::from_parts(params, semantic, root, blocks).map_err(|e| e.to_string())
 }
 
 /// Parse OctoMap file bytes (`.ot` or `.bt`, told apart by their first line); `name` is the
 /// file's name for messages. Parameters other than the resolution are OctoMap's defaults.
-pub fn parse(bytes: &[u8], name: &str) -> Result<OcTree, OctoError> {
-    let bad = |m: String| OctoError::Format { path: name.to_string(), message: m };
+pub fn parse(bytes: &[u8], name: &str) -> Result<OcTree, Error> {
+    let bad = |m: String| Error::Format { path: name.to_string(), message: m };
     // Header: text lines up to `data`.
     let mut at = 0;
     let mut lines = Vec::new();
@@ -344,14 +324,14 @@ pub fn parse(bytes: &[u8], name: &str) -> Result<OcTree, OctoError> {
         other => return Err(bad(format!("tree type `{other}` (OcTree and ColorOcTree are read)"))),
     };
     let params = Params { resolution: res, ..Params::default() };
-    params.check().map_err(&bad)?;
+    params.check().map_err(|e| bad(e.to_string()))?;
     let data = &bytes[at..];
     // Each node takes at least one byte (a .bt node's children two bits): a size beyond
     // 8 nodes per byte cannot be true.
     let limit = size.unwrap_or(usize::MAX).min(data.len().saturating_mul(8) + 1);
     let mut r = Reader { bytes: data, at: 0, nodes: 0, limit };
     let mut nodes: Vec<Raw> = Vec::new();
-    let tree = OcTree::new(params, semantic).map_err(&bad)?;
+    let tree = OcTree::new(params, semantic).map_err(|e| bad(e.to_string()))?;
     if !data.is_empty() {
         if binary {
             let (lo, hi) = tree.clamping();
@@ -375,9 +355,9 @@ pub fn parse(bytes: &[u8], name: &str) -> Result<OcTree, OctoError> {
 }
 
 /// Read an OctoMap `.ot` or `.bt` file.
-pub fn read(path: &Path) -> Result<OcTree, OctoError> {
+pub fn read(path: &Path) -> Result<OcTree, Error> {
     let bytes =
-        std::fs::read(path).map_err(|e| OctoError::Io { path: path.display().to_string(), message: e.to_string() })?;
+        std::fs::read(path).map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })?;
     parse(&bytes, &path.display().to_string())
 }
 
@@ -453,6 +433,6 @@ mod tests {
             deep.push(1);
         }
         assert!(parse(&deep, "deep").unwrap_err().to_string().contains("deeper"));
-        assert!(matches!(read(Path::new("/nonexistent.ot")), Err(OctoError::Io { .. })));
+        assert!(matches!(read(Path::new("/nonexistent.ot")), Err(Error::Io { .. })));
     }
 }

@@ -10,11 +10,14 @@
 //! - [`io`]: OctoMap's `.bt` (binary: two bits per child, maximum likelihood) and `.ot`
 //!   (full: log-odds per node, colour for ColorOcTree) files, read and written byte for byte
 //!   as OctoMap does; corrupt or truncated files are errors, never panics.
+//! - [`Error`]: the crate's one error type (parameters, memory budget, files).
 
+mod error;
 pub mod io;
 pub mod key;
 pub mod tree;
 
-pub use io::{OctoError, read, write_bt, write_ot};
+pub use error::Error;
+pub use io::{read, write_bt, write_ot};
 pub use key::{Grid, Key};
 pub use tree::{Label, Leaf, Node, OcTree, Params, RayHit, logodds, probability};

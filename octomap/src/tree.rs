@@ -18,6 +18,7 @@
 use std::collections::HashSet;
 use std::hash::{BuildHasherDefault, Hasher};
 
+use crate::Error;
 use crate::key::{DEPTH, Grid, Key};
 
 /// `log(p / (1 - p))` in `f32`, as OctoMap's `logodds`.
@@ -46,7 +47,7 @@ pub struct Params {
     /// Occupied at or above this probability (0.5).
     pub occupancy: f64,
     /// Memory budget in bytes for the tree's nodes plus one scan's scratch: a scan that would
-    /// take them past it is refused before anything changes ([`ScanError`]), so no
+    /// take them past it is refused before anything changes ([`Error`]), so no
     /// resolution or range reaches an allocation failure (default 4 GiB; a resource bound, not
     /// an OctoMap parameter).
     pub max_memory_bytes: u64,
@@ -68,66 +69,30 @@ impl Default for Params {
 
 impl Params {
     /// Why these parameters cannot make a tree, if they cannot.
-    pub fn check(&self) -> Result<(), String> {
+    pub fn check(&self) -> Result<(), Error> {
+        self.problem().map_or(Ok(()), |m| Err(Error::Params(m)))
+    }
+
+    fn problem(&self) -> Option<String> {
         let p = |v: f64| v > 0.0 && v < 1.0;
         if !(self.resolution.is_finite() && self.resolution > 0.0) {
-            return Err(format!("resolution {} must be a positive number of metres", self.resolution));
+            return Some(format!("resolution {} must be a positive number of metres", self.resolution));
         }
         if !(p(self.prob_hit) && p(self.prob_miss) && p(self.clamp_min) && p(self.clamp_max) && p(self.occupancy)) {
-            return Err("probabilities must lie strictly between 0 and 1".into());
+            return Some("probabilities must lie strictly between 0 and 1".into());
         }
         if self.max_memory_bytes == 0 {
-            return Err("the memory budget must be positive".into());
+            return Some("the memory budget must be positive".into());
         }
         if self.prob_hit <= 0.5 || self.prob_miss >= 0.5 || self.clamp_min >= self.clamp_max {
-            return Err(format!(
+            return Some(format!(
                 "need prob_hit > 0.5 > prob_miss and clamp_min < clamp_max (got {}, {}, {}, {})",
                 self.prob_hit, self.prob_miss, self.clamp_min, self.clamp_max
             ));
         }
-        Ok(())
+        None
     }
 }
-
-/// Why a scan was not inserted; the tree is as it was before the call.
-#[derive(Clone, Debug, PartialEq)]
-pub enum ScanError {
-    /// The scan would take the tree's nodes plus its own scratch past
-    /// [`Params::max_memory_bytes`].
-    OverBudget {
-        /// Upper bound on the voxels its rays cross (visits, before de-duplication).
-        voxels: u64,
-        /// Bytes the tree's nodes hold now.
-        tree_bytes: u64,
-        /// Bytes the scan needs: scratch, plus (when known) the nodes it would add.
-        scan_bytes: u64,
-        /// The budget.
-        budget: u64,
-    },
-    /// The system refused memory within the budget.
-    Alloc {
-        /// Bytes asked for.
-        bytes: u64,
-    },
-}
-
-impl std::fmt::Display for ScanError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let mb = |b: u64| b as f64 / (1u64 << 20) as f64;
-        match self {
-            Self::OverBudget { voxels, tree_bytes, scan_bytes, budget } => write!(
-                f,
-                "the scan's rays cross up to {voxels} voxels and need {:.0} MiB on top of the map's {:.0} MiB, over the {:.0} MiB memory budget",
-                mb(*scan_bytes),
-                mb(*tree_bytes),
-                mb(*budget)
-            ),
-            Self::Alloc { bytes } => write!(f, "the system refused {:.0} MiB for the scan", mb(*bytes)),
-        }
-    }
-}
-
-impl std::error::Error for ScanError {}
 
 /// Bytes of one block of eight nodes.
 const BLOCK_BYTES: u64 = std::mem::size_of::<[Node; 8]>() as u64;
@@ -392,9 +357,9 @@ struct Scratch {
 impl Scratch {
     /// Room (after the resets) for a scan of `visits` voxel visits and `points` end points, so that nothing
     /// grows while it runs: an allocation failure is an error, not an abort.
-    fn reserve(&mut self, visits: u64, points: usize, dense: bool) -> Result<(), ScanError> {
+    fn reserve(&mut self, visits: u64, points: usize, dense: bool) -> Result<(), Error> {
         let visits = usize::try_from(visits).unwrap_or(usize::MAX);
-        let fail = |n: usize, each: usize| ScanError::Alloc { bytes: (n as u64).saturating_mul(each as u64) };
+        let fail = |n: usize, each: usize| Error::Alloc { bytes: (n as u64).saturating_mul(each as u64) };
         self.free.list.try_reserve(visits).map_err(|_| fail(visits, 8))?;
         self.occupied.list.try_reserve(points).map_err(|_| fail(points, 8))?;
         if !dense {
@@ -439,7 +404,7 @@ impl std::fmt::Debug for OcTree {
 
 impl OcTree {
     /// An empty tree (checked parameters). `semantic`: keep colour and class per voxel.
-    pub fn new(params: Params, semantic: bool) -> Result<Self, String> {
+    pub fn new(params: Params, semantic: bool) -> Result<Self, Error> {
         params.check()?;
         Ok(Self {
             grid: Grid::new(params.resolution),
@@ -727,7 +692,7 @@ impl OcTree {
         labels: Option<&[Label]>,
         origin: [f32; 3],
         max_range: f64,
-    ) -> Result<(), ScanError> {
+    ) -> Result<(), Error> {
         let budget = self.params.max_memory_bytes;
         let tree_bytes = self.memory_bytes() as u64;
         let voxels = self.scan_voxels(points, origin, max_range);
@@ -744,7 +709,7 @@ impl OcTree {
         let scratch = voxels.saturating_mul(per_visit)
             + (points.len() as u64).saturating_mul(168)
             + 2 * dense_cells.map_or(0, |c| c.div_ceil(8) as u64);
-        let over = |scan_bytes: u64| ScanError::OverBudget { voxels, tree_bytes, scan_bytes, budget };
+        let over = |scan_bytes: u64| Error::OverBudget { voxels, tree_bytes, scan_bytes, budget };
         if tree_bytes.saturating_add(scratch) > budget {
             self.scratch = s;
             return Err(over(scratch));
@@ -797,7 +762,7 @@ impl OcTree {
                 let target = (capacity * 2).clamp(len + need, cap_max);
                 if self.blocks.try_reserve_exact((target - len) as usize).is_err() {
                     self.scratch = s;
-                    return Err(ScanError::Alloc { bytes: (target - len) * BLOCK_BYTES });
+                    return Err(Error::Alloc { bytes: (target - len) * BLOCK_BYTES });
                 }
             }
         }
@@ -1073,7 +1038,7 @@ impl OcTree {
         semantic: bool,
         root: Node,
         blocks: Vec<[Node; 8]>,
-    ) -> Result<Self, String> {
+    ) -> Result<Self, Error> {
         let mut t = Self::new(params, semantic)?;
         t.root = root;
         t.blocks = blocks;
@@ -1213,13 +1178,13 @@ mod tests {
         // 1 mm voxels over 2 m rays: far past 1 MiB, refused before any work (the visit bound).
         let mut fine = OcTree::new(Params { resolution: 0.001, ..params }, false).unwrap();
         let err = fine.insert_scan(&fan(2.0, 40), None, [0.0, 0.0, 0.0], -1.0).unwrap_err();
-        let ScanError::OverBudget { voxels, scan_bytes, budget, .. } = err.clone() else { panic!("{err}") };
+        let Error::OverBudget { voxels, scan_bytes, budget, .. } = err.clone() else { panic!("{err}") };
         assert!(voxels >= 1600 * 2000 && scan_bytes > budget, "{err}");
         assert!(err.to_string().contains("over the 1 MiB memory budget"), "{err}");
         assert_eq!(fine.size(), 0);
         // Within the visit bound but not the nodes: refused after the walk, the tree as it was.
         let err = t.insert_scan(&fan(4.0, 60), None, [0.0, 0.0, 0.0], -1.0).unwrap_err();
-        assert!(matches!(err, ScanError::OverBudget { .. }), "{err}");
+        assert!(matches!(err, Error::OverBudget { .. }), "{err}");
         assert_eq!((t.leaves(), t.size(), t.memory_bytes()), (leaves, size, bytes));
         assert!(t.last_changes().is_empty(), "a refused scan changed nothing");
         // The arena never grows past the budget while scans fit.

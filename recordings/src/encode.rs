@@ -2,6 +2,7 @@
 //! images; raw little-endian samples for depth and masks, which the containers compress
 //! (MCAP chunks with zstd, `.rrd` chunks with LZ4).
 
+use crate::Error;
 use dynaflow_engine::msg::{DepthImage, Image, PixelFormat, SegmentationMask};
 use image::{ExtendedColorType, ImageEncoder};
 
@@ -39,7 +40,7 @@ pub struct Encoded {
 }
 
 /// PNG (fast compression, adaptive filter) of 8- or 16-bit samples in native byte order.
-pub fn png(data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<Encoded, String> {
+pub fn png(data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<Encoded, Error> {
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new_with_quality(
         &mut bytes,
@@ -47,13 +48,13 @@ pub fn png(data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<Enco
         image::codecs::png::FilterType::Adaptive,
     )
     .write_image(data, w, h, color)
-    .map_err(|e| e.to_string())?;
+    .map_err(|e| Error::Encode(e.to_string()))?;
     Ok(Encoded { bytes, format: "png" })
 }
 
 /// JPEG through `jpeg-encoder` (AVX2 when the CPU has it; 2.1x faster than `image`'s encoder
 /// on 640×480 colour, docs/benchmarks.md), `image`'s encoder beyond 65535 pixels a side.
-fn jpeg(img: &Image, quality: u8) -> Result<Encoded, String> {
+fn jpeg(img: &Image, quality: u8) -> Result<Encoded, Error> {
     let (color, fallback) = match img.format {
         PixelFormat::Rgb8 => (jpeg_encoder::ColorType::Rgb, ExtendedColorType::Rgb8),
         PixelFormat::Gray8 => (jpeg_encoder::ColorType::Luma, ExtendedColorType::L8),
@@ -62,16 +63,16 @@ fn jpeg(img: &Image, quality: u8) -> Result<Encoded, String> {
     match (u16::try_from(img.width), u16::try_from(img.height)) {
         (Ok(w), Ok(h)) => jpeg_encoder::Encoder::new(&mut bytes, quality.clamp(1, 100))
             .encode(&img.data, w, h, color)
-            .map_err(|e| e.to_string())?,
+            .map_err(|e| Error::Encode(e.to_string()))?,
         _ => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality)
             .write_image(&img.data, img.width, img.height, fallback)
-            .map_err(|e| e.to_string())?,
+            .map_err(|e| Error::Encode(e.to_string()))?,
     }
     Ok(Encoded { bytes, format: "jpeg" })
 }
 
 /// Encode an 8-bit image (JPEG or PNG; `Raw` has no file encoding and gives PNG).
-pub fn image(img: &Image, codec: ImageCodec) -> Result<Encoded, String> {
+pub fn image(img: &Image, codec: ImageCodec) -> Result<Encoded, Error> {
     let color = match img.format {
         PixelFormat::Rgb8 => ExtendedColorType::Rgb8,
         PixelFormat::Gray8 => ExtendedColorType::L8,
@@ -162,7 +163,7 @@ pub struct EncodeCache {
     users: usize,
 }
 
-type Slot = std::sync::Arc<std::sync::OnceLock<Result<std::sync::Arc<Encoded>, String>>>;
+type Slot = std::sync::Arc<std::sync::OnceLock<Result<std::sync::Arc<Encoded>, Error>>>;
 type Key = (u64, u8);
 
 #[derive(Debug, Default)]
@@ -194,8 +195,8 @@ impl EncodeCache {
         &self,
         msg: &dynaflow_engine::msg::Message,
         kind: u8,
-        encode: impl FnOnce() -> Result<Encoded, String>,
-    ) -> Result<std::sync::Arc<Encoded>, String> {
+        encode: impl FnOnce() -> Result<Encoded, Error>,
+    ) -> Result<std::sync::Arc<Encoded>, Error> {
         let key = (msg.digest(), kind);
         let slot = {
             let mut st = self.inner.lock().unwrap_or_else(std::sync::PoisonError::into_inner);

@@ -5,10 +5,11 @@
 //! Modules: `rrd` (rerun), `live` (the same stream to a running viewer), `mcap` (MCAP + Foxglove JSON schemas), `jsonl` (message log),
 //! `payload` (the numeric `dynaflow` object stored with each MCAP message), `encode` (pixel
 //! codecs), `diff` (run comparison), `replay` (the
-//! `mcap_replay` source).
+//! `mcap_replay` source); [`Error`] is the crate's one error type.
 
 pub mod diff;
 pub mod encode;
+mod error;
 mod jsonl;
 pub mod live;
 pub mod mcap;
@@ -17,6 +18,7 @@ pub mod replay;
 pub mod rrd;
 
 pub use encode::{EncodeCache, ImageCodec};
+pub use error::Error;
 pub use jsonl::MessageLog;
 pub use live::LiveSink;
 pub use mcap::McapSink;

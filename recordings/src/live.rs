@@ -10,6 +10,7 @@
 //! stream stops with one warning and every later message is counted as dropped. The files are
 //! recorders of their own and receive everything regardless.
 
+use crate::Error;
 use std::collections::BTreeMap;
 use std::net::{SocketAddr, TcpStream, ToSocketAddrs};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -37,7 +38,11 @@ pub const PROBE_EVERY: Duration = Duration::from_millis(500);
 const CLOSE_WAIT: Duration = Duration::from_secs(5);
 
 /// The `host:port` of a `rerun+http://host:port/proxy` URL.
-pub fn address(url: &str) -> Result<SocketAddr, String> {
+pub fn address(url: &str) -> Result<SocketAddr, Error> {
+    address_msg(url).map_err(Error::Viewer)
+}
+
+fn address_msg(url: &str) -> Result<SocketAddr, String> {
     let rest = url
         .strip_prefix("rerun+http://")
         .or_else(|| url.strip_prefix("rerun+https://"))
@@ -52,22 +57,24 @@ pub fn address(url: &str) -> Result<SocketAddr, String> {
 }
 
 /// Whether a viewer accepts connections at `url`; the error says why not.
-pub fn probe(url: &str) -> Result<(), String> {
+pub fn probe(url: &str) -> Result<(), Error> {
     let addr = address(url)?;
-    TcpStream::connect_timeout(&addr, Duration::from_secs(1)).map(drop).map_err(|e| format!("{addr}: {e}"))
+    TcpStream::connect_timeout(&addr, Duration::from_secs(1))
+        .map(drop)
+        .map_err(|e| Error::Viewer(format!("{addr}: {e}")))
 }
 
 /// Start a local rerun viewer (the `rerun` on `PATH`) listening on rerun's usual port, or
 /// find the one already there; returns its URL. The error says how to install one.
-pub fn spawn_viewer() -> Result<String, String> {
+pub fn spawn_viewer() -> Result<String, Error> {
     if probe(DEFAULT_URL).is_ok() {
         return Ok(DEFAULT_URL.to_owned());
     }
     let opts = rerun::SpawnOptions { wait_for_bind: true, ..rerun::SpawnOptions::default() };
     rerun::spawn(&opts).map_err(|e| {
-        format!(
+        Error::Viewer(format!(
             "cannot start the rerun viewer: {e}\n  install it with `pip install rerun-sdk==0.36.3` (or `cargo install rerun-cli@0.36.3 --locked`)"
-        )
+        ))
     })?;
     Ok(DEFAULT_URL.to_owned())
 }
@@ -242,7 +249,7 @@ mod tests {
     #[test]
     fn urls_name_their_address_and_bad_ones_say_why() {
         assert_eq!(address("rerun+http://127.0.0.1:9876/proxy").unwrap().port(), 9876);
-        assert!(address("http://127.0.0.1:9876").unwrap_err().contains("not a rerun URL"));
+        assert!(address("http://127.0.0.1:9876").unwrap_err().to_string().contains("not a rerun URL"));
         assert!(address("rerun+http://127.0.0.1/proxy").is_err());
         // Nothing listens on port 1.
         assert!(probe("rerun+http://127.0.0.1:1/proxy").is_err());

@@ -2,38 +2,14 @@
 #![allow(clippy::unwrap_used, clippy::panic, dead_code)]
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU32, Ordering};
 
 pub mod peers;
+mod tempdir;
+#[allow(unused_imports)]
+pub use tempdir::TempDir;
 
 use dynaflow_engine::spec::ResolvedGraph;
 use dynaflow_engine::{LoadRequest, load_str};
-
-/// A fresh, empty folder under the system temp dir (removed on drop).
-pub struct TempDir(pub PathBuf);
-
-impl TempDir {
-    pub fn new(tag: &str) -> Self {
-        static N: AtomicU32 = AtomicU32::new(0);
-        let dir = std::env::temp_dir().join(format!(
-            "dynaflow-test-{tag}-{}-{}",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        ));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        Self(dir)
-    }
-    pub fn path(&self) -> &Path {
-        &self.0
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 /// Validate graph text with the shipped operators; panics with the diagnostics if invalid.
 pub fn graph(text: &str) -> ResolvedGraph {
@@ -82,4 +58,10 @@ pub fn repo() -> PathBuf {
 /// The `dynaflow` binary built for these tests.
 pub fn bin() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_dynaflow"))
+}
+
+/// The summary a run wrote (`dynaflow::summary::Summary`, the type `run` writes and `bench`
+/// reads); panics naming the file if it is missing or not one.
+pub fn summary(path: &Path) -> dynaflow::summary::Summary {
+    dynaflow::summary::Summary::read(path).unwrap_or_else(|e| panic!("{e}"))
 }

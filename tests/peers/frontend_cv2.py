@@ -120,4 +120,17 @@ if "pnp" in job:
             "inliers": [] if inliers is None else inliers.ravel().tolist(),
         }
     out["pnp"] = res
+if "distortion" in job:
+    res = {}
+    for case in job["distortion"]:
+        d = np.float64(case["k"])
+        pts = np.float64(case["points"]).reshape(-1, 1, 2)
+        eye = np.eye(3)
+        # Normalised points through the model (identity camera and pose), and back.
+        dist, _ = cv2.projectPoints(
+            np.concatenate([pts, np.ones((len(pts), 1, 1))], axis=2), np.zeros(3), np.zeros(3), eye, d
+        )
+        und = cv2.undistortPoints(np.float64(case["distorted"]).reshape(-1, 1, 2), eye, d)
+        res[case["name"]] = {"distorted": dist.reshape(-1, 2).tolist(), "undistorted": und.reshape(-1, 2).tolist()}
+    out["distortion"] = res
 print(json.dumps(out))

@@ -51,15 +51,22 @@ pub fn distort(k: &[f64; 5], xn: [f64; 2]) -> [f64; 2] {
     [x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x), y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y]
 }
 
-/// The normalised coordinates that [`distort`] maps to `xd`, by OpenCV's fixed-point iteration
-/// (`undistortPoints`' default: 5 rounds).
+/// The normalised coordinates that [`distort`] maps to `xd`, by the iteration OpenCV's
+/// `undistortPoints` runs (its default: 5 rounds): remove the tangential term at the current
+/// estimate, divide by the radial factor there. Compared with OpenCV in
+/// `vision/tests/frontend.rs`.
 pub fn undistort(k: &[f64; 5], xd: [f64; 2]) -> [f64; 2] {
-    let mut x = xd;
+    let [k1, k2, p1, p2, k3] = *k;
+    let [mut x, mut y] = xd;
     for _ in 0..5 {
-        let d = distort(k, x);
-        x = [x[0] + xd[0] - d[0], x[1] + xd[1] - d[1]];
+        let r2 = x * x + y * y;
+        let radial = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3));
+        let dx = 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x);
+        let dy = p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y;
+        x = (xd[0] - dx) / radial;
+        y = (xd[1] - dy) / radial;
     }
-    x
+    [x, y]
 }
 
 #[cfg(test)]

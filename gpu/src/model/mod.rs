@@ -176,7 +176,7 @@ impl GpuModel {
                     })
                     .collect();
                 let refs: Vec<Option<&Tensor>> = host.iter().map(Option::as_ref).collect();
-                let outs = eval_node(n, &refs).map_err(err)?;
+                let outs = eval_node(n, &refs).map_err(|e| GpuError::Shape(e.to_string()))?;
                 for (name, t) in n.outputs.iter().zip(outs) {
                     env.insert(name.clone(), PVal::Host(t));
                 }
@@ -423,7 +423,7 @@ impl GpuModel {
 
 /// The WGSL executor behind the inference crate's common interface.
 impl dynaflow_infer::Executor for GpuModel {
-    fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, dynaflow_infer::reference::RunError> {
-        GpuModel::run(self, inputs).map_err(|e| dynaflow_infer::reference::RunError::Backend(e.to_string()))
+    fn run(&self, inputs: &[(&str, Tensor)]) -> Result<Vec<Tensor>, dynaflow_infer::Error> {
+        GpuModel::run(self, inputs).map_err(|e| dynaflow_infer::Error::Backend(e.to_string()))
     }
 }

@@ -7,7 +7,7 @@ use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use dynaflow_infer::onnx::{Model, Node, Op};
-use dynaflow_infer::reference::{pool_plan, slice_plan};
+use dynaflow_infer::reference::{conv_pads, pool_plan, slice_plan};
 use dynaflow_infer::tensor::{Tensor, norm_axis, reshape_shape, strides};
 
 use crate::kernels::Kind;
@@ -361,16 +361,20 @@ pub(super) fn lower(
             if xs.len() != 4 || ws.len() != 4 {
                 return Err(GpuError::Shape(format!("Conv on {xs:?} with weights {ws:?}")));
             }
-            let p = attr("pads", vec![0; 4]);
+            if attr("pads", vec![0; 4]).iter().any(|&v| v < 0) {
+                return Err(GpuError::Shape("negative Conv pads".into()));
+            }
             let st = attr("strides", vec![1, 1]);
             let dl = attr("dilations", vec![1, 1]);
             let nonneg = |v: &[i64]| v.iter().map(|&x| usize::try_from(x).ok()).collect::<Option<Vec<usize>>>();
-            let (Some(p), Some(st), Some(dl)) = (nonneg(&p), nonneg(&st), nonneg(&dl)) else {
+            let (Some(st), Some(dl)) = (nonneg(&st), nonneg(&dl)) else {
                 return Err(GpuError::Shape("negative Conv attribute".into()));
             };
-            if p.len() != 4 || st.len() != 2 || dl.len() != 2 {
+            if st.len() != 2 || dl.len() != 2 {
                 return Err(GpuError::Shape("Conv attributes of the wrong length".into()));
             }
+            let p = conv_pads(n, [xs[2], xs[3]], [ws[2], ws[3]], [st[0], st[1]], [dl[0], dl[1]])
+                .map_err(|e| GpuError::Shape(e.to_string()))?;
             let shape = ConvShape {
                 input: [xs[0], xs[1], xs[2], xs[3]],
                 kernel: [ws[0], ws[2], ws[3]],
@@ -446,7 +450,7 @@ pub(super) fn lower(
         Op::Concat => {
             let parts: Vec<(String, Vec<usize>)> = (0..args.len()).map(gpu_arg).collect::<Result<_, _>>()?;
             let first = &parts.first().ok_or_else(|| GpuError::Shape("Concat of nothing".into()))?.1;
-            let axis = norm_axis(n.int("axis", 0), first.len()).map_err(GpuError::Shape)?;
+            let axis = norm_axis(n.int("axis", 0), first.len()).map_err(|e| GpuError::Shape(e.to_string()))?;
             let mut shape = first.clone();
             if parts.iter().any(|(_, s)| {
                 s.len() != first.len() || s.iter().zip(first.iter()).enumerate().any(|(d, (a, b))| d != axis && a != b)
@@ -476,8 +480,8 @@ pub(super) fn lower(
             let starts = ints(1).ok_or_else(|| GpuError::Shape("Slice without constant starts".into()))?;
             let ends = ints(2).ok_or_else(|| GpuError::Shape("Slice without constant ends".into()))?;
             let (axes, steps) = (ints(3), ints(4));
-            let (lo, step, shape) =
-                slice_plan(&xs, &starts, &ends, axes.as_deref(), steps.as_deref()).map_err(GpuError::Shape)?;
+            let (lo, step, shape) = slice_plan(&xs, &starts, &ends, axes.as_deref(), steps.as_deref())
+                .map_err(|e| GpuError::Shape(e.to_string()))?;
             let base = lo.iter().zip(&si).map(|(l, s)| l * s).sum();
             let st: Vec<usize> = si.iter().zip(&step).map(|(s, k)| s * k).collect();
             gather(x, shape, &st, base)
@@ -487,7 +491,7 @@ pub(super) fn lower(
             if attr("pads", vec![]).iter().any(|&v| v < 0) {
                 return Err(GpuError::Shape("negative pooling attribute".into()));
             }
-            let plan = pool_plan(n, &xs).map_err(GpuError::Shape)?;
+            let plan = pool_plan(n, &xs).map_err(|e| GpuError::Shape(e.to_string()))?;
             let ([kh, kw], [sh, sw], [pt, pl, _, _], [oh, ow]) = (plan.kernel, plan.strides, plan.pads, plan.out);
             let (h, w) = (xs[2], xs[3]);
             let planes = xs[0] * xs[1];
@@ -523,7 +527,7 @@ pub(super) fn lower(
         Op::Reshape => {
             let (x, xs) = gpu_arg(0)?;
             let spec = ints(1).ok_or_else(|| GpuError::Shape("Reshape needs a constant shape".into()))?;
-            let shape = reshape_shape(&xs, &spec).map_err(GpuError::Shape)?;
+            let shape = reshape_shape(&xs, &spec).map_err(|e| GpuError::Shape(e.to_string()))?;
             Ok((Lowered::Alias { input: x }, shape))
         }
         Op::Pad => {
@@ -550,7 +554,7 @@ pub(super) fn lower(
         }
         Op::Softmax => {
             let (x, xs) = gpu_arg(0)?;
-            let axis = norm_axis(n.int("axis", -1), xs.len()).map_err(GpuError::Shape)?;
+            let axis = norm_axis(n.int("axis", -1), xs.len()).map_err(|e| GpuError::Shape(e.to_string()))?;
             let step: usize = xs[axis + 1..].iter().product();
             let total: usize = xs.iter().product();
             let rows = total / xs[axis].max(1);
@@ -565,7 +569,7 @@ pub(super) fn lower(
                 return Err(GpuError::Shape("Gather on the GPU takes one constant index".into()));
             };
             let keep_axis = index.shape() == [1];
-            let axis = norm_axis(n.int("axis", 0), xs.len()).map_err(GpuError::Shape)?;
+            let axis = norm_axis(n.int("axis", 0), xs.len()).map_err(|e| GpuError::Shape(e.to_string()))?;
             let i = ints(1).and_then(|v| v.first().copied()).unwrap_or(0);
             let i = if i < 0 { i + xs[axis] as i64 } else { i };
             if !(0..xs[axis] as i64).contains(&i) {

@@ -98,9 +98,9 @@ pub struct Layout {
 
 /// Detect a TUM RGB-D folder, a KITTI odometry sequence or an image folder; the error says
 /// what was expected.
-pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, String> {
+pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, dynaflow_datasets::Error> {
     if !dir.is_dir() {
-        return Err(format!("{}: not a folder", dir.display()));
+        return Err(dynaflow_datasets::Error::file(dir, "not a folder"));
     }
     let path = dir.display().to_string();
     let mut params = vec![("path", path)];
@@ -120,8 +120,8 @@ pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, Str
             return Ok(Layout { op: "image_folder", params });
         }
     }
-    Err(format!(
-        "{}: not a TUM RGB-D folder (rgb.txt + depth.txt), a KITTI odometry sequence (calib.txt + times.txt) or a folder of images (*.png, *.jpg)",
-        dir.display()
+    Err(dynaflow_datasets::Error::file(
+        dir,
+        "not a TUM RGB-D folder (rgb.txt + depth.txt), a KITTI odometry sequence (calib.txt + times.txt) or a folder of images (*.png, *.jpg)",
     ))
 }

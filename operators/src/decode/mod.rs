@@ -32,12 +32,14 @@ pub enum CameraParam {
 impl Param for CameraParam {
     const TYPE: ParamType = ParamType::Text {
         what: "`auto`, `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy` or `fx,fy,cx,cy,k1,k2,p1,p2,k3`",
-        check: |s| if s.trim() == "auto" { Ok(()) } else { Intrinsics::parse(s).map(|_| ()) },
+        check: |s| {
+            if s.trim() == "auto" { Ok(()) } else { Intrinsics::parse(s).map(|_| ()).map_err(|e| e.to_string()) }
+        },
     };
     fn from_json(value: &serde_json::Value, _: &Params) -> Result<Self, String> {
         match value.as_str().map(str::trim) {
             Some("auto") => Ok(CameraParam::Auto),
-            Some(s) => Intrinsics::parse(s).map(CameraParam::Given),
+            Some(s) => Intrinsics::parse(s).map(CameraParam::Given).map_err(|e| e.to_string()),
             None => Err(format!("expected intrinsics, found {value}")),
         }
     }

@@ -4,9 +4,10 @@
 
 #[cfg(feature = "wgpu")]
 use dynaflow_gpu::{Gpu, GpuModel};
+use dynaflow_infer::Error;
 use dynaflow_infer::Executor;
 use dynaflow_infer::onnx::Model;
-use dynaflow_infer::reference::{self, RunError};
+use dynaflow_infer::reference;
 use dynaflow_infer::rten_cpu::RtenModel;
 use dynaflow_infer::tensor::Tensor;
 
@@ -36,12 +37,7 @@ impl Runner {
     /// reports (which backend really runs, and why a fallback happened). A software adapter
     /// (a renderer on the CPU, 40x slower than rten on the same cores) counts as no GPU unless
     /// `allow_software` (the tests' lavapipe runs).
-    pub fn new(
-        bytes: &[u8],
-        model: &Model,
-        backend: Backend,
-        allow_software: bool,
-    ) -> Result<(Self, String), RunError> {
+    pub fn new(bytes: &[u8], model: &Model, backend: Backend, allow_software: bool) -> Result<(Self, String), Error> {
         match backend {
             Backend::Reference => {
                 reference::check_ops(model)?;
@@ -61,7 +57,7 @@ impl Runner {
     }
 
     /// Run on one named input; the model's outputs.
-    pub fn run(&self, name: &str, input: Tensor) -> Result<Vec<Tensor>, RunError> {
+    pub fn run(&self, name: &str, input: Tensor) -> Result<Vec<Tensor>, Error> {
         self.0.run(&[(name, input)])
     }
 }

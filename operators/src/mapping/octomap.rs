@@ -75,7 +75,7 @@ pub const OCTOMAP: OpSpec = OpSpec {
             max_memory_bytes: c.max_memory_mb << 20,
             ..TreeParams::default()
         };
-        let tree = OcTree::new(params, true).map_err(OpError::Input)?;
+        let tree = OcTree::new(params, true).map_err(|e| OpError::Input(e.to_string()))?;
         Ok(Instance::Transform(Box::new(Octomap { config: c, tree, insert_ms: Vec::new(), frames: 0, skipped: 0 })))
     },
 };
@@ -233,7 +233,7 @@ impl Operator for Octomap {
             if self.config.color == Colour::Class {
                 tree.recolor(class_color);
             }
-            let io_err = |e: io::OctoError| OpError::Input(e.to_string());
+            let io_err = |e: dynaflow_octomap::Error| OpError::Input(e.to_string());
             io::write_ot(&tree, &ot).map_err(io_err)?;
             io::write_bt(&tree, &bt).map_err(io_err)?;
             report["files"] = serde_json::json!([ot.display().to_string(), bt.display().to_string()]);

@@ -1,8 +1,8 @@
-//! Utility operators: pass-through, gating and mask statistics (no vision algorithm; they
-//! shape and describe frames).
+//! Utility operators: mask statistics (no vision algorithm; it describes frames).
 //!
-//! The operators that exist only to exercise the engine (`testing.*`) live in the engine's
-//! `testing` module; they are registered here with the rest.
+//! The flow operators (`passthrough`, `gate`) and the operators that exist only to exercise
+//! the engine (`testing.*`) live in the engine (`dynaflow_engine::flow`, `::testing`); they
+//! are registered here with the rest.
 
 mod transform;
 
@@ -10,7 +10,6 @@ use dynaflow_engine::op::Registry;
 
 pub(crate) fn register(r: &mut Registry) {
     dynaflow_engine::testing::register(r);
-    r.register(transform::PASSTHROUGH);
-    r.register(transform::GATE);
+    dynaflow_engine::flow::register(r);
     r.register(transform::MASK_STATS);
 }

@@ -1,68 +1,8 @@
 //! Per-frame utility operators.
 
 use dynaflow_engine::msg::{Scalars, SegmentationMask};
-use dynaflow_engine::op::{
-    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
-};
-use dynaflow_engine::params;
+use dynaflow_engine::op::{Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs};
 use std::collections::BTreeSet;
-
-use dynaflow_engine::testing::{ANY_IN, SAME_OUT, forward};
-
-// --- passthrough -----------------------------------------------------------------------
-
-pub(super) const PASSTHROUGH: OpSpec = OpSpec {
-    name: "passthrough",
-    family: "util",
-    doc: "Forwards its input unchanged. Used to measure engine overhead per hop.",
-    kind: OpKind::Transform,
-    inputs: ANY_IN,
-    outputs: SAME_OUT,
-    params: &[],
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    build: |_| Ok(Instance::Transform(Box::new(Passthrough))),
-};
-
-struct Passthrough;
-
-impl Operator for Passthrough {
-    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        forward(inputs)
-    }
-}
-
-// --- gate ------------------------------------------------------------------------------
-
-params! {
-    struct GateConfig {
-        /// period in frames
-        every: u64 [1, 1_000_000] = 5,
-        /// phase in frames
-        offset: u64 [0, 1_000_000] = 0,
-    }
-}
-
-pub(super) const GATE: OpSpec = OpSpec {
-    name: "gate",
-    family: "util",
-    doc: "Forwards frames whose number `k` satisfies `k % every == offset`; other frames carry nothing (a watermark). Models a key-frame gate.",
-    kind: OpKind::Transform,
-    inputs: ANY_IN,
-    outputs: SAME_OUT,
-    params: GateConfig::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(Gate(GateConfig::from_params(p)?)))),
-};
-
-struct Gate(GateConfig);
-
-impl Operator for Gate {
-    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
-        if inputs.seq % self.0.every == self.0.offset % self.0.every { forward(inputs) } else { Ok(Outputs::new()) }
-    }
-}
 
 // --- mask_stats ------------------------------------------------------------------------
 

@@ -22,24 +22,7 @@ use serde::Serialize;
 pub use overlay::write_overlay;
 pub use read::{Recording, Topic, read_mcap, read_mcap_bytes};
 
-/// Why a diff could not be computed.
-#[derive(Debug, thiserror::Error)]
-pub enum DiffError {
-    /// A recording is missing, unreadable or not a dynaflow MCAP.
-    #[error("{}: {message}", path.display())]
-    BadInput {
-        /// The file.
-        path: PathBuf,
-        /// What is wrong.
-        message: String,
-    },
-    /// A `--tol` argument is malformed.
-    #[error("bad tolerance `{0}`: expected PATTERN=VALUE or PATTERN:METRIC=VALUE, e.g. `/orb/*=0.5`")]
-    BadTolerance(String),
-    /// The overlay recording could not be written.
-    #[error("{0}")]
-    Overlay(String),
-}
+pub use crate::Error;
 
 /// One `--tol` entry.
 #[derive(Clone, Debug, PartialEq)]
@@ -53,19 +36,19 @@ pub struct Tolerance {
 }
 
 impl std::str::FromStr for Tolerance {
-    type Err = DiffError;
-    fn from_str(s: &str) -> Result<Self, DiffError> {
-        let (lhs, value) = s.rsplit_once('=').ok_or_else(|| DiffError::BadTolerance(s.to_owned()))?;
-        let value: f64 = value.trim().parse().map_err(|_| DiffError::BadTolerance(s.to_owned()))?;
+    type Err = Error;
+    fn from_str(s: &str) -> Result<Self, Error> {
+        let (lhs, value) = s.rsplit_once('=').ok_or_else(|| Error::BadTolerance(s.to_owned()))?;
+        let value: f64 = value.trim().parse().map_err(|_| Error::BadTolerance(s.to_owned()))?;
         if value.is_nan() || value < 0.0 {
-            return Err(DiffError::BadTolerance(s.to_owned()));
+            return Err(Error::BadTolerance(s.to_owned()));
         }
         let (pattern, metric) = match lhs.rsplit_once(':') {
             Some((p, m)) if !m.contains('/') && !m.contains('*') => (p.to_owned(), Some(m.to_owned())),
             _ => (lhs.to_owned(), None),
         };
         if pattern.is_empty() {
-            return Err(DiffError::BadTolerance(s.to_owned()));
+            return Err(Error::BadTolerance(s.to_owned()));
         }
         Ok(Self { pattern, metric, value })
     }

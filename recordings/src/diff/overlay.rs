@@ -8,7 +8,7 @@ use rerun::blueprint::{
 };
 use serde_json::Value;
 
-use super::{DiffError, Recording, metrics};
+use super::{Error, Recording, metrics};
 
 fn xy(v: &Value) -> Vec<[f32; 2]> {
     v.as_array()
@@ -81,8 +81,8 @@ fn log_run(
 }
 
 /// Write the overlay of runs `a` and `b` to `out`.
-pub fn write_overlay(a: &Recording, b: &Recording, out: &Path) -> Result<(), DiffError> {
-    let err = |e: &dyn std::fmt::Display| DiffError::Overlay(format!("{}: {e}", out.display()));
+pub fn write_overlay(a: &Recording, b: &Recording, out: &Path) -> Result<(), Error> {
+    let err = |e: &dyn std::fmt::Display| Error::Overlay(format!("{}: {e}", out.display()));
     let rec = rerun::RecordingStreamBuilder::new("dynaflow-diff").save(out).map_err(|e| err(&e))?;
     let image_topics: Vec<String> = a
         .topics

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use super::DiffError;
+use super::Error;
 
 /// One recorded topic.
 #[derive(Clone, Debug, Default)]
@@ -41,8 +41,8 @@ impl Recording {
 
 /// Read a dynaflow MCAP file. A truncated file (killed run) is read up to its last complete
 /// record and flagged; a file that is not MCAP at all, or corrupt, is an error naming it.
-pub fn read_mcap(path: &Path) -> Result<Recording, DiffError> {
-    let bad = |message: String| DiffError::BadInput { path: path.to_path_buf(), message };
+pub fn read_mcap(path: &Path) -> Result<Recording, Error> {
+    let bad = |message: String| Error::BadInput { path: path.to_path_buf(), message };
     if path.extension().is_some_and(|e| e == "rrd") {
         return Err(bad("`dynaflow diff` reads MCAP recordings; diff the `.mcap` written next to this `.rrd`".into()));
     }
@@ -51,9 +51,9 @@ pub fn read_mcap(path: &Path) -> Result<Recording, DiffError> {
 }
 
 /// [`read_mcap`] on bytes already in memory; `path` names them in errors.
-pub fn read_mcap_bytes(path: &Path, buf: &[u8]) -> Result<Recording, DiffError> {
+pub fn read_mcap_bytes(path: &Path, buf: &[u8]) -> Result<Recording, Error> {
     use crate::mcap::scan::{End, Event, scan};
-    let bad = |message: String| DiffError::BadInput { path: path.to_path_buf(), message };
+    let bad = |message: String| Error::BadInput { path: path.to_path_buf(), message };
     let mut rec = Recording { path: path.to_path_buf(), ..Recording::default() };
     let mut metadata = BTreeMap::new();
     let mut topics: BTreeMap<String, Topic> = BTreeMap::new();

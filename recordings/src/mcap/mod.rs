@@ -9,9 +9,9 @@
 //! Submodules: `schemas` (message → Foxglove JSON and the JSON Schemas), `proto` (the
 //! protobuf image schemas and wire format).
 
-pub mod proto;
-pub mod scan;
-pub mod schemas;
+pub(crate) mod proto;
+pub(crate) mod scan;
+pub(crate) mod schemas;
 
 use std::collections::{BTreeMap, HashMap};
 use std::fs::File;

@@ -111,6 +111,7 @@ pub fn to_protobuf(msg: &Message, codec: ImageCodec, cache: &EncodeCache) -> Opt
         }
         Body::Image(img) => cache
             .get_or_encode(msg, 0, || encode::image(img, codec))
+            .map_err(|e| e.to_string())
             .and_then(|e| Ok(proto::compressed_image(stamp, frame_id, &e.bytes, e.format, &payload()?))),
         Body::Depth(d) => {
             let layout = proto::RawLayout { width: d.width, height: d.height, encoding: "32FC1", step: d.width * 4 };

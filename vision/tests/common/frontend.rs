@@ -1,5 +1,6 @@
-//! Shared by `tests/frontend.rs` and `benches/frontend.rs`: the images, our side of the
-//! front-end comparison, and the OpenCV peer (`tests/peers/frontend_cv2.py`).
+//! Shared by `vision/tests/frontend.rs`, the workspace's end-to-end tests and
+//! `benches/frontend.rs`: the images, our side of the front-end comparison, and the OpenCV
+//! peer (`tests/peers/frontend_cv2.py`).
 #![allow(clippy::unwrap_used, clippy::panic, dead_code)]
 
 use std::path::{Path, PathBuf};
@@ -11,9 +12,10 @@ use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid, seed_corners};
 use dynaflow_vision::matching::{MatchConfig, match_brute_force};
 use dynaflow_vision::orb::{Distribution, OrbConfig, OrbExtractor, OrbFeatures};
 
-/// The repository root.
+/// The repository root (the workspace's folder, whichever member crate's test this is).
 pub fn repo() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+    let manifest = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    manifest.ancestors().find(|d| d.join("Cargo.lock").exists()).map_or(manifest.clone(), Path::to_path_buf)
 }
 
 /// The real Kinect pair (slambook2 ch7) and the real LK pair (slambook2 ch8).
