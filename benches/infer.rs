@@ -1,4 +1,5 @@
-//! Detector inference, every backend side by side in one run on the same real frames:
+//! Detector and segmenter inference, every backend side by side in one run on the same real
+//! frame:
 //! our reference executor, the CPU backend (rten), onnxruntime (the peer, one thread and its
 //! default threads), our wgpu executor (whatever adapter there is: lavapipe here, an NVIDIA
 //! GPU through the device tool), and, where `DYNAFLOW_GPU_ANCHOR` names
@@ -233,7 +234,103 @@ fn main() {
             }
         }
     }
+    segmenters(&img, reps, ort_python.as_deref(), &mut report);
     if let Some(p) = std::env::var_os("DYNAFLOW_BENCH_JSON") {
         std::fs::write(p, serde_json::to_string_pretty(&report).unwrap()).unwrap();
+    }
+}
+
+/// The vendored segmenters on the same frame: reference, rten, onnxruntime (1 thread and its
+/// default threads) and wgpu (a plan, or why there is none), the model alone and end to end
+/// (input resize + model + scores resized to the frame and decided per pixel).
+fn segmenters(
+    img: &image::RgbImage,
+    reps: usize,
+    python: Option<&Path>,
+    report: &mut serde_json::Map<String, serde_json::Value>,
+) {
+    use dynaflow_infer::segment::{Normalise, Segmenter, read_classes};
+    let (w, h) = (img.width() as usize, img.height() as usize);
+    println!("\n# segmenters, {w}x{h} real Kinect frame, median of {reps}");
+    for (name, file, range) in [
+        ("PP-HumanSegV2-Lite", "models/seg/pp_humansegv2_lite/pp_humansegv2_lite_256x144.onnx", Normalise::Symmetric),
+        ("MediaPipe selfie", "models/seg/mediapipe_selfie_segmentation/selfie_segmentation.onnx", Normalise::Unit),
+        (
+            "MediaPipe selfie landscape",
+            "models/seg/mediapipe_selfie_segmentation/selfie_segmentation_landscape.onnx",
+            Normalise::Unit,
+        ),
+        ("DeepLabV3-MobileNetV2 VOC", "models/seg/deeplabv3_mnv2_voc/deeplabv3_257_mv.onnx", Normalise::Symmetric),
+    ] {
+        let path = repo().join(file);
+        let (model, bytes) = load_with_bytes(&path).unwrap();
+        let seg =
+            Segmenter::new(model.clone(), read_classes(&path.with_file_name("classes.txt")).unwrap(), range).unwrap();
+        let x = seg.input(img.as_raw(), w, h);
+        let shape = x.shape().to_vec();
+        let input = || vec![(seg.input_name(), x.clone())];
+        let mut rows: Vec<(String, f64, Option<f64>, Option<f64>)> = Vec::new();
+        let mut want = Vec::new();
+        let ms = median_ms(reps.min(3), || want = run(&model, &input()).unwrap()[0].floats());
+        rows.push(("reference executor (ours, plain loops, 1 thread)".into(), ms, None, Some(0.0)));
+        let rten = RtenModel::load(bytes).unwrap();
+        let mut got = Vec::new();
+        let ms = median_ms(reps, || got = rten.run(&input()).unwrap());
+        let e2e = median_ms(reps, || {
+            let out = rten.run(&[(seg.input_name(), seg.input(img.as_raw(), w, h))]).unwrap();
+            seg.decode(&out[0], w, h, 0.5, false).unwrap();
+        });
+        let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+        rows.push((format!("cpu: rten 0.27 ({threads} threads)"), ms, Some(e2e), Some(max_diff(&got, &want))));
+        if let Some(py) = python
+            && let Some((theirs, v)) = onnxruntime(py, &path, &x.floats(), &shape, reps)
+        {
+            let d = theirs.iter().zip(&want).map(|(a, b)| f64::from((a - b).abs())).fold(0.0, f64::max);
+            let version = v["version"].as_str().unwrap_or("?").to_string();
+            rows.push((
+                format!("onnxruntime {version} CPU, 1 thread (peer)"),
+                v["ms_1thread"].as_f64().unwrap_or(f64::NAN),
+                None,
+                Some(d),
+            ));
+            rows.push((
+                format!("onnxruntime {version} CPU, default threads (peer)"),
+                v["ms_threads"].as_f64().unwrap_or(f64::NAN),
+                None,
+                Some(d),
+            ));
+        }
+        let wgpu = match Gpu::new() {
+            Ok(gpu) => match GpuModel::new(gpu, &model) {
+                Ok(g) => {
+                    let mut got = Vec::new();
+                    let ms = median_ms(reps, || got = g.run(&input()).unwrap());
+                    rows.push((format!("wgpu (ours): {}", g.adapter()), ms, None, Some(max_diff(&got, &want))));
+                    None
+                }
+                Err(e) => Some(format!("no wgpu row: the plan refuses the model ({e})")),
+            },
+            Err(e) => Some(format!("no wgpu row: {e}")),
+        };
+        println!("\n## {name} {}x{} ({} classes)\n", shape[3], shape[2], seg.classes().len());
+        println!(
+            "| backend | model ms/frame | end to end ms (resize + model + per-pixel decision at {w}x{h}) | max abs diff vs reference |"
+        );
+        println!("|---|---|---|---|");
+        for (b, ms, e2e, d) in &rows {
+            let e2e = e2e.map_or("".into(), |v| format!("{v:.2}"));
+            let d = d.map_or("".into(), |v| format!("{v:.1e}"));
+            println!("| {b} | {ms:.2} | {e2e} | {d} |");
+        }
+        if let Some(why) = &wgpu {
+            println!("\n{why}");
+        }
+        report.insert(
+            name.into(),
+            json!({
+                "rows": rows.iter().map(|(b, ms, e2e, d)| json!({"backend": b, "ms": ms, "end_to_end_ms": e2e, "max_diff": d})).collect::<Vec<_>>(),
+                "wgpu": wgpu,
+            }),
+        );
     }
 }

@@ -78,6 +78,8 @@ enum Command {
     Eval(commands::eval::EvalArgs),
     /// Run an ONNX detector on images: detections per image as JSON lines.
     Infer(commands::infer::InferArgs),
+    /// Run an ONNX segmenter on images: per image a class-id PNG and a JSON of class pixel counts.
+    Segment(commands::segment::SegmentArgs),
     /// Summarise an OctoMap file (.ot, .bt) as JSON; `--plot` draws it from above.
     Octree(commands::octree::OctreeArgs),
     /// Generate a semi-synthetic dynamic RGB-D sequence in the TUM layout, with ground truth.
@@ -227,6 +229,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => commands::eval::eval(&args),
         Command::Synth(args) => commands::synth::synth(&args),
         Command::Infer(args) => commands::infer::infer(&args),
+        Command::Segment(args) => commands::segment::segment(&args),
         Command::Bench(args) => commands::bench::bench(&args),
         Command::Octree(args) => commands::octree::octree(&args),
         Command::View { file } => commands::view::view(&file),

@@ -487,3 +487,60 @@ fn a_detector_of_the_other_family_is_refused_at_load() {
         assert!(e.contains("det") && e.contains(shapes), "{e}");
     }
 }
+
+/// The vendored segmenters: model file, class count, input range.
+fn segmenters() -> Vec<(PathBuf, usize, dynaflow_infer::segment::Normalise)> {
+    use dynaflow_infer::segment::Normalise;
+    let seg = common::repo().join("models/seg");
+    vec![
+        (seg.join("pp_humansegv2_lite/pp_humansegv2_lite_256x144.onnx"), 2, Normalise::Symmetric),
+        (seg.join("mediapipe_selfie_segmentation/selfie_segmentation.onnx"), 2, Normalise::Unit),
+        (seg.join("mediapipe_selfie_segmentation/selfie_segmentation_landscape.onnx"), 2, Normalise::Unit),
+        (seg.join("deeplabv3_mnv2_voc/deeplabv3_257_mv.onnx"), 21, Normalise::Symmetric),
+    ]
+}
+
+#[test]
+fn segmenters_on_the_reference_executor_and_rten_equal_onnxruntime_on_real_images() {
+    use dynaflow_infer::segment::{Segmenter, read_classes};
+    let Some(python) = frontend::python_with(
+        "onnxruntime",
+        "onnxruntime, numpy",
+        "infer: segmenters on the reference executor and rten vs onnxruntime",
+    ) else {
+        return;
+    };
+    let dir = common::TempDir::new("seg-ort");
+    // Two real Kinect frames and a synthetic frame with two people in view.
+    let mut images: Vec<(String, Vec<u8>, usize, usize)> =
+        [frontend::ch7()[0].clone(), common::repo().join("tests/fixtures/slambook2_dense_rgbd/color/1.png")]
+            .iter()
+            .map(|p| {
+                let (px, w, h) = rgb(p);
+                (p.display().to_string(), px, w, h)
+            })
+            .collect();
+    let g = dynaflow_datasets::synth::Generator::new(dynaflow_datasets::synth::SynthConfig::default());
+    let k = g.config().intrinsics.clone();
+    images.push(("synthetic frame 40".into(), g.frame(40, false).rgb, k.width as usize, k.height as usize));
+    for (path, classes, range) in segmenters() {
+        let model = load(&path).unwrap();
+        let names = read_classes(&path.with_file_name("classes.txt")).unwrap();
+        assert_eq!(names.len(), classes, "{}", path.display());
+        let seg = Segmenter::new(model.clone(), names, range).unwrap();
+        let rten = RtenModel::load(std::fs::read(&path).unwrap()).unwrap();
+        for (img, px, w, h) in &images {
+            let input = seg.input(px, *w, *h);
+            let shape = input.shape().to_vec();
+            let theirs = ort(&python, &path, &input.floats(), &shape, dir.path());
+            let ours = run(&model, &[(seg.input_name(), input.clone())]).unwrap();
+            let max = max_abs(&ours[0].floats(), &theirs[0]);
+            eprintln!("{} {img}: max |reference - onnxruntime| = {max:e}", path.display());
+            assert!(max <= 1e-3, "reference {} {img}: {max}", path.display());
+            let got = rten.run(&[(seg.input_name(), input)]).unwrap();
+            let max = max_abs(&got[0].floats(), &theirs[0]);
+            eprintln!("{} {img}: max |rten - onnxruntime| = {max:e}", path.display());
+            assert!(max <= 1e-3, "rten {} {img}: {max}", path.display());
+        }
+    }
+}

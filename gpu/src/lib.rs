@@ -43,7 +43,7 @@ pub enum GpuError {
 }
 
 /// A wgpu device and queue.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub struct Gpu {
     /// The device.
     pub device: wgpu::Device,

@@ -71,3 +71,37 @@ fn fastestdet_on_the_gpu_equals_the_reference_on_real_images() {
         assert!(d <= 1e-3, "{img}: {d}");
     }
 }
+
+#[test]
+fn the_segmenters_on_the_gpu_equal_the_reference_on_real_images() {
+    use dynaflow_infer::segment::{Normalise, Segmenter, read_classes};
+    let Some(gpu) = gpu(
+        "gpu::models::the_segmenters_on_the_gpu_equal_the_reference_on_real_images: GPU kernels vs the reference executor",
+    ) else {
+        return;
+    };
+    let seg = repo().join("models/seg");
+    for (file, range) in [
+        ("pp_humansegv2_lite/pp_humansegv2_lite_256x144.onnx", Normalise::Symmetric),
+        ("mediapipe_selfie_segmentation/selfie_segmentation.onnx", Normalise::Unit),
+        ("mediapipe_selfie_segmentation/selfie_segmentation_landscape.onnx", Normalise::Unit),
+        ("deeplabv3_mnv2_voc/deeplabv3_257_mv.onnx", Normalise::Symmetric),
+    ] {
+        let path = seg.join(file);
+        let model = load(&path).unwrap();
+        let s =
+            Segmenter::new(model.clone(), read_classes(&path.with_file_name("classes.txt")).unwrap(), range).unwrap();
+        let on_gpu = GpuModel::new(gpu.clone(), &model).unwrap_or_else(|e| panic!("{file}: {e}"));
+        eprintln!("{file}: plan {:?}", on_gpu.stats());
+        for img in ["tests/fixtures/slambook2_rgbd_pair/rgb/1.png", "tests/fixtures/slambook2_dense_rgbd/color/1.png"] {
+            let rgb = image::open(repo().join(img)).unwrap().into_rgb8();
+            let input = s.input(rgb.as_raw(), rgb.width() as usize, rgb.height() as usize);
+            let want = run(&model, &[(s.input_name(), input.clone())]).unwrap();
+            let got = on_gpu.run(&[(s.input_name(), input)]).unwrap();
+            assert_eq!(got[0].shape(), want[0].shape(), "{file}");
+            let d = got[0].floats().iter().zip(want[0].floats()).map(|(a, b)| (a - b).abs()).fold(0.0f32, f32::max);
+            eprintln!("{file} {img}: max |gpu - reference| = {d:e}");
+            assert!(d <= 1e-3, "{file} {img}: {d}");
+        }
+    }
+}

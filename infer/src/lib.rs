@@ -10,12 +10,15 @@
 //!   by measurement).
 //! - `Error`: the crate's one error type (reading, checking and running a model).
 //! - `detect`: detector pre- and post-processing: YOLOX letterbox, decoding, class-wise NMS.
+//! - `segment`: segmenter pre- and post-processing: the input contract, class scores resized to
+//!   the frame and decided per pixel, dilation, instances by connected components.
 
 pub mod detect;
 mod error;
 pub mod onnx;
 pub mod reference;
 pub mod rten_cpu;
+pub mod segment;
 pub mod tensor;
 
 pub use error::Error;

@@ -9,6 +9,7 @@ mod conv_transpose;
 mod pool;
 mod resize;
 
+pub use conv_transpose::conv_transpose_geometry;
 pub use pool::{PoolPlan, pool_plan};
 
 use crate::onnx::{Attribute, Model, Node, Op};

@@ -46,6 +46,7 @@ pub fn registry() -> Registry {
     r.register(inference::DETECT);
     r.register(inference::BOX_TO_MASK);
     r.register(inference::KEYFRAME_GATE);
+    r.register(inference::SEGMENT);
     r.register(mapping::OCTOMAP);
     r
 }

@@ -40,7 +40,7 @@ pub struct InferArgs {
 
 /// A clap parser for the names of a graph parameter's enum, so the flag and the parameter
 /// take the same values.
-fn names<T: Clone + Send + Sync + 'static>(
+pub(super) fn names<T: Clone + Send + Sync + 'static>(
     names: &'static [&'static str],
     from: fn(&str) -> Option<T>,
 ) -> impl clap::builder::TypedValueParser<Value = T> {

@@ -8,6 +8,7 @@ pub mod infer;
 pub mod octree;
 pub mod ops;
 pub mod run;
+pub mod segment;
 pub mod synth;
 pub mod validate;
 pub mod view;

@@ -1,5 +1,7 @@
-// Element-wise a (op) b over equal-length buffers: op 0 add, 1 multiply.
-struct Params { len: u32, op: u32, pad0: u32, pad1: u32 }
+// Element-wise a (op) b: op 0 add, 1 multiply, 2 subtract, 3 divide. `b` is as long as `a`
+// (bmode 0), one value per channel of NCHW `a` (bmode 1: `[1, C, 1, 1]`, `plane` = H x W,
+// `channels` = C) or one value (bmode 2).
+struct Params { len: u32, op: u32, bmode: u32, plane: u32, channels: u32, pad0: u32, pad1: u32, pad2: u32 }
 
 @group(0) @binding(0) var<storage, read> a: array<f32>;
 @group(0) @binding(1) var<storage, read> b: array<f32>;
@@ -14,9 +16,18 @@ fn main(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) 
     if (i >= p.len) {
         return;
     }
-    if (p.op == 0u) {
-        y[off.z + i] = a[off.x + i] + b[off.y + i];
-    } else {
-        y[off.z + i] = a[off.x + i] * b[off.y + i];
+    var j = i;
+    if (p.bmode == 1u) {
+        j = (i / p.plane) % p.channels;
+    } else if (p.bmode == 2u) {
+        j = 0u;
+    }
+    let u = a[off.x + i];
+    let v = b[off.y + j];
+    switch p.op {
+        case 1u: { y[off.z + i] = u * v; }
+        case 2u: { y[off.z + i] = u - v; }
+        case 3u: { y[off.z + i] = u / v; }
+        default: { y[off.z + i] = u + v; }
     }
 }

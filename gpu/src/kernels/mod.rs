@@ -92,9 +92,11 @@ pub(crate) enum Kind {
     ConvGemm32,
     /// The same with 16 channels x 256 pixels a tile, for layers of at most 16 channels.
     ConvGemm16,
-    /// Sigmoid / ReLU not fused into a convolution.
+    /// Transposed convolution (a gather per output element).
+    ConvTranspose,
+    /// Sigmoid / ReLU not fused into a convolution; hard sigmoid, hard swish, clip.
     Unary,
-    /// Add / Mul of equal shapes.
+    /// Add / Mul / Sub / Div of equal shapes, or with one value or one per channel.
     Binary,
     /// Strided gather: Slice, Transpose, Gather of one index.
     Gather,
@@ -102,7 +104,7 @@ pub(crate) enum Kind {
     CopyBlock,
     /// Max and average pooling.
     Pool,
-    /// Nearest resize.
+    /// Nearest (asymmetric, floor) and bilinear resize.
     Resize,
     /// Constant pad.
     Pad,
@@ -118,6 +120,7 @@ impl Kind {
             Kind::ConvGemm => "conv_gemm",
             Kind::ConvGemm32 => "conv_gemm_32x128",
             Kind::ConvGemm16 => "conv_gemm_16x256",
+            Kind::ConvTranspose => "conv_transpose",
             Kind::Unary => "unary",
             Kind::Binary => "binary",
             Kind::Gather => "gather",
@@ -141,6 +144,7 @@ impl Kind {
                         .replace("const TN: u32 = 64u;", &format!("const TN: u32 = {tn}u;")),
                 );
             }
+            Kind::ConvTranspose => include_str!("conv_transpose.wgsl"),
             Kind::Unary => include_str!("unary.wgsl"),
             Kind::Binary => include_str!("binary.wgsl"),
             Kind::Gather => include_str!("gather.wgsl"),

@@ -36,9 +36,15 @@ use plan::*;
 pub const GPU_OPS: &[&str] = &[
     "Add",
     "AveragePool",
+    "Clip",
     "Concat",
     "Conv",
+    "ConvTranspose",
+    "Div",
     "Gather",
+    "GlobalAveragePool",
+    "HardSigmoid",
+    "HardSwish",
     "MaxPool",
     "Mul",
     "Pad",
@@ -48,6 +54,7 @@ pub const GPU_OPS: &[&str] = &[
     "Sigmoid",
     "Slice",
     "Softmax",
+    "Sub",
     "Transpose",
 ];
 /// Ops run on the host (shape arithmetic on constants).
@@ -182,12 +189,13 @@ impl GpuModel {
                 }
                 continue;
             }
-            let mut weight = |name: &str, len: usize| -> Arc<wgpu::Buffer> {
+            let mut weight = |name: &str, len: usize, given: Option<&[f32]>| -> Arc<wgpu::Buffer> {
                 if let Some(b) = weights.get(name) {
                     return b.clone();
                 }
-                let data = match model.initializers.get(name) {
-                    Some(t) if !t.floats.is_empty() => t.floats.clone(),
+                let data = match (given, model.initializers.get(name)) {
+                    (Some(d), _) => d.to_vec(),
+                    (None, Some(t)) if !t.floats.is_empty() => t.floats.clone(),
                     _ => vec![0.0; len],
                 };
                 weight_bytes += 4 * data.len();

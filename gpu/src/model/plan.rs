@@ -7,7 +7,7 @@ use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use dynaflow_infer::onnx::{Model, Node, Op};
-use dynaflow_infer::reference::{conv_pads, pool_plan, slice_plan};
+use dynaflow_infer::reference::{conv_pads, conv_transpose_geometry, pool_plan, slice_plan};
 use dynaflow_infer::tensor::{Tensor, norm_axis, reshape_shape, strides};
 
 use crate::kernels::Kind;
@@ -313,12 +313,16 @@ pub(super) fn dispatches(
     Ok((out, in_place, copied))
 }
 
+/// Uploads a weight once by name: `(name, length, values)`; without values the model's
+/// initializer of that name, or zeros of that length (a missing bias).
+pub(super) type WeightUpload<'a> = dyn FnMut(&str, usize, Option<&[f32]>) -> Arc<wgpu::Buffer> + 'a;
+
 /// The lowering of one float node: what it becomes and its output shape.
 pub(super) fn lower(
     n: &Node,
     act: Activation,
     args: &[Option<(&str, &PVal)>],
-    weight: &mut dyn FnMut(&str, usize) -> Arc<wgpu::Buffer>,
+    weight: &mut WeightUpload<'_>,
 ) -> Result<(Lowered, Vec<usize>), GpuError> {
     let gpu_arg = |i: usize| -> Result<(String, Vec<usize>), GpuError> {
         match args.get(i).copied().flatten() {
@@ -387,10 +391,12 @@ pub(super) fn lower(
             if ws[1] * shape.group != xs[1] {
                 return Err(GpuError::Shape(format!("Conv weights {ws:?} do not fit input {xs:?}")));
             }
-            let w = weight(&wname, 0);
+            // Weights and bias as the host holds them (an initializer or a `Constant` node's
+            // value); no bias is zeros.
+            let w = weight(&wname, 0, host(1).map(Tensor::floats).as_deref());
             let bias_name =
                 n.inputs.get(2).filter(|b| !b.is_empty()).cloned().unwrap_or_else(|| format!("{wname}#zero-bias"));
-            let b = weight(&bias_name, ws[0]);
+            let b = weight(&bias_name, ws[0], host(2).map(Tensor::floats).as_deref());
             let out = vec![xs[0], ws[0], oh, ow];
             // Both convolution kernels share these sixteen words; the direct one adds four.
             let k = xs[1] * ws[2] * ws[3];
@@ -428,24 +434,124 @@ pub(super) fn lower(
             };
             Ok((Lowered::Kernel { kind, inputs: vec![x], weights: vec![w, b], words, grid }, out))
         }
-        Op::Sigmoid | Op::Relu => {
+        Op::Sigmoid | Op::Relu | Op::HardSigmoid | Op::HardSwish | Op::Clip => {
             let (x, xs) = gpu_arg(0)?;
             let len: usize = xs.iter().product();
-            let op = if n.op == Op::Sigmoid { 2 } else { 3 };
-            Ok((kernel(Kind::Unary, vec![x], vec![u32s(&[len])?[0], op, 0, 0], len), xs))
+            let bound = |i: usize, default: f32| -> Result<f32, GpuError> {
+                match args.get(i).copied().flatten() {
+                    None => Ok(default),
+                    Some(_) => host(i)
+                        .and_then(|t| t.floats().first().copied())
+                        .ok_or_else(|| GpuError::Shape("Clip bounds must be constants on the GPU".into())),
+                }
+            };
+            let (op, a, b) = match n.op {
+                Op::Sigmoid => (2, 0.0, 0.0),
+                Op::Relu => (3, 0.0, 0.0),
+                Op::HardSigmoid => (4, n.float("alpha", 0.2), n.float("beta", 0.5)),
+                Op::HardSwish => (5, 0.0, 0.0),
+                _ => (6, bound(1, f32::NEG_INFINITY)?, bound(2, f32::INFINITY)?),
+            };
+            Ok((kernel(Kind::Unary, vec![x], vec![u32s(&[len])?[0], op, a.to_bits(), b.to_bits()], len), xs))
         }
-        Op::Add | Op::Mul => {
+        Op::Add | Op::Mul | Op::Sub | Op::Div => {
             let (a, sa) = gpu_arg(0)?;
-            let (b, sb) = gpu_arg(1)?;
-            if sa != sb {
+            let op = match n.op {
+                Op::Add => 0,
+                Op::Mul => 1,
+                Op::Sub => 2,
+                _ => 3,
+            };
+            let len: usize = sa.iter().product();
+            // `b`: a GPU value, or a constant uploaded once as a weight.
+            let (inputs, weights, sb) = match (gpu_arg(1), host(1)) {
+                (Ok((b, sb)), _) => (vec![a, b], Vec::new(), sb),
+                (Err(_), Some(t)) => {
+                    let name = n.inputs.get(1).cloned().unwrap_or_default();
+                    let data = t.floats();
+                    (vec![a], vec![weight(&format!("{name}#operand"), data.len(), Some(&data))], t.shape().to_vec())
+                }
+                (Err(e), None) => return Err(e),
+            };
+            let count: usize = sb.iter().product();
+            let per_channel = sa.len() == 4 && sb.len() == 4 && sb == [1, sa[1], 1, 1] && sa[0] == 1;
+            let (bmode, plane, channels) = if sb == sa {
+                (0, 0, 0)
+            } else if count == 1 && sb.len() <= sa.len() {
+                (2, 0, 0)
+            } else if per_channel {
+                (1, sa[2] * sa[3], sa[1])
+            } else {
                 return Err(GpuError::Shape(format!(
-                    "{} of {sa:?} and {sb:?}: broadcasting is not on the GPU yet",
+                    "{} of {sa:?} and {sb:?}: only equal shapes, one value or one per channel broadcast on the GPU",
                     n.op
                 )));
+            };
+            let words = u32s(&[len, op, bmode, plane, channels, 0, 0, 0])?;
+            Ok((Lowered::Kernel { kind: Kind::Binary, inputs, weights, words, grid: Grid::Flat(len) }, sa))
+        }
+        Op::GlobalAveragePool => {
+            let (x, xs) = gpu_arg(0)?;
+            if xs.len() != 4 || xs[2] * xs[3] == 0 {
+                return Err(GpuError::Shape(format!("GlobalAveragePool of {xs:?}")));
             }
-            let len: usize = sa.iter().product();
-            let op = u32::from(n.op == Op::Mul);
-            Ok((kernel(Kind::Binary, vec![a, b], vec![u32s(&[len])?[0], op, 0, 0], len), sa))
+            let planes = xs[0] * xs[1];
+            // The pooling kernel with one window over the whole plane (average, no padding).
+            let words = u32s(&[planes, xs[2], xs[3], 1, 1, xs[2], xs[3], 1, 1, 0, 0, 1])?;
+            Ok((kernel(Kind::Pool, vec![x], words, planes), vec![xs[0], xs[1], 1, 1]))
+        }
+        Op::ConvTranspose => {
+            let (x, xs) = gpu_arg(0)?;
+            let wname = n.inputs.get(1).cloned().unwrap_or_default();
+            let ws = match host(1) {
+                Some(t) if matches!(t, Tensor::F32 { .. }) => t.shape().to_vec(),
+                _ => return Err(GpuError::Shape("ConvTranspose weights must be float initializers".into())),
+            };
+            if xs.len() != 4 || ws.len() != 4 || ws[0] != xs[1] {
+                return Err(GpuError::Shape(format!("ConvTranspose of {xs:?} with weights {ws:?}")));
+            }
+            // The shape and padding as the reference executor computes them.
+            let (oh, ow, pt, pl) =
+                conv_transpose_geometry(n, [xs[0], xs[1], xs[2], xs[3]], [ws[0], ws[1], ws[2], ws[3]])
+                    .map_err(|e| GpuError::Shape(e.to_string()))?;
+            let group = n.int("group", 1).max(1) as usize;
+            let m = ws[1] * group;
+            let st = attr("strides", vec![1, 1]);
+            let dl = attr("dilations", vec![1, 1]);
+            let at = |v: &[i64], i: usize| v.get(i).copied().unwrap_or(1).max(1) as usize;
+            let w = weight(&wname, 0, host(1).map(Tensor::floats).as_deref());
+            let bias_name =
+                n.inputs.get(2).filter(|b| !b.is_empty()).cloned().unwrap_or_else(|| format!("{wname}#zero-bias"));
+            let b = weight(&bias_name, m, host(2).map(Tensor::floats).as_deref());
+            let words = u32s(&[
+                xs[1],
+                xs[2],
+                xs[3],
+                m,
+                oh,
+                ow,
+                ws[2],
+                ws[3],
+                at(&st, 0),
+                at(&st, 1),
+                pt,
+                pl,
+                at(&dl, 0),
+                at(&dl, 1),
+                xs[0],
+                group,
+            ])?;
+            let len = xs[0] * m * oh * ow;
+            Ok((
+                Lowered::Kernel {
+                    kind: Kind::ConvTranspose,
+                    inputs: vec![x],
+                    weights: vec![w, b],
+                    words,
+                    grid: Grid::Flat(len),
+                },
+                vec![xs[0], m, oh, ow],
+            ))
         }
         Op::Concat => {
             let parts: Vec<(String, Vec<usize>)> = (0..args.len()).map(gpu_arg).collect::<Result<_, _>>()?;
@@ -511,17 +617,44 @@ pub(super) fn lower(
                 n.string("coordinate_transformation_mode", "half_pixel"),
                 n.string("nearest_mode", ""),
             );
-            if xs.len() != 4 || mode.0 != "nearest" || mode.1 != "asymmetric" || mode.2 != "floor" {
-                return Err(GpuError::Shape(format!("Resize {mode:?} is not on the GPU (nearest, asymmetric, floor)")));
+            let kind = match (mode.0.as_str(), mode.1.as_str(), mode.2.as_str()) {
+                ("nearest", "asymmetric", "floor") => 0,
+                ("linear", "half_pixel", _) => 1,
+                ("linear", "align_corners", _) => 2,
+                ("linear", "asymmetric", _) => 3,
+                ("linear", "pytorch_half_pixel", _) => 4,
+                _ => {
+                    return Err(GpuError::Shape(format!(
+                        "Resize {mode:?} is not on the GPU (nearest asymmetric floor, or linear)"
+                    )));
+                }
+            };
+            if xs.len() != 4 || xs.contains(&0) {
+                return Err(GpuError::Shape(format!("Resize of {xs:?}")));
             }
-            let sc = scales.ok_or_else(|| GpuError::Shape("Resize needs constant scales on the GPU".into()))?;
-            if sc.iter().any(|s| !(s.is_finite() && *s > 0.0)) {
-                return Err(GpuError::Shape(format!("Resize scales {sc:?}")));
+            let sizes: Option<Vec<i64>> = ints(3).filter(|v| v.len() == 4);
+            let (oh, ow, fy, fx) = match (sizes, scales) {
+                (Some(z), _) if z[0] as usize == xs[0] && z[1] as usize == xs[1] && z[2] > 0 && z[3] > 0 => {
+                    let (oh, ow) = (z[2] as usize, z[3] as usize);
+                    (oh, ow, oh as f32 / xs[2] as f32, ow as f32 / xs[3] as f32)
+                }
+                (None, Some(sc))
+                    if sc[0] == 1.0
+                        && sc[1] == 1.0
+                        && sc[2] > 0.0
+                        && sc[3] > 0.0
+                        && sc.iter().all(|s| s.is_finite()) =>
+                {
+                    ((xs[2] as f32 * sc[2]).floor() as usize, (xs[3] as f32 * sc[3]).floor() as usize, sc[2], sc[3])
+                }
+                other => return Err(GpuError::Shape(format!("Resize sizes/scales {other:?} on the GPU"))),
+            };
+            if oh == 0 || ow == 0 {
+                return Err(GpuError::Shape("Resize to nothing".into()));
             }
-            let (oh, ow) = ((xs[2] as f32 * sc[2]).floor() as usize, (xs[3] as f32 * sc[3]).floor() as usize);
             let planes = xs[0] * xs[1];
             let mut words = u32s(&[planes, xs[2], xs[3], oh, ow])?;
-            words.extend([sc[2].to_bits(), sc[3].to_bits(), 0]);
+            words.extend([fy.to_bits(), fx.to_bits(), kind]);
             Ok((kernel(Kind::Resize, vec![x], words, planes * oh * ow), vec![xs[0], xs[1], oh, ow]))
         }
         Op::Reshape => {

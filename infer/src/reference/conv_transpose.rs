@@ -3,6 +3,7 @@
 //! definition of the op rather than a fast form of it.
 
 use super::f32_arg;
+use crate::Error;
 use crate::onnx::Node;
 use crate::tensor::Tensor;
 
@@ -39,6 +40,21 @@ fn axis(
     Ok((begin, end, out))
 }
 
+/// Output height and width and begin padding (top, left) of `ConvTranspose` node `n` on an
+/// input of shape `x` with weights of shape `w` (C_in x M/group x kH x kW): what the reference
+/// computes and the GPU planner takes.
+pub fn conv_transpose_geometry(n: &Node, x: [usize; 4], w: [usize; 4]) -> Result<(usize, usize, usize, usize), Error> {
+    if x.contains(&0) || w.contains(&0) {
+        return Err(Error::Shape(format!("ConvTranspose of {x:?} with weights {w:?}")));
+    }
+    let st = n.ints("strides").map_or(vec![1, 1], <[i64]>::to_vec);
+    let dl = n.ints("dilations").map_or(vec![1, 1], <[i64]>::to_vec);
+    let at = |v: &[i64], i: usize| v.get(i).copied().unwrap_or(1).max(1) as usize;
+    let (pt, _, oh) = axis(n, 0, x[2], w[2], at(&st, 0), at(&dl, 0)).map_err(Error::Shape)?;
+    let (pl, _, ow) = axis(n, 1, x[3], w[3], at(&st, 1), at(&dl, 1)).map_err(Error::Shape)?;
+    Ok((oh, ow, pt, pl))
+}
+
 pub(super) fn conv_transpose(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
     let (xs, x) = f32_arg(args, 0)?;
     let (ws, w) = f32_arg(args, 1)?;
@@ -62,10 +78,9 @@ pub(super) fn conv_transpose(n: &Node, args: &[Option<&Tensor>]) -> Result<Tenso
     }
     let st = n.ints("strides").map_or(vec![1, 1], <[i64]>::to_vec);
     let dl = n.ints("dilations").map_or(vec![1, 1], <[i64]>::to_vec);
-    let (sh, sw) = (st.first().copied().unwrap_or(1).max(1) as usize, st.get(1).copied().unwrap_or(1).max(1) as usize);
-    let (dh, dw) = (dl.first().copied().unwrap_or(1).max(1) as usize, dl.get(1).copied().unwrap_or(1).max(1) as usize);
-    let (pt, _, oh) = axis(n, 0, h, kh, sh, dh)?;
-    let (pl, _, ow) = axis(n, 1, wd, kw, sw, dw)?;
+    let at = |v: &[i64], i: usize| v.get(i).copied().unwrap_or(1).max(1) as usize;
+    let (sh, sw, dh, dw) = (at(&st, 0), at(&st, 1), at(&dl, 0), at(&dl, 1));
+    let (oh, ow, pt, pl) = conv_transpose_geometry(n, [nb, c, h, wd], [cin, mg, kh, kw])?;
     let cg = c / group;
     let mut out = vec![0.0f32; nb * m * oh * ow];
     for b in 0..nb {

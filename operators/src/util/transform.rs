@@ -1,7 +1,11 @@
 //! Per-frame utility operators.
 
+use crate::inference::{ClassName, class_list};
 use dynaflow_engine::msg::{Scalars, SegmentationMask};
-use dynaflow_engine::op::{Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs};
+use dynaflow_engine::op::{
+    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
+};
+use dynaflow_engine::params;
 use std::collections::BTreeSet;
 
 // --- mask_stats ------------------------------------------------------------------------
@@ -34,5 +38,103 @@ impl Operator for MaskStats {
             m.instances.as_ref().map_or(0, |i| i.iter().filter(|&&v| v != 0).collect::<BTreeSet<_>>().len());
         let values = vec![("dynamic_fraction".into(), fraction), ("instances".into(), instances as f64)];
         Ok(Outputs::new().send(&STATS, msg.header.clone(), Scalars { values }))
+    }
+}
+
+// --- mask_iou --------------------------------------------------------------------------
+
+params! {
+    struct IouConfig {
+        /// classes of `mask` that count as foreground (matched by name); every non-zero class of `truth` does
+        classes: Vec<ClassName> = class_list(&["person"]),
+    }
+}
+
+pub(super) const MASK_IOU: OpSpec = OpSpec {
+    name: "mask_iou",
+    family: "util",
+    doc: "Agreement of a mask with a reference mask (the generator's `gt_mask`): per frame the intersection over union, precision and recall of the `classes` pixels against the reference's non-zero pixels; the node report gives the run's pooled values (summed intersections over summed unions) and the per-frame mean. An evaluation: it reads ground truth, so its outputs are marked so.",
+    kind: OpKind::Transform,
+    inputs: &[IOU_MASK.spec, TRUTH.spec],
+    outputs: &[IOU.spec],
+    params: IouConfig::PARAMS,
+    cpu_heavy: false,
+    ground_truth_outputs: None,
+    build: |p: &Params| {
+        Ok(Instance::Transform(Box::new(MaskIou {
+            config: IouConfig::from_params(p)?,
+            sums: [0; 4],
+            frames: 0,
+            iou_sum: 0.0,
+        })))
+    },
+};
+
+const IOU_MASK: In<SegmentationMask> =
+    In::required("mask", "the mask to score (a segmenter's, `box_to_mask`'s)").with_role(InputRole::Statistics);
+const TRUTH: In<SegmentationMask> =
+    In::required("truth", "the reference mask, same size (non-zero = foreground)").with_role(InputRole::Statistics);
+const IOU: Out<Scalars> = Out::new(
+    "iou",
+    "`iou`, `precision`, `recall` (1 where nothing is to be found and nothing is), `mask_pixels`, `truth_pixels`",
+);
+
+struct MaskIou {
+    config: IouConfig,
+    /// Intersection, union, mask and truth pixels over the run.
+    sums: [u64; 4],
+    frames: u64,
+    iou_sum: f64,
+}
+
+impl Operator for MaskIou {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (msg, m) = IOU_MASK.require(inputs)?;
+        let (_, t) = TRUTH.require(inputs)?;
+        if (m.width, m.height) != (t.width, t.height) {
+            return Err(OpError::Input(format!(
+                "mask is {}x{} but truth is {}x{}",
+                m.width, m.height, t.width, t.height
+            )));
+        }
+        let fg: Vec<bool> =
+            m.class_names.iter().map(|n| self.config.classes.iter().any(|c| c.as_str() == &**n)).collect();
+        let [mut inter, mut union, mut mp, mut tp] = [0u64; 4];
+        for (&c, &g) in m.classes.iter().zip(&t.classes) {
+            let a = fg.get(usize::from(c)).copied().unwrap_or(false);
+            let b = g != 0;
+            inter += u64::from(a && b);
+            union += u64::from(a || b);
+            mp += u64::from(a);
+            tp += u64::from(b);
+        }
+        let ratio = |n: u64, d: u64| if d == 0 { 1.0 } else { n as f64 / d as f64 };
+        let iou = ratio(inter, union);
+        for (s, v) in self.sums.iter_mut().zip([inter, union, mp, tp]) {
+            *s += v;
+        }
+        self.frames += 1;
+        self.iou_sum += iou;
+        let values = vec![
+            ("iou".into(), iou),
+            ("precision".into(), ratio(inter, mp)),
+            ("recall".into(), ratio(inter, tp)),
+            ("mask_pixels".into(), mp as f64),
+            ("truth_pixels".into(), tp as f64),
+        ];
+        Ok(Outputs::new().send(&IOU, msg.header.clone(), Scalars { values }))
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
+        let [inter, union, mp, tp] = self.sums;
+        let ratio = |n: u64, d: u64| if d == 0 { 1.0 } else { n as f64 / d as f64 };
+        ctx.report = Some(serde_json::json!({
+            "frames": self.frames,
+            "iou": ratio(inter, union),
+            "precision": ratio(inter, mp),
+            "recall": ratio(inter, tp),
+            "mean_frame_iou": if self.frames == 0 { 0.0 } else { self.iou_sum / self.frames as f64 },
+        }));
+        Ok(())
     }
 }
