@@ -92,6 +92,36 @@ fn onnxruntime(
     Some((b.chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect(), v))
 }
 
+/// A table row: backend, model ms, end-to-end ms, max abs difference from the reference.
+type Row = (String, f64, Option<f64>, Option<f64>);
+
+/// onnxruntime's two rows (one thread, its default threads) for `model` on input `x`, their
+/// outputs against the reference's `want`; a note when there is no peer.
+fn peer_rows(
+    python: Option<&Path>,
+    model: &Path,
+    x: &[f32],
+    shape: &[usize],
+    reps: usize,
+    want: &[f32],
+    rows: &mut Vec<Row>,
+) {
+    let Some((theirs, v)) = python.and_then(|py| onnxruntime(py, model, x, shape, reps)) else {
+        println!("note: no Python with onnxruntime (DYNAFLOW_PEERS); the peer rows are missing");
+        return;
+    };
+    let d = theirs.iter().zip(want).map(|(a, b)| f64::from((a - b).abs())).fold(0.0, f64::max);
+    let version = v["version"].as_str().unwrap_or("?").to_string();
+    for (threads, key) in [("1 thread", "ms_1thread"), ("default threads", "ms_threads")] {
+        rows.push((
+            format!("onnxruntime {version} CPU, {threads} (peer)"),
+            v[key].as_f64().unwrap_or(f64::NAN),
+            None,
+            Some(d),
+        ));
+    }
+}
+
 fn main() {
     let reps: usize = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(10);
     let frame = repo().join("tests/fixtures/slambook2_rgbd_pair/rgb/1.png");
@@ -114,7 +144,7 @@ fn main() {
         let shape = vec![1, 3, side, side];
         let input = || vec![(input_name.as_str(), Tensor::F32 { shape: shape.clone(), data: x.clone() })];
         let detector = Detector::new(model.clone(), decoder).unwrap();
-        let mut rows: Vec<(String, f64, Option<f64>, Option<f64>)> = Vec::new();
+        let mut rows: Vec<Row> = Vec::new();
 
         let mut want = Vec::new();
         let ms = median_ms(reps.min(3), || want = run(&model, &input()).unwrap()[0].floats());
@@ -133,26 +163,7 @@ fn main() {
             Some(max_diff(&got, &want)),
         ));
 
-        if let Some(py) = &ort_python
-            && let Some((theirs, v)) = onnxruntime(py, &path, &x, &shape, reps)
-        {
-            let d = theirs.iter().zip(&want).map(|(a, b)| f64::from((a - b).abs())).fold(0.0, f64::max);
-            let version = v["version"].as_str().unwrap_or("?").to_string();
-            rows.push((
-                format!("onnxruntime {version} CPU, 1 thread (peer)"),
-                v["ms_1thread"].as_f64().unwrap_or(f64::NAN),
-                None,
-                Some(d),
-            ));
-            rows.push((
-                format!("onnxruntime {version} CPU, default threads (peer)"),
-                v["ms_threads"].as_f64().unwrap_or(f64::NAN),
-                None,
-                Some(d),
-            ));
-        } else {
-            println!("note: no Python with onnxruntime (DYNAFLOW_PEERS); the peer rows are missing");
-        }
+        peer_rows(ort_python.as_deref(), &path, &x, &shape, reps, &want, &mut rows);
 
         let mut kernels: Option<Vec<dynaflow_gpu::KernelTime>> = None;
         let mut stats = None;
@@ -269,7 +280,7 @@ fn segmenters(
         let x = seg.input(img.as_raw(), w, h);
         let shape = x.shape().to_vec();
         let input = || vec![(seg.input_name(), x.clone())];
-        let mut rows: Vec<(String, f64, Option<f64>, Option<f64>)> = Vec::new();
+        let mut rows: Vec<Row> = Vec::new();
         let mut want = Vec::new();
         let ms = median_ms(reps.min(3), || want = run(&model, &input()).unwrap()[0].floats());
         rows.push(("reference executor (ours, plain loops, 1 thread)".into(), ms, None, Some(0.0)));
@@ -282,24 +293,7 @@ fn segmenters(
         });
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         rows.push((format!("cpu: rten 0.27 ({threads} threads)"), ms, Some(e2e), Some(max_diff(&got, &want))));
-        if let Some(py) = python
-            && let Some((theirs, v)) = onnxruntime(py, &path, &x.floats(), &shape, reps)
-        {
-            let d = theirs.iter().zip(&want).map(|(a, b)| f64::from((a - b).abs())).fold(0.0, f64::max);
-            let version = v["version"].as_str().unwrap_or("?").to_string();
-            rows.push((
-                format!("onnxruntime {version} CPU, 1 thread (peer)"),
-                v["ms_1thread"].as_f64().unwrap_or(f64::NAN),
-                None,
-                Some(d),
-            ));
-            rows.push((
-                format!("onnxruntime {version} CPU, default threads (peer)"),
-                v["ms_threads"].as_f64().unwrap_or(f64::NAN),
-                None,
-                Some(d),
-            ));
-        }
+        peer_rows(python, &path, &x.floats(), &shape, reps, &want, &mut rows);
         let wgpu = match Gpu::new() {
             Ok(gpu) => match GpuModel::new(gpu, &model) {
                 Ok(g) => {

@@ -11,43 +11,8 @@ use std::time::Duration;
 use dynaflow_engine::msg::Body;
 use dynaflow_engine::runtime::{self, RunOptions, RunReport, RunStatus};
 use dynaflow_engine::sink::{MemorySink, Sink};
-use dynaflow_engine::spec::ResolvedGraph;
-use dynaflow_engine::{LoadRequest, load_str};
 
-mod common {
-    use super::*;
-
-    /// `text` validated against the engine's own registry (flow and `testing.*` operators).
-    pub fn graph(text: &str) -> ResolvedGraph {
-        let loaded = load_str("test.yaml", text, None, &dynaflow_engine::testing::registry(), &LoadRequest::default());
-        let rendered: Vec<String> = loaded.diagnostics.iter().map(|d| loaded.source.plain(d)).collect();
-        loaded.graph.unwrap_or_else(|| panic!("graph invalid:\n{}", rendered.join("\n")))
-    }
-
-    /// A seeded generator: reproducible case by case, so a failing case is rerun from its
-    /// number.
-    pub struct Rng(rand_chacha::ChaCha8Rng);
-
-    impl Rng {
-        pub fn new(seed: u64) -> Self {
-            use rand_core::SeedableRng;
-            Self(rand_chacha::ChaCha8Rng::seed_from_u64(seed))
-        }
-        /// Uniform in `0..n` (`n > 0`).
-        pub fn below(&mut self, n: u64) -> u64 {
-            use rand_core::Rng as _;
-            ((u128::from(self.0.next_u64()) * u128::from(n)) >> 64) as u64
-        }
-        /// Uniform in `lo..=hi`.
-        pub fn range(&mut self, lo: u64, hi: u64) -> u64 {
-            lo + self.below(hi - lo + 1)
-        }
-        /// True with probability `p`.
-        pub fn chance(&mut self, p: f64) -> bool {
-            (self.below(1 << 20) as f64) < p * f64::from(1u32 << 20)
-        }
-    }
-}
+mod common;
 
 #[derive(Clone, Debug)]
 enum Queue {

@@ -10,18 +10,8 @@ use dynaflow_engine::msg::{Body, Message};
 use dynaflow_engine::runtime::{RunOptions, RunReport, RunStatus};
 use dynaflow_engine::sink::MemorySink;
 use dynaflow_engine::spec::ResolvedGraph;
-use dynaflow_engine::{LoadRequest, load_str};
 
-mod common {
-    use super::*;
-
-    /// `text` validated against the engine's testing registry.
-    pub fn graph(text: &str) -> ResolvedGraph {
-        let loaded = load_str("test.yaml", text, None, &dynaflow_engine::testing::registry(), &LoadRequest::default());
-        let rendered: Vec<String> = loaded.diagnostics.iter().map(|d| loaded.source.plain(d)).collect();
-        loaded.graph.unwrap_or_else(|| panic!("graph invalid:\n{}", rendered.join("\n")))
-    }
-}
+mod common;
 
 fn run_with(graph: &ResolvedGraph, options: RunOptions) -> (RunReport, MemorySink) {
     dynaflow_engine::testing::run_to_memory(graph, options).unwrap()

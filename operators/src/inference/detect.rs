@@ -5,7 +5,7 @@ use std::sync::Arc;
 use std::path::PathBuf;
 
 use super::runner::{Backend, Runner};
-use dynaflow_engine::msg::{Detection, Detections, Image, PixelFormat};
+use dynaflow_engine::msg::{Detection, Detections, Image};
 use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::{param_enum, params};
 use dynaflow_infer::detect::{Decoder, Detector};
@@ -93,20 +93,13 @@ impl Operator for Detect {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (msg, img) = IMAGE.require(inputs)?;
         let (w, h) = (img.width as usize, img.height as usize);
-        let grey_as_rgb: Vec<u8>;
-        let rgb: &[u8] = match img.format {
-            PixelFormat::Rgb8 => &img.data,
-            PixelFormat::Gray8 => {
-                grey_as_rgb = img.data.iter().flat_map(|&v| [v, v, v]).collect();
-                &grey_as_rgb
-            }
-        };
+        let rgb = super::rgb_pixels(img);
         let (score, iou) = (self.config.score_threshold as f32, self.config.nms_iou as f32);
         let classes = self.names.len();
         let runner = &self.runner;
         let found = self
             .detector
-            .detect_with(rgb, w, h, classes, score, iou, |name, input| runner.run(name, input))
+            .detect_with(&rgb, w, h, classes, score, iou, |name, input| runner.run(name, input))
             .map_err(|e| OpError::Input(e.to_string()))?;
         let detections = found
             .into_iter()

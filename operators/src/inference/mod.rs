@@ -17,3 +17,14 @@ pub use detect::{COCO_NAMES, DETECT, DecoderName, YOLOX_NANO};
 pub use gate::KEYFRAME_GATE;
 pub use runner::{Backend, Runner};
 pub use segment::{InputRange, PP_HUMANSEG, SEGMENT, load as load_segmenter, segment_frame};
+
+/// An image's pixels as RGB8: colour as it is, grey replicated into three channels (the
+/// networks take RGB).
+pub(crate) fn rgb_pixels(img: &dynaflow_engine::msg::Image) -> std::borrow::Cow<'_, [u8]> {
+    match img.format {
+        dynaflow_engine::msg::PixelFormat::Rgb8 => std::borrow::Cow::Borrowed(&img.data),
+        dynaflow_engine::msg::PixelFormat::Gray8 => {
+            std::borrow::Cow::Owned(img.data.iter().flat_map(|&v| [v, v, v]).collect())
+        }
+    }
+}

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 use super::runner::{Backend, Runner};
-use dynaflow_engine::msg::{DepthImage, Image, PixelFormat, SegmentationMask};
+use dynaflow_engine::msg::{DepthImage, Image, SegmentationMask};
 use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::{param_enum, params};
 use dynaflow_infer::onnx;
@@ -129,15 +129,7 @@ pub fn segment_frame(
     depth: Option<(&[f32], f32)>,
 ) -> Result<(Vec<u16>, Vec<u16>), String> {
     let (w, h) = (img.width as usize, img.height as usize);
-    let grey_as_rgb: Vec<u8>;
-    let rgb: &[u8] = match img.format {
-        PixelFormat::Rgb8 => &img.data,
-        PixelFormat::Gray8 => {
-            grey_as_rgb = img.data.iter().flat_map(|&v| [v, v, v]).collect();
-            &grey_as_rgb
-        }
-    };
-    let input = segmenter.input(rgb, w, h);
+    let input = segmenter.input(&super::rgb_pixels(img), w, h);
     let outputs = runner.run(segmenter.input_name(), input).map_err(|e| e.to_string())?;
     let first = outputs.first().ok_or("the model gave no output")?;
     let mut map = segmenter.decode(first, w, h, threshold, false).map_err(|e| e.to_string())?;
