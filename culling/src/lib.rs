@@ -146,6 +146,37 @@ pub struct DepthAnchors {
     anchors: std::collections::HashMap<u64, nalgebra::Point3<f64>>,
 }
 
+/// MG-SLAM's "dynamic features tracked": a track labelled dynamic stays dynamic for as long
+/// as it is tracked (its id keeps coming back), so a walker's point that moves along its
+/// epipolar line for a frame is not let back in. Tracks that end are forgotten.
+#[derive(Debug, Default)]
+pub struct StickyLabels {
+    dynamic: std::collections::HashSet<u64>,
+}
+
+impl StickyLabels {
+    /// Whether track `id` was labelled dynamic in an earlier frame and is still tracked.
+    pub fn was_dynamic(&self, id: u64) -> bool {
+        self.dynamic.contains(&id)
+    }
+
+    /// This frame's decisions for the tracks `ids`, with every remembered dynamic track kept
+    /// dynamic (reason and score as decided); the memory becomes this frame's dynamic tracks.
+    pub fn apply(&mut self, ids: &[u64], decisions: &mut [Decision]) {
+        for (id, d) in ids.iter().zip(decisions.iter_mut()) {
+            if self.dynamic.contains(id) {
+                d.dynamic = true;
+            }
+        }
+        self.remember(ids, decisions);
+    }
+
+    /// Remember this frame's dynamic tracks without changing the decisions.
+    pub fn remember(&mut self, ids: &[u64], decisions: &[Decision]) {
+        self.dynamic = ids.iter().zip(decisions).filter(|(_, d)| d.dynamic).map(|(id, _)| *id).collect();
+    }
+}
+
 /// One track for [`DepthAnchors`]: its id and its previous and current pixel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrackedPoint {
@@ -398,6 +429,30 @@ pub fn combine(a: Option<Decision>, b: Option<Decision>, how: Combine) -> Decisi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_dynamic_track_stays_dynamic_while_tracked_and_is_forgotten_when_it_ends() {
+        let d = |dynamic: bool| Decision { dynamic, reason: LabelReason::Epipolar, score: 0.0 };
+        let mut sticky = StickyLabels::default();
+        // Frame 1: track 7 is dynamic, 8 static.
+        let mut f1 = vec![d(true), d(false)];
+        sticky.apply(&[7, 8], &mut f1);
+        assert!(sticky.was_dynamic(7) && !sticky.was_dynamic(8));
+        // Frame 2: 7 under the threshold (moving along its epipolar line) stays dynamic; 8 too.
+        let mut f2 = vec![d(false), d(false), d(false)];
+        sticky.apply(&[7, 8, 9], &mut f2);
+        assert_eq!(f2.iter().map(|x| x.dynamic).collect::<Vec<_>>(), vec![true, false, false]);
+        // Frame 3: track 7 is lost; frame 4: a new track with another id is not dynamic.
+        let mut f3 = vec![d(false)];
+        sticky.apply(&[8], &mut f3);
+        assert!(!sticky.was_dynamic(7));
+        // `remember` records without changing decisions.
+        let f4 = vec![d(true)];
+        sticky.remember(&[11], &f4);
+        let mut f5 = vec![d(false)];
+        sticky.apply(&[11], &mut f5);
+        assert!(f5[0].dynamic);
+    }
 
     #[test]
     fn combine_labels_decision_table() {

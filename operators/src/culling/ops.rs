@@ -226,6 +226,10 @@ params! {
         ransac_threshold: f64 [0.01, 100.0] = 1.0,
         /// RANSAC confidence
         confidence: f64 [0.5, 0.999_999] = 0.99,
+        /// a track labelled dynamic stays dynamic while it is tracked (MG-SLAM's dynamic features tracked)
+        sticky: bool = false,
+        /// fit F only on the tracks not already labelled dynamic in the previous frame
+        fit_static: bool = false,
     }
 }
 
@@ -233,21 +237,37 @@ fn ransac(threshold: f64, confidence: f64) -> RansacConfig {
     RansacConfig { threshold, confidence, ..RansacConfig::default() }
 }
 
-rule_op!(CULL_EPIPOLAR, "cull_epipolar", &[TRACKS.spec], EpipolarConfig, EpipolarOp);
+rule_op!(CULL_EPIPOLAR, "cull_epipolar", &[TRACKS.spec], EpipolarConfig, EpipolarOp::new);
 
-struct EpipolarOp(EpipolarConfig);
+struct EpipolarOp(EpipolarConfig, rules::StickyLabels);
+
+impl EpipolarOp {
+    fn new(config: EpipolarConfig) -> Self {
+        Self(config, rules::StickyLabels::default())
+    }
+}
 
 impl Operator for EpipolarOp {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (msg, t) = TRACKS.require(inputs)?;
         let (prev, cur) = endpoints(t);
+        let ids: Vec<u64> = t.tracks.iter().map(|t| t.id).collect();
         let seed = ctx.rng.next_u64();
         let ransac = ransac(self.0.ransac_threshold, self.0.confidence);
         let threshold = self.0.threshold as f32;
-        let decisions = match rules::epipolar_distances(&prev, &cur, &vec![true; prev.len()], &ransac, seed) {
+        let mut fit_on: Vec<bool> = ids.iter().map(|&id| !(self.0.fit_static && self.1.was_dynamic(id))).collect();
+        if fit_on.iter().filter(|u| **u).count() < 8 {
+            fit_on = vec![true; ids.len()];
+        }
+        let mut decisions = match rules::epipolar_distances(&prev, &cur, &fit_on, &ransac, seed) {
             Some((_, d)) => rules::epipolar_fixed(&d, threshold),
             None => all_static(prev.len(), 0.0),
         };
+        if self.0.sticky {
+            self.1.apply(&ids, &mut decisions);
+        } else {
+            self.1.remember(&ids, &decisions);
+        }
         Ok(labelled(msg, t, &decisions, &[("threshold", f64::from(threshold))]))
     }
 }
