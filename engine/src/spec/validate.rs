@@ -1,6 +1,9 @@
 //! Semantic checks of a [`GraphSpec`] against the operator registry.
 //!
 //! Every check runs even when earlier ones failed, so a user sees all problems at once.
+//!
+//! Why one file of this size: the checks share one index of the graph's nodes, ports and
+//! edges built here, and run as one pass over it in the order their diagnostics are printed.
 
 use std::collections::HashMap;
 use std::path::PathBuf;

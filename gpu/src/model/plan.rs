@@ -2,6 +2,10 @@
 //! node to a kernel (or host-side shape arithmetic), placement of every value in one arena
 //! (Concat free, Reshape an alias), and the dispatch list with its bind groups. The steps are
 //! described in the parent module; `GpuModel` drives them and runs the result.
+//!
+//! Why one file of this size: `lower` is one `match` over every op the GPU runs, each arm
+//! that op's whole lowering (shape checks, parameter words, kernel choice); split across
+//! files, the table of what the GPU takes would be too.
 
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;

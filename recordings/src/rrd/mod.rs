@@ -28,6 +28,9 @@
 //! waits to be written is bounded in bytes at every stage: rows per entity in the batcher and
 //! the batcher's in-flight budget; the file writer encodes and writes each chunk as it comes,
 //! with no queue of its own.
+//!
+//! Size: 580 lines of code, then its unit tests (change-only logging, path segments, shared
+//! encodings); the `.rrd` writer itself is `file.rs`.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
