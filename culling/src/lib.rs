@@ -177,6 +177,43 @@ impl StickyLabels {
     }
 }
 
+/// Where each tracked point was `k` frames ago, for an epipolar test over a longer baseline
+/// than consecutive frames: the positions of the tracks still tracked, forgotten when a
+/// track ends.
+#[derive(Debug)]
+pub struct TrackHistory {
+    k: usize,
+    positions: std::collections::HashMap<u64, std::collections::VecDeque<[f32; 2]>>,
+}
+
+impl TrackHistory {
+    /// A history `k` frames deep (`k >= 1`; 1 is the previous frame).
+    pub fn new(k: usize) -> Self {
+        Self { k: k.max(1), positions: std::collections::HashMap::new() }
+    }
+
+    /// Record this frame's tracks (`ids`, previous and current pixels); tracks not in `ids`
+    /// are forgotten.
+    pub fn update(&mut self, ids: &[u64], prev: &[[f32; 2]], cur: &[[f32; 2]]) {
+        let mut next = std::collections::HashMap::with_capacity(ids.len());
+        for ((id, p), c) in ids.iter().zip(prev).zip(cur) {
+            let mut q = self.positions.remove(id).unwrap_or_else(|| std::collections::VecDeque::from([*p]));
+            q.push_back(*c);
+            while q.len() > self.k + 1 {
+                q.pop_front();
+            }
+            next.insert(*id, q);
+        }
+        self.positions = next;
+    }
+
+    /// Track `id`'s pixel `k` frames before the last update's current frame, if it was
+    /// tracked that long.
+    pub fn back(&self, id: u64) -> Option<[f32; 2]> {
+        self.positions.get(&id).filter(|q| q.len() == self.k + 1).and_then(|q| q.front().copied())
+    }
+}
+
 /// One track for [`DepthAnchors`]: its id and its previous and current pixel.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrackedPoint {
@@ -429,6 +466,21 @@ pub fn combine(a: Option<Decision>, b: Option<Decision>, how: Combine) -> Decisi
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_history_gives_a_tracks_pixel_k_frames_back_while_it_is_tracked() {
+        let mut h = TrackHistory::new(2);
+        h.update(&[1], &[[0.0, 0.0]], &[[1.0, 0.0]]);
+        assert_eq!(h.back(1), None, "one frame of history for k = 2");
+        h.update(&[1, 2], &[[1.0, 0.0], [5.0, 5.0]], &[[2.0, 0.0], [6.0, 5.0]]);
+        assert_eq!(h.back(1), Some([0.0, 0.0]));
+        assert_eq!(h.back(2), None);
+        h.update(&[1, 2], &[[2.0, 0.0], [6.0, 5.0]], &[[3.0, 0.0], [7.0, 5.0]]);
+        assert_eq!(h.back(1), Some([1.0, 0.0]));
+        assert_eq!(h.back(2), Some([5.0, 5.0]));
+        h.update(&[2], &[[7.0, 5.0]], &[[8.0, 5.0]]);
+        assert_eq!(h.back(1), None, "a track that ended is forgotten");
+    }
 
     #[test]
     fn a_dynamic_track_stays_dynamic_while_tracked_and_is_forgotten_when_it_ends() {

@@ -230,6 +230,8 @@ params! {
         sticky: bool = false,
         /// fit F only on the tracks not already labelled dynamic in the previous frame
         fit_static: bool = false,
+        /// frames between the two views tested: 1 compares consecutive frames (MG-SLAM); k > 1 each track's pixel k frames ago with now, where it has been tracked that long (the rest: consecutive frames)
+        baseline: u64 [1, 60] = 1,
     }
 }
 
@@ -239,11 +241,12 @@ fn ransac(threshold: f64, confidence: f64) -> RansacConfig {
 
 rule_op!(CULL_EPIPOLAR, "cull_epipolar", &[TRACKS.spec], EpipolarConfig, EpipolarOp::new);
 
-struct EpipolarOp(EpipolarConfig, rules::StickyLabels);
+struct EpipolarOp(EpipolarConfig, rules::StickyLabels, rules::TrackHistory);
 
 impl EpipolarOp {
     fn new(config: EpipolarConfig) -> Self {
-        Self(config, rules::StickyLabels::default())
+        let history = rules::TrackHistory::new(config.baseline as usize);
+        Self(config, rules::StickyLabels::default(), history)
     }
 }
 
@@ -263,6 +266,19 @@ impl Operator for EpipolarOp {
             Some((_, d)) => rules::epipolar_fixed(&d, threshold),
             None => all_static(prev.len(), 0.0),
         };
+        if self.0.baseline > 1 {
+            // The tracks with a pixel `baseline` frames back are tested over that baseline.
+            self.2.update(&ids, &prev, &cur);
+            let long: Vec<usize> = (0..ids.len()).filter(|&i| self.2.back(ids[i]).is_some()).collect();
+            let back: Vec<[f32; 2]> = long.iter().filter_map(|&i| self.2.back(ids[i])).collect();
+            let now: Vec<[f32; 2]> = long.iter().map(|&i| cur[i]).collect();
+            let fit: Vec<bool> = long.iter().map(|&i| fit_on[i]).collect();
+            if let Some((_, d)) = rules::epipolar_distances(&back, &now, &fit, &ransac, seed ^ 1) {
+                for (j, decision) in long.iter().zip(rules::epipolar_fixed(&d, threshold)) {
+                    decisions[*j] = decision;
+                }
+            }
+        }
         if self.0.sticky {
             self.1.apply(&ids, &mut decisions);
         } else {
