@@ -11,8 +11,11 @@
 use dynaflow_culling::{self as rules, LabelledBox};
 use dynaflow_datasets::synth::{Generator, Motion, SynthConfig};
 use dynaflow_vision::GrayImage;
-use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid, seed_corners};
+use dynaflow_vision::flow::{LkConfig, LkTracker, seed_corners};
 use dynaflow_vision::geometry::RansacConfig;
+
+#[path = "common/synth_tracks.rs"]
+mod synth_tracks;
 
 #[derive(Default, Clone, Copy)]
 struct Counts {
@@ -68,15 +71,7 @@ fn main() {
         let mut next = g.frame(0, false);
         for f in 0..pairs {
             let cur = std::mem::replace(&mut next, g.frame(f + 1, false));
-            let (a, b) =
-                (GrayImage::from_rgb8(w, h, &cur.rgb).unwrap(), GrayImage::from_rgb8(w, h, &next.rgb).unwrap());
-            let (mut pa, mut pb) = (Pyramid::default(), Pyramid::default());
-            pa.build(&a, 3);
-            pb.build(&b, 3);
-            let seeds = seed_corners(&a, 1000, 20, 5.0, 10, &[]);
-            let res = lk.track(&pa, &pb, &seeds);
-            let (prev, curp): (Vec<[f32; 2]>, Vec<[f32; 2]>) =
-                seeds.iter().zip(&res).filter(|(_, r)| r.found).map(|(p, r)| (*p, r.point)).unzip();
+            let (prev, curp, errors) = synth_tracks::lk_tracks(&mut lk, &cur.rgb, &next.rgb, w, h);
             let truth: Vec<bool> =
                 prev.iter().map(|p| cur.class[p[1].round() as usize * w + p[0].round() as usize] == 1).collect();
             // What `oracle_boxes` emits (every instance, however small).
@@ -98,7 +93,7 @@ fn main() {
             let mask = rules::mask_rule(&curp, |x, y| x < w && y < h && next.class[y * w + x] == 1);
             let value = |l: &str| if l == "person" { 1.0 } else { 0.0 };
             let semantic = rules::semantic_prior(&curp, &boxes, value, false);
-            let quality: Vec<f64> = res.iter().filter(|r| r.found).map(|r| 1.0 / (1.0 + f64::from(r.error))).collect();
+            let quality: Vec<f64> = errors.iter().map(|e| 1.0 / (1.0 + f64::from(*e))).collect();
             let flow_h = match rules::homography_residuals(&prev, &curp, &quality, 1.0, f) {
                 Some((_, r)) => rules::flow_consistency(&r, 1.0),
                 None => fixed.clone(),
@@ -110,8 +105,6 @@ fn main() {
             let key_f = f.saturating_sub(10);
             let key = g.frame(key_f, false);
             let kimg = GrayImage::from_rgb8(w, h, &key.rgb).unwrap();
-            let mut pk = Pyramid::default();
-            pk.build(&kimg, 3);
             let kseeds = seed_corners(&kimg, 1000, 20, 5.0, 10, &[]);
             // The key frame's points themselves are checked (no tracking needed: they are
             // projected).

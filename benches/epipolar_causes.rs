@@ -21,10 +21,12 @@
 
 use dynaflow_culling as rules;
 use dynaflow_datasets::synth::{Generator, Motion, SynthConfig};
-use dynaflow_vision::GrayImage;
-use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid, seed_corners};
+use dynaflow_vision::flow::{LkConfig, LkTracker};
 use dynaflow_vision::geometry::RansacConfig;
 use nalgebra::{Matrix3, Vector3};
+
+#[path = "common/synth_tracks.rs"]
+mod synth_tracks;
 
 const THRESHOLD: f32 = 0.4;
 
@@ -60,15 +62,7 @@ fn main() {
         let mut next = g.frame(0, false);
         for f in 0..pairs {
             let cur = std::mem::replace(&mut next, g.frame(f + 1, false));
-            let (a, b) =
-                (GrayImage::from_rgb8(w, h, &cur.rgb).unwrap(), GrayImage::from_rgb8(w, h, &next.rgb).unwrap());
-            let (mut pa, mut pb) = (Pyramid::default(), Pyramid::default());
-            pa.build(&a, 3);
-            pb.build(&b, 3);
-            let seeds = seed_corners(&a, 1000, 20, 5.0, 10, &[]);
-            let res = lk.track(&pa, &pb, &seeds);
-            let (prev, curp): (Vec<[f32; 2]>, Vec<[f32; 2]>) =
-                seeds.iter().zip(&res).filter(|(_, r)| r.found).map(|(p, r)| (*p, r.point)).unzip();
+            let (prev, curp, _) = synth_tracks::lk_tracks(&mut lk, &cur.rgb, &next.rgb, w, h);
             let Some((_, d_est)) =
                 rules::epipolar_distances(&prev, &curp, &vec![true; prev.len()], &RansacConfig::default(), f)
             else {

@@ -289,7 +289,7 @@ fn segmenters(
         let ms = median_ms(reps, || got = rten.run(&input()).unwrap());
         let e2e = median_ms(reps, || {
             let out = rten.run(&[(seg.input_name(), seg.input(img.as_raw(), w, h))]).unwrap();
-            seg.decode(&out[0], w, h, 0.5, false).unwrap();
+            seg.decode(&out[0], w, h, 0.5).unwrap();
         });
         let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
         rows.push((format!("cpu: rten 0.27 ({threads} threads)"), ms, Some(e2e), Some(max_diff(&got, &want))));

@@ -8,25 +8,14 @@ mod common;
 use std::sync::Arc;
 
 use dynaflow_engine::LoadRequest;
-use dynaflow_engine::msg::{Body, Message};
-use dynaflow_engine::runtime::{RunOptions, RunReport, RunStatus};
-use dynaflow_engine::sink::MemorySink;
+use dynaflow_engine::msg::Message;
+use dynaflow_engine::runtime::RunStatus;
 use dynaflow_engine::spec::ResolvedGraph;
 
-fn run_with(graph: &ResolvedGraph, options: RunOptions) -> (RunReport, MemorySink) {
-    dynaflow_engine::testing::run_to_memory(graph, options).unwrap()
-}
+#[path = "../engine/tests/common/runs.rs"]
+mod runs;
 
-fn run(graph: &ResolvedGraph) -> (RunReport, MemorySink) {
-    run_with(graph, RunOptions::default())
-}
-
-fn scalar(m: &Message, key: &str) -> f64 {
-    match &m.body {
-        Body::Scalars(s) => s.get(key).unwrap(),
-        other => panic!("not scalars: {other:?}"),
-    }
-}
+use runs::{run, scalar};
 
 fn default_graph(req: &LoadRequest) -> ResolvedGraph {
     common::graph_with(include_str!("../graphs/engine_smoke.yaml"), req)

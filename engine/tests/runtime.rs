@@ -6,27 +6,11 @@
 
 use std::time::Instant;
 
-use dynaflow_engine::msg::{Body, Message};
-use dynaflow_engine::runtime::{RunOptions, RunReport, RunStatus};
-use dynaflow_engine::sink::MemorySink;
-use dynaflow_engine::spec::ResolvedGraph;
+use dynaflow_engine::runtime::{RunOptions, RunStatus};
 
 mod common;
 
-fn run_with(graph: &ResolvedGraph, options: RunOptions) -> (RunReport, MemorySink) {
-    dynaflow_engine::testing::run_to_memory(graph, options).unwrap()
-}
-
-fn run(graph: &ResolvedGraph) -> (RunReport, MemorySink) {
-    run_with(graph, RunOptions::default())
-}
-
-fn scalar(m: &Message, key: &str) -> f64 {
-    match &m.body {
-        Body::Scalars(s) => s.get(key).unwrap(),
-        other => panic!("not scalars: {other:?}"),
-    }
-}
+use common::runs::{run, run_with, scalar};
 
 const SLOW: &str = r"
 name: slow

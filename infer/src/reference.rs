@@ -11,6 +11,7 @@ mod resize;
 
 pub use conv_transpose::conv_transpose_geometry;
 pub use pool::{PoolPlan, pool_plan};
+pub use resize::resize_geometry;
 
 use crate::onnx::{Attribute, Model, Node, Op};
 pub use crate::tensor::Tensor;

@@ -54,8 +54,6 @@ pub struct ClassMap {
     pub height: usize,
     /// Class index per pixel (0 = background), row-major.
     pub class: Vec<u16>,
-    /// Probability of the chosen class per pixel (`with_probability`).
-    pub probability: Option<Vec<f32>>,
 }
 
 impl Segmenter {
@@ -136,14 +134,7 @@ impl Segmenter {
     /// class 1 where its probability reaches `threshold` (one-channel and two-class models);
     /// for more classes the most probable class, kept where its probability reaches
     /// `threshold` (background otherwise).
-    pub fn decode(
-        &self,
-        output: &Tensor,
-        width: usize,
-        height: usize,
-        threshold: f32,
-        with_probability: bool,
-    ) -> Result<ClassMap, Error> {
+    pub fn decode(&self, output: &Tensor, width: usize, height: usize, threshold: f32) -> Result<ClassMap, Error> {
         let Tensor::F32 { shape, data } = output else {
             return Err(Error::Contract("the model's output is not a float tensor".into()));
         };
@@ -178,15 +169,11 @@ impl Segmenter {
             top + (bottom - top) * wy
         };
         let mut class = Vec::with_capacity(width * height);
-        let mut probability = with_probability.then(|| Vec::with_capacity(width * height));
         let mut scores = vec![0.0f32; channels];
         for &ty in &ys {
             for &tx in &xs {
-                let (k, p) = match self.scores {
-                    Scores::Probability => {
-                        let p = sample(0, ty, tx);
-                        if p >= threshold { (1, p) } else { (0, 1.0 - p) }
-                    }
+                let k = match self.scores {
+                    Scores::Probability => u16::from(sample(0, ty, tx) >= threshold),
                     Scores::Softmax | Scores::Logits => {
                         for (ch, s) in scores.iter_mut().enumerate() {
                             *s = sample(ch, ty, tx);
@@ -194,28 +181,23 @@ impl Segmenter {
                         if self.scores == Scores::Logits {
                             softmax(&mut scores);
                         }
-                        let (best, p) = scores
-                            .iter()
-                            .copied()
-                            .enumerate()
-                            .fold((0, f32::NEG_INFINITY), |a, (i, v)| if v > a.1 { (i, v) } else { a });
                         if channels == 2 {
                             // Two classes: the same threshold rule as one probability channel.
-                            if scores[1] >= threshold { (1, scores[1]) } else { (0, scores[0]) }
-                        } else if best != 0 && p < threshold {
-                            (0, scores[0])
+                            u16::from(scores[1] >= threshold)
                         } else {
-                            (best, p)
+                            let (best, p) = scores
+                                .iter()
+                                .copied()
+                                .enumerate()
+                                .fold((0, f32::NEG_INFINITY), |a, (i, v)| if v > a.1 { (i, v) } else { a });
+                            if p < threshold { 0 } else { best as u16 }
                         }
                     }
                 };
-                class.push(k as u16);
-                if let Some(pr) = probability.as_mut() {
-                    pr.push(p);
-                }
+                class.push(k);
             }
         }
-        Ok(ClassMap { width, height, class, probability })
+        Ok(ClassMap { width, height, class })
     }
 }
 

@@ -4,6 +4,8 @@
 use dynaflow_engine::spec::ResolvedGraph;
 use dynaflow_engine::{LoadRequest, load_str};
 
+pub mod runs;
+
 #[path = "../../../tests/common/rng.rs"]
 mod rng;
 #[allow(unused_imports)]

@@ -11,7 +11,7 @@ use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 
 use dynaflow_infer::onnx::{Model, Node, Op};
-use dynaflow_infer::reference::{conv_pads, conv_transpose_geometry, pool_plan, slice_plan};
+use dynaflow_infer::reference::{conv_pads, conv_transpose_geometry, pool_plan, resize_geometry, slice_plan};
 use dynaflow_infer::tensor::{Tensor, norm_axis, reshape_shape, strides};
 
 use crate::kernels::Kind;
@@ -633,29 +633,9 @@ pub(super) fn lower(
                     )));
                 }
             };
-            if xs.len() != 4 || xs.contains(&0) {
-                return Err(GpuError::Shape(format!("Resize of {xs:?}")));
-            }
-            let sizes: Option<Vec<i64>> = ints(3).filter(|v| v.len() == 4);
-            let (oh, ow, fy, fx) = match (sizes, scales) {
-                (Some(z), _) if z[0] as usize == xs[0] && z[1] as usize == xs[1] && z[2] > 0 && z[3] > 0 => {
-                    let (oh, ow) = (z[2] as usize, z[3] as usize);
-                    (oh, ow, oh as f32 / xs[2] as f32, ow as f32 / xs[3] as f32)
-                }
-                (None, Some(sc))
-                    if sc[0] == 1.0
-                        && sc[1] == 1.0
-                        && sc[2] > 0.0
-                        && sc[3] > 0.0
-                        && sc.iter().all(|s| s.is_finite()) =>
-                {
-                    ((xs[2] as f32 * sc[2]).floor() as usize, (xs[3] as f32 * sc[3]).floor() as usize, sc[2], sc[3])
-                }
-                other => return Err(GpuError::Shape(format!("Resize sizes/scales {other:?} on the GPU"))),
-            };
-            if oh == 0 || ow == 0 {
-                return Err(GpuError::Shape("Resize to nothing".into()));
-            }
+            let sizes = ints(3);
+            let (oh, ow, fy, fx) = resize_geometry(&xs, scales.as_deref(), sizes.as_deref())
+                .map_err(|e| GpuError::Shape(e.to_string()))?;
             let planes = xs[0] * xs[1];
             let mut words = u32s(&[planes, xs[2], xs[3], oh, ow])?;
             words.extend([fy.to_bits(), fx.to_bits(), kind]);

@@ -5,6 +5,7 @@
 //! the transformation, clamped to the input for `linear`, then the two neighbours' weights.
 
 use super::f32_arg;
+use crate::Error;
 use crate::onnx::Node;
 use crate::tensor::Tensor;
 
@@ -110,39 +111,51 @@ fn linear_taps(t: Transform, scale: f32, len_in: usize, len_out: usize) -> Vec<(
         .collect()
 }
 
-/// The output height and width and the two scales of node `n` on input shape `s`.
-fn geometry(s: &[usize], args: &[Option<&Tensor>]) -> Result<(usize, usize, f32, f32), String> {
-    let scales = args.get(2).copied().flatten().map(Tensor::floats).filter(|v| v.len() == 4);
-    let sizes = args.get(3).copied().flatten().map(Tensor::ints).filter(|v| v.len() == 4);
+/// The output height and width and the two scales of a `Resize` of a 4-D input of shape `s`
+/// by `sizes` (taking precedence) or `scales`, each of four values: only height and width may
+/// change, scales must be finite and positive, and the output must not be empty. What the
+/// reference executor and the GPU planner both compute.
+pub fn resize_geometry(
+    s: &[usize],
+    scales: Option<&[f32]>,
+    sizes: Option<&[i64]>,
+) -> Result<(usize, usize, f32, f32), Error> {
+    let (scales, sizes) = (scales.filter(|v| v.len() == 4), sizes.filter(|v| v.len() == 4));
+    if s.len() != 4 || s.contains(&0) {
+        return Err(Error::Shape(format!("Resize wants a non-empty 4-D input, got {s:?}")));
+    }
     match (sizes, scales) {
         (Some(z), _) => {
             if z[0] as usize != s[0] || z[1] as usize != s[1] || z[2] <= 0 || z[3] <= 0 {
-                return Err(format!("Resize sizes {z:?} for input {s:?}: only height and width may change"));
+                return Err(Error::Shape(format!(
+                    "Resize sizes {z:?} for input {s:?}: only height and width may change"
+                )));
             }
             let (oh, ow) = (z[2] as usize, z[3] as usize);
             Ok((oh, ow, oh as f32 / s[2] as f32, ow as f32 / s[3] as f32))
         }
         (None, Some(sc)) => {
-            if sc[0] != 1.0 || sc[1] != 1.0 || !(sc[2] > 0.0 && sc[3] > 0.0) {
-                return Err(format!("Resize scales {sc:?}: only height and width may change"));
+            if sc[0] != 1.0 || sc[1] != 1.0 || !(sc[2] > 0.0 && sc[3] > 0.0 && sc[2].is_finite() && sc[3].is_finite()) {
+                return Err(Error::Shape(format!(
+                    "Resize scales {sc:?}: only height and width may change, by finite factors"
+                )));
             }
             let (oh, ow) = ((s[2] as f32 * sc[2]).floor() as usize, (s[3] as f32 * sc[3]).floor() as usize);
             if oh == 0 || ow == 0 {
-                return Err(format!("Resize scales {sc:?} leave nothing of input {s:?}"));
+                return Err(Error::Shape(format!("Resize scales {sc:?} leave nothing of input {s:?}")));
             }
             Ok((oh, ow, sc[2], sc[3]))
         }
-        _ => Err("Resize needs scales or sizes".into()),
+        _ => Err(Error::Shape("Resize needs scales or sizes".into())),
     }
 }
 
 pub(super) fn resize(n: &Node, args: &[Option<&Tensor>]) -> Result<Tensor, String> {
     let (s, x) = f32_arg(args, 0)?;
-    if s.len() != 4 || s.contains(&0) {
-        return Err(format!("Resize wants a non-empty 4-D input, got {s:?}"));
-    }
     let transform = Transform::parse(&n.string("coordinate_transformation_mode", "half_pixel"))?;
-    let (oh, ow, fy, fx) = geometry(s, args)?;
+    let scales = args.get(2).copied().flatten().map(Tensor::floats);
+    let sizes = args.get(3).copied().flatten().map(Tensor::ints);
+    let (oh, ow, fy, fx) = resize_geometry(s, scales.as_deref(), sizes.as_deref())?;
     let (h, w) = (s[2], s[3]);
     let planes = s[0] * s[1];
     let mut data = Vec::with_capacity(planes * oh * ow);

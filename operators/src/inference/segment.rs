@@ -132,7 +132,7 @@ pub fn segment_frame(
     let input = segmenter.input(&super::rgb_pixels(img), w, h);
     let outputs = runner.run(segmenter.input_name(), input).map_err(|e| e.to_string())?;
     let first = outputs.first().ok_or("the model gave no output")?;
-    let mut map = segmenter.decode(first, w, h, threshold, false).map_err(|e| e.to_string())?;
+    let mut map = segmenter.decode(first, w, h, threshold).map_err(|e| e.to_string())?;
     segment::dilate(&mut map.class, w, h, dilate);
     let instances = segment::instances(&map.class, w, h, depth);
     Ok((map.class, instances))
