@@ -17,34 +17,6 @@ use dynaflow_vision::geometry::RansacConfig;
 #[path = "common/synth_tracks.rs"]
 mod synth_tracks;
 
-#[derive(Default, Clone, Copy)]
-struct Counts {
-    tp: u64,
-    fp: u64,
-    fn_: u64,
-}
-
-impl Counts {
-    fn add(&mut self, predicted: bool, truth: bool) {
-        match (predicted, truth) {
-            (true, true) => self.tp += 1,
-            (true, false) => self.fp += 1,
-            (false, true) => self.fn_ += 1,
-            _ => {}
-        }
-    }
-    fn precision(self) -> f64 {
-        self.tp as f64 / (self.tp + self.fp).max(1) as f64
-    }
-    fn recall(self) -> f64 {
-        self.tp as f64 / (self.tp + self.fn_).max(1) as f64
-    }
-    fn f1(self) -> f64 {
-        let (p, r) = (self.precision(), self.recall());
-        if p + r > 0.0 { 2.0 * p * r / (p + r) } else { 0.0 }
-    }
-}
-
 const MODES: [&str; 8] = [
     "epipolar_fixed",
     "epipolar_adaptive",
@@ -65,8 +37,8 @@ fn main() {
         let k = g.config().intrinsics.clone();
         let (w, h) = (k.width as usize, k.height as usize);
         let mut lk = LkTracker::new(LkConfig { fb_threshold: Some(1.0), ..LkConfig::default() });
-        let mut counts = [Counts::default(); MODES.len()];
-        let mut depth_counts = Counts::default();
+        let mut counts = [rules::Confusion::default(); MODES.len()];
+        let mut depth_counts = rules::Confusion::default();
         let mut total = 0u64;
         let mut next = g.frame(0, false);
         for f in 0..pairs {

@@ -34,6 +34,15 @@ fn every_seed_graph_variant_runs_and_the_tables_compare_them_with_the_baseline()
         // The oracle variants (ground-truth masks or boxes), and only they, are marked.
         assert_eq!(r[14], (r[1].starts_with("oracle") || r[1] == "masked").to_string(), "{r:?}");
     }
+    // Each rule's labels scored against the generator's masks (`label_accuracy`): the mask
+    // rule fed the ground-truth mask agrees with it point for point, and the geometric-only
+    // row scores its epipolar rule (a precision and a recall, each in 0..=1).
+    let labels = |g: &str, v: &str| rows.iter().find(|r| r[0] == g && r[1] == v).unwrap()[15].clone();
+    assert!(labels("mg_slam", "oracle").contains("semantic_pr 1.00/1.00"), "{}", labels("mg_slam", "oracle"));
+    let g = labels("mg_slam", "G");
+    let pr: Vec<f64> = g.strip_prefix("geometric_pr ").unwrap().split('/').map(|v| v.parse().unwrap()).collect();
+    assert!(pr.len() == 2 && pr.iter().all(|v| (0.0..=1.0).contains(v)), "{g}");
+    assert!(labels("orb_baseline", "base").is_empty());
     let md = std::fs::read_to_string(dir.path().join("bench.md")).unwrap();
     assert!(md.contains("| mg_slam | oracle (oracle) | synthetic |"), "{md}");
     // The improvement over orb_baseline is computed for every other row on the same sequence.

@@ -8,8 +8,8 @@
 use dynaflow_msg::LabelReason;
 pub use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{
-    FundamentalFit, HomographyFit, RansacConfig, SplitMix64, epipolar_distance, fit_fundamental, fit_homography_prosac,
-    transfer_error,
+    CHI2_2DOF, FundamentalFit, HOMOGRAPHY_RATIO, HomographyFit, RansacConfig, SplitMix64, epipolar_distance,
+    fit_fundamental, fit_homography_prosac, homography_ratio, transfer_error,
 };
 
 /// One point's decision.
@@ -211,6 +211,131 @@ impl TrackHistory {
     /// tracked that long.
     pub fn back(&self, id: u64) -> Option<[f32; 2]> {
         self.positions.get(&id).filter(|q| q.len() == self.k + 1).and_then(|q| q.front().copied())
+    }
+}
+
+/// When [`EpipolarCull`] tests over its longer baseline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LongBaseline {
+    /// On every frame, for every track tracked that long.
+    Always,
+    /// Only on frames whose consecutive pair has too little parallax for F: where ORB-SLAM2's
+    /// model selection prefers a homography (`R_H > 0.40`, its initialiser's rule; a rotation,
+    /// or a translation short against the scene's depth).
+    LowParallax,
+}
+
+/// The options of MG-SLAM's epipolar test as [`EpipolarCull`] runs it frame after frame.
+#[derive(Clone, Debug)]
+pub struct EpipolarOptions {
+    /// Distance from the epipolar line above which a track is dynamic, pixels (MG-SLAM: 0.40).
+    pub threshold: f32,
+    /// F's LO-RANSAC.
+    pub ransac: RansacConfig,
+    /// A track labelled dynamic stays so while it is tracked (MG-SLAM's tracked dynamic features).
+    pub sticky: bool,
+    /// F fitted only on the tracks not labelled dynamic the frame before.
+    pub fit_static: bool,
+    /// Frames between the two views of the longer test (1: consecutive frames only).
+    pub baseline: usize,
+    /// When the longer test replaces the consecutive one.
+    pub long_baseline: LongBaseline,
+}
+
+/// What [`EpipolarCull::label`] decided for one frame.
+#[derive(Clone, Debug)]
+pub struct EpipolarFrame {
+    /// Per track.
+    pub decisions: Vec<Decision>,
+    /// ORB-SLAM2's `R_H` of the consecutive pair (computed for `LongBaseline::LowParallax`).
+    pub homography_ratio: Option<f64>,
+    /// Tracks tested over the longer baseline.
+    pub long: usize,
+}
+
+/// MG-SLAM's epipolar test (LK tracks, F by LO-RANSAC, dynamic above the threshold) over a
+/// sequence, with the options the paper describes and its one-frame form leaves out (see
+/// [`EpipolarOptions`]). Deterministic from the seeds it is given.
+#[derive(Debug)]
+pub struct EpipolarCull {
+    options: EpipolarOptions,
+    sticky: StickyLabels,
+    history: TrackHistory,
+}
+
+impl EpipolarCull {
+    /// A test with `options`, before its first frame.
+    pub fn new(options: EpipolarOptions) -> Self {
+        let history = TrackHistory::new(options.baseline);
+        Self { options, sticky: StickyLabels::default(), history }
+    }
+
+    /// Label this frame's tracks (`ids`, previous and current pixels).
+    pub fn label(&mut self, ids: &[u64], prev: &[[f32; 2]], cur: &[[f32; 2]], seed: u64) -> EpipolarFrame {
+        let o = &self.options;
+        let mut fit_on: Vec<bool> = ids.iter().map(|&id| !(o.fit_static && self.sticky.was_dynamic(id))).collect();
+        if fit_on.iter().filter(|u| **u).count() < 8 {
+            fit_on = vec![true; ids.len()];
+        }
+        let consecutive = epipolar_distances(prev, cur, &fit_on, &o.ransac, seed);
+        let mut decisions = match &consecutive {
+            Some((_, d)) => epipolar_fixed(d, o.threshold),
+            None => vec![Decision::keep(LabelReason::Static, 0.0); prev.len()],
+        };
+        let mut frame = EpipolarFrame { decisions: Vec::new(), homography_ratio: None, long: 0 };
+        if o.baseline > 1 {
+            self.history.update(ids, prev, cur);
+            let wanted = match o.long_baseline {
+                LongBaseline::Always => true,
+                LongBaseline::LowParallax => {
+                    let ratio = consecutive.as_ref().and_then(|(fit, _)| {
+                        let (p1, p2): (Vec<[f64; 2]>, Vec<[f64; 2]>) = prev
+                            .iter()
+                            .zip(cur)
+                            .zip(&fit_on)
+                            .filter(|(_, u)| **u)
+                            .map(|((a, b), _)| ([f64::from(a[0]), f64::from(a[1])], [f64::from(b[0]), f64::from(b[1])]))
+                            .unzip();
+                        let quality = vec![1.0; p1.len()];
+                        let h = fit_homography_prosac(
+                            &p1,
+                            &p2,
+                            &quality,
+                            CHI2_2DOF.sqrt(),
+                            1000,
+                            &mut SplitMix64::new(seed ^ 2),
+                        )?;
+                        Some(homography_ratio(&h.h, &fit.f, &p1, &p2))
+                    });
+                    frame.homography_ratio = ratio;
+                    // No F at all is the least parallax there is.
+                    ratio.is_none_or(|r| r > HOMOGRAPHY_RATIO)
+                }
+            };
+            if wanted {
+                let long: Vec<usize> = (0..ids.len()).filter(|&i| self.history.back(ids[i]).is_some()).collect();
+                let back: Vec<[f32; 2]> = long.iter().filter_map(|&i| self.history.back(ids[i])).collect();
+                let now: Vec<[f32; 2]> = long.iter().map(|&i| cur[i]).collect();
+                let fit: Vec<bool> = long.iter().map(|&i| fit_on[i]).collect();
+                // A track over k frames is the sum of k one-frame LK steps with independent
+                // errors: its error grows as sqrt(k), and so do both thresholds.
+                let grow = (o.baseline as f64).sqrt();
+                let ransac = RansacConfig { threshold: o.ransac.threshold * grow, ..o.ransac.clone() };
+                if let Some((_, d)) = epipolar_distances(&back, &now, &fit, &ransac, seed ^ 1) {
+                    for (j, decision) in long.iter().zip(epipolar_fixed(&d, o.threshold * grow as f32)) {
+                        decisions[*j] = decision;
+                    }
+                    frame.long = long.len();
+                }
+            }
+        }
+        if o.sticky {
+            self.sticky.apply(ids, &mut decisions);
+        } else {
+            self.sticky.remember(ids, &decisions);
+        }
+        frame.decisions = decisions;
+        frame
     }
 }
 
@@ -463,9 +588,123 @@ pub fn combine(a: Option<Decision>, b: Option<Decision>, how: Combine) -> Decisi
     }
 }
 
+/// Labels scored against a reference (the generator's masks): counts of true and false
+/// positives and negatives, "positive" meaning dynamic. For evaluation only; no rule reads it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Confusion {
+    /// Labelled dynamic and truly dynamic.
+    pub tp: u64,
+    /// Labelled dynamic but static.
+    pub fp: u64,
+    /// Labelled static but dynamic.
+    pub fn_: u64,
+    /// Labelled static and static.
+    pub tn: u64,
+}
+
+impl Confusion {
+    /// Count one point.
+    pub fn add(&mut self, predicted: bool, truth: bool) {
+        match (predicted, truth) {
+            (true, true) => self.tp += 1,
+            (true, false) => self.fp += 1,
+            (false, true) => self.fn_ += 1,
+            (false, false) => self.tn += 1,
+        }
+    }
+
+    /// Both counts together.
+    pub fn merge(&mut self, other: &Self) {
+        self.tp += other.tp;
+        self.fp += other.fp;
+        self.fn_ += other.fn_;
+        self.tn += other.tn;
+    }
+
+    /// Of the points labelled dynamic, the share truly dynamic (1 when none is labelled).
+    pub fn precision(&self) -> f64 {
+        ratio(self.tp, self.tp + self.fp)
+    }
+
+    /// Of the truly dynamic points, the share labelled dynamic (1 when there is none).
+    pub fn recall(&self) -> f64 {
+        ratio(self.tp, self.tp + self.fn_)
+    }
+
+    /// Harmonic mean of precision and recall (0 when both are 0).
+    pub fn f1(&self) -> f64 {
+        let (p, r) = (self.precision(), self.recall());
+        if p + r > 0.0 { 2.0 * p * r / (p + r) } else { 0.0 }
+    }
+}
+
+fn ratio(n: u64, d: u64) -> f64 {
+    if d == 0 { 1.0 } else { n as f64 / d as f64 }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every point's pixel in each of `frames` frames of a camera moving by `step` (rotation,
+    /// translation) a frame in a room 2-6 m deep; a fifth of the points (a walker) drift 0.6 px
+    /// a frame sideways.
+    fn frames_of(frames: usize, step: (f64, f64)) -> Vec<Vec<[f32; 2]>> {
+        let mut rng = SplitMix64::new(5);
+        let points: Vec<nalgebra::Point3<f64>> = (0..400)
+            .map(|_| {
+                nalgebra::Point3::new(rng.uniform() * 3.0 - 1.5, rng.uniform() * 2.0 - 1.0, 2.0 + 4.0 * rng.uniform())
+            })
+            .collect();
+        let camera = Pinhole::new(525.0, 525.0, 320.0, 240.0);
+        (0..frames)
+            .map(|f| {
+                let k = f as f64;
+                let pose = nalgebra::Isometry3::new(
+                    nalgebra::Vector3::new(step.1 * k, 0.0, 0.0),
+                    nalgebra::Vector3::new(0.0, step.0.to_radians() * k, 0.0),
+                );
+                let drift = |i: usize| if i.is_multiple_of(5) { 0.6 * k } else { 0.0 };
+                let project = |(i, x): (usize, &nalgebra::Point3<f64>)| {
+                    let p = camera.project(&(pose * x)).unwrap_or([0.0, 0.0]);
+                    [(p[0] + drift(i)) as f32, p[1] as f32]
+                };
+                points.iter().enumerate().map(project).collect()
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_longer_baseline_runs_where_orbslam2_finds_no_parallax() {
+        let options = |long_baseline| EpipolarOptions {
+            threshold: 0.4,
+            ransac: RansacConfig { threshold: 0.4, ..RansacConfig::default() },
+            sticky: false,
+            fit_static: false,
+            baseline: 10,
+            long_baseline,
+        };
+        let run = |frames: &[Vec<[f32; 2]>], long_baseline| {
+            let ids: Vec<u64> = (0..frames[0].len() as u64).collect();
+            let mut cull = EpipolarCull::new(options(long_baseline));
+            (1..frames.len()).map(|f| cull.label(&ids, &frames[f - 1], &frames[f], f as u64)).collect::<Vec<_>>()
+        };
+        // A camera that only rotates: no parallax, ORB-SLAM2 would take the homography, so
+        // every track tracked ten frames is tested over them, as without the gate.
+        let rotating = frames_of(12, (0.3, 0.0));
+        let (gated, always) = (run(&rotating, LongBaseline::LowParallax), run(&rotating, LongBaseline::Always));
+        let last = gated.last().unwrap();
+        assert!(last.homography_ratio.is_some_and(|r| r > HOMOGRAPHY_RATIO), "{:?}", last.homography_ratio);
+        assert_eq!(last.long, 400);
+        assert!(gated.iter().zip(&always).all(|(g, a)| g.decisions == a.decisions && g.long == a.long));
+        // 20 cm sideways a frame: tens of pixels of parallax, F is well posed, and the gated
+        // rule keeps to consecutive frames (the ungated one does not).
+        let wide = frames_of(12, (0.0, 0.2));
+        let (gated, always) = (run(&wide, LongBaseline::LowParallax), run(&wide, LongBaseline::Always));
+        let last = gated.last().unwrap();
+        assert!(last.homography_ratio.is_some_and(|r| r < HOMOGRAPHY_RATIO), "{:?}", last.homography_ratio);
+        assert_eq!((last.long, always.last().unwrap().long), (0, 400));
+    }
 
     #[test]
     fn the_history_gives_a_tracks_pixel_k_frames_back_while_it_is_tracked() {

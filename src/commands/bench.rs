@@ -88,6 +88,9 @@ struct Row {
     ms_per_frame: f64,
     /// Busy milliseconds per frame of each node.
     nodes: Vec<(String, f64)>,
+    /// Each `label_accuracy` node's pooled precision and recall (a rule's labels against the
+    /// generator's masks), by node.
+    labels: Vec<(String, f64, f64)>,
     trajectory: Option<(PathBuf, PathBuf)>,
 }
 
@@ -211,6 +214,13 @@ fn run_one(exe: &Path, job: &Job, args: &BenchArgs) -> Row {
             row.error = format!("`{}`: {why}", n.node);
         }
         row.nodes.push((n.node.clone(), 1e3 * n.busy_s / row.frames.max(1) as f64));
+        let pooled = |k: &str| report.and_then(|r| r.get(k)?.as_f64());
+        if n.op == "label_accuracy"
+            && report.and_then(|r| r.get("frames")?.as_u64()).is_some_and(|f| f > 0)
+            && let (Some(p), Some(r)) = (pooled("precision"), pooled("recall"))
+        {
+            row.labels.push((n.node.clone(), p, r));
+        }
     }
     let est = files.node_file(&node, "trajectory.txt");
     let gt = files.node_file(&node, "groundtruth.txt");
@@ -312,10 +322,10 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
         .filter_map(|(j, r)| r.ate.map(|a| (j.sequence(), a[0])))
         .collect();
     let mut md = String::from(
-        "Variants marked (oracle) decide with ground truth (masks, boxes or poses from the generator or the dataset): they bound what a rule can do, they are not results.\n\n| graph | variant | sequence | ATE rmse (cm) | mean | median | std | RPE t (cm) | RPE r (deg) | ms/frame | vs orb_baseline |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "Variants marked (oracle) decide with ground truth (masks, boxes or poses from the generator or the dataset): they bound what a rule can do, they are not results.\n\n| graph | variant | sequence | ATE rmse (cm) | mean | median | std | RPE t (cm) | RPE r (deg) | ms/frame | vs orb_baseline | labels precision / recall (generator masks) |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let mut csv = String::from(
-        "graph,variant,sequence,status,frames,ate_rmse_m,ate_mean_m,ate_median_m,ate_std_m,rpe_t_m,rpe_r_deg,ms_per_frame,improvement_pct,error,oracle\n",
+        "graph,variant,sequence,status,frames,ate_rmse_m,ate_mean_m,ate_median_m,ate_std_m,rpe_t_m,rpe_r_deg,ms_per_frame,improvement_pct,error,oracle,labels_precision_recall\n",
     );
     for (j, r) in jobs.iter().zip(rows) {
         let improvement = match (r.ate, baseline.get(&j.sequence())) {
@@ -327,9 +337,11 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
         let ate = r.ate.map(|a| a.map(Some)).unwrap_or([None; 4]);
         let variant = if r.oracle { format!("{} (oracle)", j.variant_name()) } else { j.variant_name().to_owned() };
         let rpe = r.rpe.map(|a| a.map(Some)).unwrap_or([None; 2]);
+        let labels =
+            |sep: &str| r.labels.iter().map(|(n, p, q)| format!("{n} {p:.2}/{q:.2}")).collect::<Vec<_>>().join(sep);
         if r.ok {
             md.push_str(&format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.1} | {} | {} |\n",
                 j.name,
                 variant,
                 j.sequence(),
@@ -341,10 +353,11 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
                 rpe[1].map_or_else(|| "-".into(), |v| format!("{v:.3}")),
                 r.ms_per_frame,
                 improvement.map_or_else(|| "-".into(), |v| format!("{v:+.0} %")),
+                if r.labels.is_empty() { "-".to_owned() } else { labels("; ") },
             ));
         } else {
             md.push_str(&format!(
-                "| {} | {} | {} | **failed**: {} | | | | | | | |\n",
+                "| {} | {} | {} | **failed**: {} | | | | | | | | |\n",
                 j.name,
                 variant,
                 j.sequence(),
@@ -353,7 +366,7 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
         }
         let f = |v: Option<f64>| v.map_or_else(String::new, |v| format!("{v:.6}"));
         csv.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{:.3},{},\"{}\",{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{:.3},{},\"{}\",{},{}\n",
             j.name,
             j.variant_name(),
             j.sequence(),
@@ -369,6 +382,7 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
             improvement.map_or_else(String::new, |v| format!("{v:.1}")),
             r.error.replace('"', "'"),
             r.oracle,
+            labels(" "),
         ));
     }
     (md, csv)

@@ -232,59 +232,50 @@ params! {
         fit_static: bool = false,
         /// frames between the two views tested: 1 compares consecutive frames (MG-SLAM); k > 1 each track's pixel k frames ago with now, where it has been tracked that long (the rest: consecutive frames)
         baseline: u64 [1, 60] = 1,
+        /// when the `baseline` test replaces the consecutive one: on every frame, or only where the consecutive pair has too little parallax for F (ORB-SLAM2's model selection: R_H > 0.40)
+        long_baseline: LongBaseline = LongBaseline::Always,
     }
+}
+
+param_enum! {
+    /// When the longer-baseline epipolar test runs.
+    enum LongBaseline { Always = "always", LowParallax = "low_parallax" }
 }
 
 fn ransac(threshold: f64, confidence: f64) -> RansacConfig {
     RansacConfig { threshold, confidence, ..RansacConfig::default() }
 }
 
-rule_op!(CULL_EPIPOLAR, "cull_epipolar", &[TRACKS.spec], EpipolarConfig, EpipolarOp::new);
+rule_op!(CULL_EPIPOLAR, "cull_epipolar", &[TRACKS.spec], EpipolarConfig, |c: EpipolarConfig| {
+    EpipolarOp(
+        rules::EpipolarCull::new(rules::EpipolarOptions {
+            threshold: c.threshold as f32,
+            ransac: ransac(c.ransac_threshold, c.confidence),
+            sticky: c.sticky,
+            fit_static: c.fit_static,
+            baseline: c.baseline as usize,
+            long_baseline: match c.long_baseline {
+                LongBaseline::Always => rules::LongBaseline::Always,
+                LongBaseline::LowParallax => rules::LongBaseline::LowParallax,
+            },
+        }),
+        f64::from(c.threshold as f32),
+    )
+});
 
-struct EpipolarOp(EpipolarConfig, rules::StickyLabels, rules::TrackHistory);
-
-impl EpipolarOp {
-    fn new(config: EpipolarConfig) -> Self {
-        let history = rules::TrackHistory::new(config.baseline as usize);
-        Self(config, rules::StickyLabels::default(), history)
-    }
-}
+struct EpipolarOp(rules::EpipolarCull, f64);
 
 impl Operator for EpipolarOp {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (msg, t) = TRACKS.require(inputs)?;
         let (prev, cur) = endpoints(t);
         let ids: Vec<u64> = t.tracks.iter().map(|t| t.id).collect();
-        let seed = ctx.rng.next_u64();
-        let ransac = ransac(self.0.ransac_threshold, self.0.confidence);
-        let threshold = self.0.threshold as f32;
-        let mut fit_on: Vec<bool> = ids.iter().map(|&id| !(self.0.fit_static && self.1.was_dynamic(id))).collect();
-        if fit_on.iter().filter(|u| **u).count() < 8 {
-            fit_on = vec![true; ids.len()];
+        let frame = self.0.label(&ids, &prev, &cur, ctx.rng.next_u64());
+        let mut extra = vec![("threshold", self.1), ("long_baseline", frame.long as f64)];
+        if let Some(r) = frame.homography_ratio {
+            extra.push(("homography_ratio", r));
         }
-        let mut decisions = match rules::epipolar_distances(&prev, &cur, &fit_on, &ransac, seed) {
-            Some((_, d)) => rules::epipolar_fixed(&d, threshold),
-            None => all_static(prev.len(), 0.0),
-        };
-        if self.0.baseline > 1 {
-            // The tracks with a pixel `baseline` frames back are tested over that baseline.
-            self.2.update(&ids, &prev, &cur);
-            let long: Vec<usize> = (0..ids.len()).filter(|&i| self.2.back(ids[i]).is_some()).collect();
-            let back: Vec<[f32; 2]> = long.iter().filter_map(|&i| self.2.back(ids[i])).collect();
-            let now: Vec<[f32; 2]> = long.iter().map(|&i| cur[i]).collect();
-            let fit: Vec<bool> = long.iter().map(|&i| fit_on[i]).collect();
-            if let Some((_, d)) = rules::epipolar_distances(&back, &now, &fit, &ransac, seed ^ 1) {
-                for (j, decision) in long.iter().zip(rules::epipolar_fixed(&d, threshold)) {
-                    decisions[*j] = decision;
-                }
-            }
-        }
-        if self.0.sticky {
-            self.1.apply(&ids, &mut decisions);
-        } else {
-            self.1.remember(&ids, &decisions);
-        }
-        Ok(labelled(msg, t, &decisions, &[("threshold", f64::from(threshold))]))
+        Ok(labelled(msg, t, &frame.decisions, &extra))
     }
 }
 

@@ -1,5 +1,5 @@
-//! Utility operators: mask statistics and a mask's agreement with a reference (no vision
-//! algorithm; they describe frames).
+//! Utility operators: mask statistics, a mask's and a rule's labels' agreement with a
+//! reference (no vision algorithm; they describe frames).
 //!
 //! The flow operators (`passthrough`, `gate`) and the operators that exist only to exercise
 //! the engine (`testing.*`) live in the engine (`dynaflow_engine::flow`, `::testing`); they
@@ -14,4 +14,5 @@ pub(crate) fn register(r: &mut Registry) {
     dynaflow_engine::flow::register(r);
     r.register(transform::MASK_STATS);
     r.register(transform::MASK_IOU);
+    r.register(transform::LABEL_ACCURACY);
 }

@@ -1,7 +1,8 @@
 //! Per-frame utility operators.
 
 use crate::inference::{ClassName, class_list};
-use dynaflow_engine::msg::{Scalars, SegmentationMask};
+use dynaflow_culling::Confusion;
+use dynaflow_engine::msg::{PointLabels, Scalars, SegmentationMask};
 use dynaflow_engine::op::{
     Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
 };
@@ -134,6 +135,76 @@ impl Operator for MaskIou {
             "precision": ratio(inter, mp),
             "recall": ratio(inter, tp),
             "mean_frame_iou": if self.frames == 0 { 0.0 } else { self.iou_sum / self.frames as f64 },
+        }));
+        Ok(())
+    }
+}
+
+// --- label_accuracy --------------------------------------------------------------------
+
+pub(super) const LABEL_ACCURACY: OpSpec = OpSpec {
+    name: "label_accuracy",
+    family: "util",
+    doc: "Precision and recall of a culling rule's labels against a reference mask (the generator's `gt_mask`): a label is truly dynamic where the reference is non-zero at its point. Per frame `precision`, `recall` (1 where nothing is to be found, or nothing was labelled), `tp`, `fp`, `fn`, `points`; the node report pools the run (`dynaflow bench` puts it next to the ATE). An evaluation: it reads ground truth, decides nothing; frames without a reference give nothing.",
+    kind: OpKind::Transform,
+    inputs: &[ACC_LABELS.spec, ACC_TRUTH.spec],
+    outputs: &[ACCURACY.spec],
+    params: &[],
+    cpu_heavy: false,
+    ground_truth_outputs: None,
+    build: |_| Ok(Instance::Transform(Box::new(LabelAccuracy::default()))),
+};
+
+const ACC_LABELS: In<PointLabels> =
+    In::required("labels", "a rule's labels, each at its point").with_role(InputRole::Statistics);
+const ACC_TRUTH: In<SegmentationMask> =
+    In::wired("truth", "the reference mask (non-zero = dynamic); a frame without (real TUM data): nothing is scored")
+        .with_role(InputRole::Statistics);
+const ACCURACY: Out<Scalars> = Out::new("accuracy", "`precision`, `recall`, `tp`, `fp`, `fn`, `points`");
+
+#[derive(Default)]
+struct LabelAccuracy {
+    run: Confusion,
+    frames: u64,
+}
+
+impl Operator for LabelAccuracy {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (msg, labels) = ACC_LABELS.require(inputs)?;
+        let Some(truth) = ACC_TRUTH.get(inputs)? else { return Ok(Outputs::new()) };
+        let (w, h) = (truth.width as usize, truth.height as usize);
+        let mut c = Confusion::default();
+        for l in &labels.labels {
+            let (x, y) = (l.at[0].round(), l.at[1].round());
+            // A point outside the reference (it cannot be: labels are at tracked pixels) counts as static.
+            let inside = x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h;
+            let dynamic = inside && truth.classes.get(y as usize * w + x as usize).is_some_and(|&k| k != 0);
+            c.add(l.dynamic, dynamic);
+        }
+        self.run.merge(&c);
+        self.frames += 1;
+        let values = vec![
+            ("precision".into(), c.precision()),
+            ("recall".into(), c.recall()),
+            ("tp".into(), c.tp as f64),
+            ("fp".into(), c.fp as f64),
+            ("fn".into(), c.fn_ as f64),
+            ("points".into(), labels.labels.len() as f64),
+        ];
+        Ok(Outputs::new().send(&ACCURACY, msg.header.clone(), Scalars { values }))
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
+        let c = self.run;
+        ctx.report = Some(serde_json::json!({
+            "frames": self.frames,
+            "precision": c.precision(),
+            "recall": c.recall(),
+            "f1": c.f1(),
+            "tp": c.tp,
+            "fp": c.fp,
+            "fn": c.fn_,
+            "tn": c.tn,
         }));
         Ok(())
     }

@@ -13,12 +13,16 @@
 
 mod fundamental;
 mod homography;
+mod model_selection;
 mod p3p;
 mod pose;
 mod ransac;
 
 pub use fundamental::{eight_point, epipolar_distance, epipolar_error, seven_point};
 pub use homography::{HomographyFit, fit_homography_prosac, homography_dlt, transfer, transfer_error};
+pub use model_selection::{
+    CHI2_1DOF, CHI2_2DOF, HOMOGRAPHY_RATIO, fundamental_score, homography_ratio, homography_score,
+};
 pub use p3p::p3p;
 pub use pose::{
     CHI2_2DOF_95, CHI2_3DOF_95, PoseFit, PoseObservation, bearing, compose, exp_se3, observation_jacobian,
