@@ -270,6 +270,11 @@ impl EpipolarCull {
         Self { options, sticky: StickyLabels::default(), history }
     }
 
+    /// The options it runs with.
+    pub fn options(&self) -> &EpipolarOptions {
+        &self.options
+    }
+
     /// Label this frame's tracks (`ids`, previous and current pixels).
     pub fn label(&mut self, ids: &[u64], prev: &[[f32; 2]], cur: &[[f32; 2]], seed: u64) -> EpipolarFrame {
         let o = &self.options;
@@ -282,50 +287,42 @@ impl EpipolarCull {
             Some((_, d)) => epipolar_fixed(d, o.threshold),
             None => vec![Decision::keep(LabelReason::Static, 0.0); prev.len()],
         };
-        let mut frame = EpipolarFrame { decisions: Vec::new(), homography_ratio: None, long: 0 };
+        let (mut homography_ratio_of_pair, mut long_tested) = (None, 0);
         if o.baseline > 1 {
             self.history.update(ids, prev, cur);
             let wanted = match o.long_baseline {
                 LongBaseline::Always => true,
                 LongBaseline::LowParallax => {
                     let ratio = consecutive.as_ref().and_then(|(fit, _)| {
-                        let (p1, p2): (Vec<[f64; 2]>, Vec<[f64; 2]>) = prev
-                            .iter()
-                            .zip(cur)
-                            .zip(&fit_on)
-                            .filter(|(_, u)| **u)
-                            .map(|((a, b), _)| ([f64::from(a[0]), f64::from(a[1])], [f64::from(b[0]), f64::from(b[1])]))
-                            .unzip();
+                        let (p1, p2): (Vec<[f32; 2]>, Vec<[f32; 2]>) =
+                            prev.iter().zip(cur).zip(&fit_on).filter(|(_, u)| **u).map(|((a, b), _)| (*a, *b)).unzip();
+                        let (p1, p2) = (to64(&p1), to64(&p2));
                         let quality = vec![1.0; p1.len()];
-                        let h = fit_homography_prosac(
-                            &p1,
-                            &p2,
-                            &quality,
-                            CHI2_2DOF.sqrt(),
-                            1000,
-                            &mut SplitMix64::new(seed ^ 2),
-                        )?;
+                        let mut rng = SplitMix64::new(seed ^ 2);
+                        let h = fit_homography_prosac(&p1, &p2, &quality, CHI2_2DOF.sqrt(), 1000, &mut rng)?;
                         Some(homography_ratio(&h.h, &fit.f, &p1, &p2))
                     });
-                    frame.homography_ratio = ratio;
+                    homography_ratio_of_pair = ratio;
                     // No F at all is the least parallax there is.
                     ratio.is_none_or(|r| r > HOMOGRAPHY_RATIO)
                 }
             };
             if wanted {
-                let long: Vec<usize> = (0..ids.len()).filter(|&i| self.history.back(ids[i]).is_some()).collect();
-                let back: Vec<[f32; 2]> = long.iter().filter_map(|&i| self.history.back(ids[i])).collect();
-                let now: Vec<[f32; 2]> = long.iter().map(|&i| cur[i]).collect();
-                let fit: Vec<bool> = long.iter().map(|&i| fit_on[i]).collect();
+                // The tracks tracked `baseline` frames, with their pixel then.
+                let long: Vec<(usize, [f32; 2])> =
+                    (0..ids.len()).filter_map(|i| Some((i, self.history.back(ids[i])?))).collect();
+                let back: Vec<[f32; 2]> = long.iter().map(|(_, p)| *p).collect();
+                let now: Vec<[f32; 2]> = long.iter().map(|(i, _)| cur[*i]).collect();
+                let fit: Vec<bool> = long.iter().map(|(i, _)| fit_on[*i]).collect();
                 // A track over k frames is the sum of k one-frame LK steps with independent
                 // errors: its error grows as sqrt(k), and so do both thresholds.
                 let grow = (o.baseline as f64).sqrt();
                 let ransac = RansacConfig { threshold: o.ransac.threshold * grow, ..o.ransac.clone() };
                 if let Some((_, d)) = epipolar_distances(&back, &now, &fit, &ransac, seed ^ 1) {
-                    for (j, decision) in long.iter().zip(epipolar_fixed(&d, o.threshold * grow as f32)) {
+                    for ((j, _), decision) in long.iter().zip(epipolar_fixed(&d, o.threshold * grow as f32)) {
                         decisions[*j] = decision;
                     }
-                    frame.long = long.len();
+                    long_tested = long.len();
                 }
             }
         }
@@ -334,8 +331,7 @@ impl EpipolarCull {
         } else {
             self.sticky.remember(ids, &decisions);
         }
-        frame.decisions = decisions;
-        frame
+        EpipolarFrame { decisions, homography_ratio: homography_ratio_of_pair, long: long_tested }
     }
 }
 

@@ -247,23 +247,20 @@ fn ransac(threshold: f64, confidence: f64) -> RansacConfig {
 }
 
 rule_op!(CULL_EPIPOLAR, "cull_epipolar", &[TRACKS.spec], EpipolarConfig, |c: EpipolarConfig| {
-    EpipolarOp(
-        rules::EpipolarCull::new(rules::EpipolarOptions {
-            threshold: c.threshold as f32,
-            ransac: ransac(c.ransac_threshold, c.confidence),
-            sticky: c.sticky,
-            fit_static: c.fit_static,
-            baseline: c.baseline as usize,
-            long_baseline: match c.long_baseline {
-                LongBaseline::Always => rules::LongBaseline::Always,
-                LongBaseline::LowParallax => rules::LongBaseline::LowParallax,
-            },
-        }),
-        f64::from(c.threshold as f32),
-    )
+    EpipolarOp(rules::EpipolarCull::new(rules::EpipolarOptions {
+        threshold: c.threshold as f32,
+        ransac: ransac(c.ransac_threshold, c.confidence),
+        sticky: c.sticky,
+        fit_static: c.fit_static,
+        baseline: c.baseline as usize,
+        long_baseline: match c.long_baseline {
+            LongBaseline::Always => rules::LongBaseline::Always,
+            LongBaseline::LowParallax => rules::LongBaseline::LowParallax,
+        },
+    }))
 });
 
-struct EpipolarOp(rules::EpipolarCull, f64);
+struct EpipolarOp(rules::EpipolarCull);
 
 impl Operator for EpipolarOp {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
@@ -271,7 +268,8 @@ impl Operator for EpipolarOp {
         let (prev, cur) = endpoints(t);
         let ids: Vec<u64> = t.tracks.iter().map(|t| t.id).collect();
         let frame = self.0.label(&ids, &prev, &cur, ctx.rng.next_u64());
-        let mut extra = vec![("threshold", self.1), ("long_baseline", frame.long as f64)];
+        let threshold = f64::from(self.0.options().threshold);
+        let mut extra = vec![("threshold", threshold), ("long_baseline", frame.long as f64)];
         if let Some(r) = frame.homography_ratio {
             extra.push(("homography_ratio", r));
         }
