@@ -9,6 +9,7 @@
 //!   guided window search.
 //! - [`flow`]: pyramidal LK (Scharr gradients, minimum-eigenvalue rejection,
 //!   forward-backward check) and a corner detector for re-seeding tracks.
+//! - [`stereo`]: ORB-SLAM2's sparse stereo matching of ORB keypoints on a rectified pair.
 //! - [`geometry`]: the fundamental matrix (7- and 8-point solvers, LO-RANSAC) and epipolar
 //!   distances, for culling points that move.
 //!
@@ -21,5 +22,6 @@ pub mod geometry;
 pub mod image;
 pub mod matching;
 pub mod orb;
+pub mod stereo;
 
 pub use image::GrayImage;

@@ -174,3 +174,37 @@ fn kinect_noise_scales_with_depth_squared_and_leaves_holes() {
     eprintln!("median |error|/z^2: {m:.6}, the model simulated {want:.6}");
     assert!((m / want - 1.0).abs() <= 0.03, "median |error|/z² = {m}, the model's {want}");
 }
+
+/// The right image of a stereo pair shows each left pixel at `u - d` (exact disparity), and
+/// nowhere else: the colour difference there is small, and grows when the disparity is off by
+/// a few pixels. A baseline that is not positive gives no right image.
+#[test]
+fn the_right_image_sees_left_pixels_at_their_exact_disparity() {
+    let g = small(Motion::Xyz, false);
+    let left = g.frame(30, false);
+    let right = g.right(&left, 0.08).unwrap();
+    let (w, h) = (320usize, 240usize);
+    let grey = |rgb: &[u8], i: usize| f64::from(rgb[3 * i]) + f64::from(rgb[3 * i + 1]) + f64::from(rgb[3 * i + 2]);
+    let diff = |offset: f32| {
+        let mut d = Vec::new();
+        for v in 0..h {
+            for u in 0..w {
+                let i = v * w + u;
+                let disparity = right.disparity[i];
+                let ur = (u as f32 - disparity - offset).round();
+                if disparity <= 0.0 || ur < 0.0 || ur >= w as f32 {
+                    continue;
+                }
+                d.push((grey(&left.rgb, i) - grey(&right.rgb, v * w + ur as usize)).abs());
+            }
+        }
+        median(d)
+    };
+    let (at, off) = (diff(0.0), diff(3.0));
+    assert!(at < 15.0 && off > 2.0 * at, "median colour difference {at} at the disparity, {off} 3 px off");
+    // Disparity is fx * b / z.
+    let i = 120 * w + 160;
+    let expected = g.config().intrinsics.fx * 0.08 / f64::from(left.depth_true[i]);
+    assert!((f64::from(right.disparity[i]) - expected).abs() < 1e-3);
+    assert!(g.right(&left, 0.0).is_none() && g.right(&left, f64::NAN).is_none());
+}

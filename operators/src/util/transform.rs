@@ -145,7 +145,7 @@ impl Operator for MaskIou {
 pub(super) const LABEL_ACCURACY: OpSpec = OpSpec {
     name: "label_accuracy",
     family: "util",
-    doc: "Precision and recall of a culling rule's labels against a reference mask (the generator's `gt_mask`): a label is truly dynamic where the reference is non-zero at its point. Per frame `precision`, `recall` (1 where nothing is to be found, or nothing was labelled), `tp`, `fp`, `fn`, `points`; the node report pools the run (`dynaflow bench` puts it next to the ATE). An evaluation: it reads ground truth, decides nothing; frames without a reference give nothing.",
+    doc: "Precision and recall of a culling rule's labels against a reference mask (the generator's `gt_mask`): a label is truly dynamic where the reference is non-zero at its point. Per frame `precision`, `recall` (1 where nothing is to be found, or nothing was labelled), `tp`, `fp`, `fn`, `points`, `outside` (labels at points the reference does not cover: not scored, counted); the node report pools the run (`dynaflow bench` puts it next to the ATE). An evaluation: it reads ground truth, decides nothing; frames without a reference give nothing.",
     kind: OpKind::Transform,
     inputs: &[ACC_LABELS.spec, ACC_TRUTH.spec],
     outputs: &[ACCURACY.spec],
@@ -160,12 +160,14 @@ const ACC_LABELS: In<PointLabels> =
 const ACC_TRUTH: In<SegmentationMask> =
     In::wired("truth", "the reference mask (non-zero = dynamic); a frame without (real TUM data): nothing is scored")
         .with_role(InputRole::Statistics);
-const ACCURACY: Out<Scalars> = Out::new("accuracy", "`precision`, `recall`, `tp`, `fp`, `fn`, `points`");
+const ACCURACY: Out<Scalars> = Out::new("accuracy", "`precision`, `recall`, `tp`, `fp`, `fn`, `points`, `outside`");
 
 #[derive(Default)]
 struct LabelAccuracy {
     run: Confusion,
     frames: u64,
+    /// Labels at points the reference does not cover (not scored).
+    outside: u64,
 }
 
 impl Operator for LabelAccuracy {
@@ -174,14 +176,20 @@ impl Operator for LabelAccuracy {
         let Some(truth) = ACC_TRUTH.get(inputs)? else { return Ok(Outputs::new()) };
         let (w, h) = (truth.width as usize, truth.height as usize);
         let mut c = Confusion::default();
+        let mut outside = 0u64;
         for l in &labels.labels {
             let (x, y) = (l.at[0].round(), l.at[1].round());
-            // A point outside the reference (it cannot be: labels are at tracked pixels) counts as static.
-            let inside = x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h;
-            let dynamic = inside && truth.classes.get(y as usize * w + x as usize).is_some_and(|&k| k != 0);
+            // A point the reference does not cover (LK keeps tracks whose window still touches
+            // the image; a reference of another size) cannot be scored: counted, not guessed.
+            if !(x >= 0.0 && y >= 0.0 && (x as usize) < w && (y as usize) < h) {
+                outside += 1;
+                continue;
+            }
+            let dynamic = truth.classes.get(y as usize * w + x as usize).is_some_and(|&k| k != 0);
             c.add(l.dynamic, dynamic);
         }
         self.run.merge(&c);
+        self.outside += outside;
         self.frames += 1;
         let values = vec![
             ("precision".into(), c.precision()),
@@ -190,6 +198,7 @@ impl Operator for LabelAccuracy {
             ("fp".into(), c.fp as f64),
             ("fn".into(), c.fn_ as f64),
             ("points".into(), labels.labels.len() as f64),
+            ("outside".into(), outside as f64),
         ];
         Ok(Outputs::new().send(&ACCURACY, msg.header.clone(), Scalars { values }))
     }
@@ -205,6 +214,7 @@ impl Operator for LabelAccuracy {
             "fp": c.fp,
             "fn": c.fn_,
             "tn": c.tn,
+            "outside": self.outside,
         }));
         Ok(())
     }

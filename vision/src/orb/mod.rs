@@ -135,6 +135,13 @@ impl OrbExtractor {
         &self.config
     }
 
+    /// The pyramid of the last [`extract`](Self::extract) or [`describe`](Self::describe):
+    /// `image` (the one it was given, level 0) and the levels resized from it, as the
+    /// stereo matcher's SAD search reads them.
+    pub fn pyramid<'a>(&'a self, image: &'a GrayImage) -> Vec<&'a GrayImage> {
+        std::iter::once(image).chain(self.levels.iter().skip(1).take_while(|l| !l.is_empty())).collect()
+    }
+
     /// Scale of `level` relative to level 0.
     pub fn scale(&self, level: usize) -> f32 {
         self.config.scale_factor.powi(level as i32)

@@ -5,6 +5,7 @@
 pub mod frontend;
 #[path = "../../../tests/common/peers.rs"]
 pub mod peers;
+pub mod stereo;
 #[path = "../../../tests/common/tempdir.rs"]
 mod tempdir;
 pub use tempdir::TempDir;
