@@ -240,6 +240,11 @@ pub struct EpipolarOptions {
     pub baseline: usize,
     /// When the longer test replaces the consecutive one.
     pub long_baseline: LongBaseline,
+    /// Test the longer pair against the model ORB-SLAM2's model selection picks for it: where
+    /// its `R_H > 0.40` (a rotation, or too little translation for the scene's depth: F is
+    /// ill-posed and any epipole fits the static points) each track's transfer error from the
+    /// pair's homography is compared with the same threshold instead of its epipolar distance.
+    pub select_model: bool,
 }
 
 /// What [`EpipolarCull::label`] decided for one frame.
@@ -251,6 +256,10 @@ pub struct EpipolarFrame {
     pub homography_ratio: Option<f64>,
     /// Tracks tested over the longer baseline.
     pub long: usize,
+    /// ORB-SLAM2's `R_H` of the longer pair (computed with `select_model`).
+    pub long_homography_ratio: Option<f64>,
+    /// Whether the longer pair was tested against its homography (`select_model`, `R_H > 0.40`).
+    pub long_homography: bool,
 }
 
 /// MG-SLAM's epipolar test (LK tracks, F by LO-RANSAC, dynamic above the threshold) over a
@@ -288,6 +297,7 @@ impl EpipolarCull {
             None => vec![Decision::keep(LabelReason::Static, 0.0); prev.len()],
         };
         let (mut homography_ratio_of_pair, mut long_tested) = (None, 0);
+        let (mut long_ratio, mut long_homography) = (None, false);
         if o.baseline > 1 {
             self.history.update(ids, prev, cur);
             let wanted = match o.long_baseline {
@@ -318,8 +328,21 @@ impl EpipolarCull {
                 // errors: its error grows as sqrt(k), and so do both thresholds.
                 let grow = (o.baseline as f64).sqrt();
                 let ransac = RansacConfig { threshold: o.ransac.threshold * grow, ..o.ransac.clone() };
-                if let Some((_, d)) = epipolar_distances(&back, &now, &fit, &ransac, seed ^ 1) {
-                    for ((j, _), decision) in long.iter().zip(epipolar_fixed(&d, o.threshold * grow as f32)) {
+                let threshold = o.threshold * grow as f32;
+                if let Some((fit_f, d)) = epipolar_distances(&back, &now, &fit, &ransac, seed ^ 1) {
+                    let mut tested = epipolar_fixed(&d, threshold);
+                    if o.select_model {
+                        let selected = homography_if_selected(&back, &now, &fit, &fit_f, seed ^ 3);
+                        long_ratio = selected.as_ref().map(|(r, _)| *r);
+                        if let Some((_, Some(h))) = selected {
+                            let (b, n) = (to64(&back), to64(&now));
+                            let r: Vec<f32> =
+                                b.iter().zip(&n).map(|(p, q)| transfer_error(&h, *p, *q) as f32).collect();
+                            tested = epipolar_fixed(&r, threshold);
+                            long_homography = true;
+                        }
+                    }
+                    for ((j, _), decision) in long.iter().zip(tested) {
                         decisions[*j] = decision;
                     }
                     long_tested = long.len();
@@ -331,8 +354,34 @@ impl EpipolarCull {
         } else {
             self.sticky.remember(ids, &decisions);
         }
-        EpipolarFrame { decisions, homography_ratio: homography_ratio_of_pair, long: long_tested }
+        EpipolarFrame {
+            decisions,
+            homography_ratio: homography_ratio_of_pair,
+            long: long_tested,
+            long_homography_ratio: long_ratio,
+            long_homography,
+        }
     }
+}
+
+/// ORB-SLAM2's model selection on a pair: the PROSAC homography of the points `fit_on`,
+/// `R_H` against the fitted `F`, and the homography when `R_H > 0.40` (the pair is explained
+/// by a homography better than F is conditioned: a rotation, or too little translation).
+/// `None` when no homography could be fitted.
+fn homography_if_selected(
+    prev: &[[f32; 2]],
+    cur: &[[f32; 2]],
+    fit_on: &[bool],
+    f: &FundamentalFit,
+    seed: u64,
+) -> Option<(f64, Option<dynaflow_vision::geometry::Mat3>)> {
+    let (p1, p2): (Vec<[f32; 2]>, Vec<[f32; 2]>) =
+        prev.iter().zip(cur).zip(fit_on).filter(|(_, u)| **u).map(|((a, b), _)| (*a, *b)).unzip();
+    let (p1, p2) = (to64(&p1), to64(&p2));
+    let quality = vec![1.0; p1.len()];
+    let h = fit_homography_prosac(&p1, &p2, &quality, CHI2_2DOF.sqrt(), 1000, &mut SplitMix64::new(seed))?;
+    let ratio = homography_ratio(&h.h, &f.f, &p1, &p2);
+    Some((ratio, (ratio > HOMOGRAPHY_RATIO).then_some(h.h)))
 }
 
 /// One track for [`DepthAnchors`]: its id and its previous and current pixel.
@@ -679,6 +728,7 @@ mod tests {
             fit_static: false,
             baseline: 10,
             long_baseline,
+            select_model: false,
         };
         let run = |frames: &[Vec<[f32; 2]>], long_baseline| {
             let ids: Vec<u64> = (0..frames[0].len() as u64).collect();
@@ -700,6 +750,37 @@ mod tests {
         let last = gated.last().unwrap();
         assert!(last.homography_ratio.is_some_and(|r| r < HOMOGRAPHY_RATIO), "{:?}", last.homography_ratio);
         assert_eq!((last.long, always.last().unwrap().long), (0, 400));
+    }
+
+    #[test]
+    fn model_selection_tests_a_rotation_against_its_homography() {
+        let options = |select_model| EpipolarOptions {
+            threshold: 0.4,
+            ransac: RansacConfig { threshold: 0.4, ..RansacConfig::default() },
+            sticky: false,
+            fit_static: false,
+            baseline: 10,
+            long_baseline: LongBaseline::Always,
+            select_model,
+        };
+        let last = |frames: &[Vec<[f32; 2]>], select_model| {
+            let ids: Vec<u64> = (0..frames[0].len() as u64).collect();
+            let mut cull = EpipolarCull::new(options(select_model));
+            (1..frames.len()).map(|f| cull.label(&ids, &frames[f - 1], &frames[f], f as u64)).last().unwrap()
+        };
+        // A rotating camera: the ten-frame pair is a homography (R_H > 0.40), so the walkers
+        // (every fifth point, 6 px off over ten frames) are judged by their transfer error,
+        // which no epipole can explain away: every one flagged, no static point.
+        let rotating = frames_of(12, (0.3, 0.0));
+        let f = last(&rotating, true);
+        assert!(f.long_homography && f.long_homography_ratio.is_some_and(|r| r > HOMOGRAPHY_RATIO));
+        let flagged: Vec<bool> = f.decisions.iter().map(|d| d.dynamic).collect();
+        assert!(flagged.iter().enumerate().all(|(i, d)| *d == i.is_multiple_of(5)), "{flagged:?}");
+        // 20 cm a frame: parallax, F is selected and the decisions are the epipolar test's.
+        let wide = frames_of(12, (0.0, 0.2));
+        let (selected, plain) = (last(&wide, true), last(&wide, false));
+        assert!(!selected.long_homography && selected.long_homography_ratio.is_some_and(|r| r < HOMOGRAPHY_RATIO));
+        assert_eq!(selected.decisions, plain.decisions);
     }
 
     #[test]

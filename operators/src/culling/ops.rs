@@ -234,6 +234,8 @@ params! {
         baseline: u64 [1, 60] = 1,
         /// when the `baseline` test replaces the consecutive one: on every frame, or only where the consecutive pair has too little parallax for F (ORB-SLAM2's model selection: R_H > 0.40)
         long_baseline: LongBaseline = LongBaseline::Always,
+        /// test the `baseline` pair against the model ORB-SLAM2's model selection picks for it: its homography's transfer error where R_H > 0.40 (a rotation: F is ill-posed), its epipolar distance otherwise
+        select_model: bool = false,
     }
 }
 
@@ -257,6 +259,7 @@ rule_op!(CULL_EPIPOLAR, "cull_epipolar", &[TRACKS.spec], EpipolarConfig, |c: Epi
             LongBaseline::Always => rules::LongBaseline::Always,
             LongBaseline::LowParallax => rules::LongBaseline::LowParallax,
         },
+        select_model: c.select_model,
     }))
 });
 
@@ -272,6 +275,10 @@ impl Operator for EpipolarOp {
         let mut extra = vec![("threshold", threshold), ("long_baseline", frame.long as f64)];
         if let Some(r) = frame.homography_ratio {
             extra.push(("homography_ratio", r));
+        }
+        if let Some(r) = frame.long_homography_ratio {
+            extra.push(("long_homography_ratio", r));
+            extra.push(("long_homography", f64::from(u8::from(frame.long_homography))));
         }
         Ok(labelled(msg, t, &frame.decisions, &extra))
     }
