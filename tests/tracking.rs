@@ -16,10 +16,18 @@ use dynaflow_slam::eval::{Align, evaluate};
 
 /// Run a variant; return the summary's ATE RMSE and the trajectory file's.
 fn run(variant: Option<&str>, motion: &str, dir: &Path, frames: &str) -> (Summary, f64) {
+    run_with(variant, &[], motion, dir, frames)
+}
+
+/// [`run`] with `--set` overrides (`sets`), in a folder of its own.
+fn run_with(variant: Option<&str>, sets: &[&str], motion: &str, dir: &Path, frames: &str) -> (Summary, f64) {
     let name = variant.unwrap_or("walking");
-    let out = dir.join(name);
+    let out = dir.join(format!("{name}{}", sets.join(",")));
     let mut cmd = common::bin();
     cmd.args(["run", "--no-progress", "--record", "none", "--frames", frames, "--out"]).arg(&out);
+    for s in sets {
+        cmd.args(["--set", s]);
+    }
     if let Some(v) = variant {
         cmd.args(["--variant", v]);
     }
@@ -68,6 +76,43 @@ fn baseline_meets_the_ate_bounds_on_static_scenes() {
         let mapping = summary.run.nodes.iter().find(|n| n.node == "mapping").unwrap();
         assert!(mapping.frames >= 3, "key frames reached local mapping");
     }
+}
+
+#[test]
+fn stereo_tracks_static_scenes_within_the_rgbd_bounds() {
+    let dir = common::TempDir::new("tracking-stereo");
+    // ORB-SLAM2's stereo mode on a rectified pair (12 cm), against the same back-end on the
+    // depth camera, static scene, 300 frames. On xyz within 1.5x of RGB-D (issue 33); on the
+    // orbit within the RGB-D bound of 2 cm (measured 1.65x of RGB-D there: docs/benchmarks.md).
+    for (motion, bound, ratio) in [("xyz", 0.01, Some(1.5)), ("halfsphere", 0.02, None)] {
+        let sets = ["camera.people=0", &format!("camera.motion={motion}")];
+        let (summary, stereo) = run_with(Some("stereo"), &sets, motion, dir.path(), "300");
+        let (_, rgbd) = run_with(None, &sets, motion, dir.path(), "300");
+        eprintln!("{motion}, static: stereo ATE RMSE {stereo:.4} m, RGB-D {rgbd:.4} m");
+        assert!(stereo <= bound, "{motion}: stereo {stereo} m > {bound} m");
+        if let Some(r) = ratio {
+            assert!(stereo <= r * rgbd, "{motion}: stereo {stereo} m > {r} x RGB-D {rgbd} m");
+        }
+        let track = summary.node_report("track").unwrap();
+        assert_eq!(track["frames"]["lost"], 0, "{motion}");
+        let matcher = summary.run.nodes.iter().find(|n| n.node == "stereo").unwrap();
+        assert_eq!(matcher.frames, 300, "every frame was matched");
+    }
+}
+
+#[test]
+fn a_stereo_graph_without_a_right_image_fails_naming_the_fix() {
+    let dir = common::TempDir::new("tracking-stereo-zero");
+    let o = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--frames", "5", "--variant", "stereo"])
+        .args(["--set", "camera.stereo_baseline=0", "--out"])
+        .arg(dir.path())
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("frame 0 has no right image") && stderr.contains("stereo_baseline"), "{stderr}");
 }
 
 #[test]

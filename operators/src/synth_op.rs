@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, PixelFormat, Pose, SegmentationMask};
+use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, PixelFormat, Pose, Scalars, SegmentationMask};
 use dynaflow_engine::op::Seeded;
 use dynaflow_engine::op::{Context, Instance, OpError, OpKind, OpSpec, Out, Outputs, Param, ParamType, Params, Source};
 use dynaflow_engine::params;
@@ -47,6 +47,8 @@ params! {
         image_noise: f64 [0.0, 50.0] = 2.0,
         /// 3×3 image blur
         blur: bool = true,
+        /// a rectified right camera this many metres to the right (`right`, `stereo`); 0: none (a zero baseline has no disparity)
+        stereo_baseline: f64 [0.0, 10.0] = 0.0,
     }
 }
 
@@ -54,6 +56,9 @@ const RGB: Out<Image> = Out::new("rgb", "RGB8 camera image");
 const DEPTH: Out<DepthImage> = Out::new("depth", "depth in metres (0 = no measurement)");
 const CAMERA_INFO: Out<CameraInfo> = Out::new("camera_info", "pinhole intrinsics (TUM fr3, scaled to the resolution)");
 const GT_POSE: Out<Pose> = Out::ground_truth("gt_pose", "ground-truth world_from_cam");
+const RIGHT: Out<Image> =
+    Out::new("right", "RGB8 image of the rectified right camera (with `stereo_baseline` > 0; its own sensor noise)");
+const STEREO: Out<Scalars> = Out::new("stereo", "`baseline_m`: the stereo baseline (with `stereo_baseline` > 0)");
 const GT_MASK: Out<SegmentationMask> =
     Out::ground_truth("gt_mask", "ground-truth class (0 static, 1 person) and instance masks");
 
@@ -63,7 +68,7 @@ pub(crate) const SYNTH: OpSpec = OpSpec {
     doc: dynaflow_engine::op::doc_line(include_str!("docs/synth.md")),
     kind: OpKind::Source,
     inputs: &[],
-    outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec],
+    outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec, RIGHT.spec, STEREO.spec],
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
@@ -88,6 +93,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         generator: Generator::new(config),
         seeded: c.seed.0.is_some(),
         frames: c.frames,
+        stereo_baseline: (c.stereo_baseline > 0.0).then_some(c.stereo_baseline),
         frame_id: "camera".into(),
     })))
 }
@@ -97,6 +103,8 @@ struct SynthSource {
     /// Whether the graph gave `seed`; otherwise the node's seed is used.
     seeded: bool,
     frames: u64,
+    /// The right camera's baseline, metres.
+    stereo_baseline: Option<f64>,
     frame_id: Arc<str>,
 }
 
@@ -118,6 +126,13 @@ impl Source for SynthSource {
         let k = &self.generator.config().intrinsics;
         let header = Header { seq, stamp: f.stamp, frame_id: self.frame_id.clone() };
         let world = Header { frame_id: "world".into(), ..header.clone() };
+        let mut out = Outputs::new();
+        if let Some(b) = self.stereo_baseline
+            && let Some(right) = self.generator.right(&f, b)
+        {
+            let image = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: right.rgb };
+            out = out.send(&RIGHT, header.clone(), image).send(&STEREO, header.clone(), Scalars::one("baseline_m", b));
+        }
         let info = k.clone();
         let mask = SegmentationMask {
             width: k.width,
@@ -127,16 +142,15 @@ impl Source for SynthSource {
             class_names: vec!["static".into(), "person".into()],
         };
         Ok(Some(
-            Outputs::new()
-                .send(
-                    &RGB,
-                    header.clone(),
-                    Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: f.rgb },
-                )
-                .send(&DEPTH, header.clone(), DepthImage { width: k.width, height: k.height, data: f.depth })
-                .send(&CAMERA_INFO, header.clone(), info)
-                .send(&GT_POSE, world, Pose { world_from_cam: f.world_from_cam })
-                .send(&GT_MASK, header, mask),
+            out.send(
+                &RGB,
+                header.clone(),
+                Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: f.rgb },
+            )
+            .send(&DEPTH, header.clone(), DepthImage { width: k.width, height: k.height, data: f.depth })
+            .send(&CAMERA_INFO, header.clone(), info)
+            .send(&GT_POSE, world, Pose { world_from_cam: f.world_from_cam })
+            .send(&GT_MASK, header, mask),
         ))
     }
 

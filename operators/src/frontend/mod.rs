@@ -3,14 +3,17 @@
 //! - `orb`: `orb_extract` (ORB-SLAM-style ORB features).
 //! - `matching`: `match_descriptors` (frame-to-frame Hamming matching with stable track ids).
 //! - `flow`: `lk_flow` (pyramidal Lucas-Kanade tracking with re-seeding).
+//! - `stereo`: `stereo_match` (ORB-SLAM2's sparse stereo matching into a right image).
 
 mod flow;
 mod matching;
 mod orb;
+mod stereo;
 
 pub use flow::LK_FLOW;
 pub use matching::MATCH_DESCRIPTORS;
 pub use orb::ORB_EXTRACT;
+pub use stereo::STEREO_MATCH;
 
 use dynaflow_engine::msg::{Image, PixelFormat};
 use dynaflow_engine::op::OpError;

@@ -142,6 +142,21 @@ impl OrbExtractor {
         std::iter::once(image).chain(self.levels.iter().skip(1).take_while(|l| !l.is_empty())).collect()
     }
 
+    /// Build the pyramid of `image` as [`extract`](Self::extract) would, without extracting,
+    /// and return it as [`pyramid`](Self::pyramid) does (the stereo matcher's left view when
+    /// the keypoints came from another extractor with the same settings).
+    pub fn build_pyramid<'a>(&'a mut self, image: &'a GrayImage) -> Vec<&'a GrayImage> {
+        self.levels.resize_with(self.config.levels, GrayImage::default);
+        let mut built = 1;
+        for level in 1..self.config.levels {
+            if !self.build_level(image, level) {
+                break;
+            }
+            built += 1;
+        }
+        std::iter::once(image).chain(self.levels.iter().skip(1).take(built - 1)).collect()
+    }
+
     /// Scale of `level` relative to level 0.
     pub fn scale(&self, level: usize) -> f32 {
         self.config.scale_factor.powi(level as i32)

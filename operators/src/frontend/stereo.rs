@@ -1,0 +1,150 @@
+//! `stereo_match`.
+
+use dynaflow_engine::msg::{CameraInfo, DepthImage, Image, Keypoints, Scalars};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::params;
+use dynaflow_vision::orb::{OrbConfig, OrbExtractor, OrbKeypoint};
+use dynaflow_vision::stereo::{StereoRig, StereoView, stereo_match};
+
+params! {
+    struct Config {
+        /// keypoints extracted from the right image (ORB-SLAM2 extracts as many as on the left)
+        features: u64 [1, 100_000] = 1000,
+        /// scale between pyramid levels: that of the left keypoints' `orb_extract`
+        scale_factor: f64 [1.01, 4.0] = 1.2,
+        /// pyramid levels: those of the left keypoints' `orb_extract`
+        levels: u64 [1, 16] = 8,
+        /// FAST threshold tried first in each cell of the right image (iniThFAST)
+        ini_threshold: u64 [1, 254] = 20,
+        /// FAST threshold for cells with no corner at the first (minThFAST)
+        min_threshold: u64 [1, 254] = 7,
+    }
+}
+
+const KEYPOINTS: In<Keypoints> =
+    In::required("keypoints", "the left image's ORB keypoints with descriptors (`orb_extract`)");
+const LEFT: In<Image> = In::required("left", "the left rectified image the keypoints come from");
+const RIGHT: In<Image> = In::wired("right", "the right rectified image, same size (a frame without one is an error)");
+const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "the left camera's intrinsics (fx for bf)");
+const STEREO: In<Scalars> = In::wired("stereo", "the rig: `baseline_m` (a frame without it is an error)");
+const DEPTH: Out<DepthImage> =
+    Out::new("depth", "sparse depth: each matched keypoint's stereo depth at its pixel, metres (0 = none)");
+const STATS: Out<Scalars> = Out::new(
+    "stats",
+    "`keypoints`, `matched`, `no_candidate`, `no_refinement`, `out_of_range`, `high_cost` (the matcher's rejections)",
+);
+
+pub const STEREO_MATCH: OpSpec = OpSpec {
+    name: "stereo_match",
+    family: "stereo",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/stereo_match.md")),
+    kind: OpKind::Transform,
+    inputs: &[KEYPOINTS.spec, LEFT.spec, RIGHT.spec, CAMERA_INFO.spec, STEREO.spec],
+    outputs: &[DEPTH.spec, STATS.spec],
+    params: Config::PARAMS,
+    cpu_heavy: true,
+    ground_truth_outputs: None,
+    build: |p: &Params| {
+        let c = Config::from_params(p)?;
+        let config = OrbConfig {
+            features: c.features as usize,
+            scale_factor: c.scale_factor as f32,
+            levels: c.levels as usize,
+            ini_threshold: c.ini_threshold.min(254) as u8,
+            min_threshold: c.min_threshold.min(254) as u8,
+            ..OrbConfig::default()
+        };
+        Ok(Instance::Transform(Box::new(StereoOp {
+            left: OrbExtractor::new(config.clone()),
+            right: OrbExtractor::new(config),
+        })))
+    },
+};
+
+struct StereoOp {
+    /// Builds the left pyramid (the keypoints come from `orb_extract`).
+    left: OrbExtractor,
+    /// Extracts the right keypoints.
+    right: OrbExtractor,
+}
+
+impl Operator for StereoOp {
+    fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (msg, kp) = KEYPOINTS.require(inputs)?;
+        let (_, left) = LEFT.require(inputs)?;
+        let (_, k) = CAMERA_INFO.require(inputs)?;
+        let (Some(right), Some(rig)) = (RIGHT.get(inputs)?, STEREO.get(inputs)?) else {
+            return Err(OpError::Input(format!(
+                "frame {} has no right image or no `stereo` rig: the source gives none (`synth`: set `stereo_baseline` > 0; a zero baseline has no disparity)",
+                inputs.seq
+            )));
+        };
+        let baseline = rig
+            .values
+            .iter()
+            .find(|(n, _)| &**n == "baseline_m")
+            .map(|(_, v)| *v)
+            .ok_or_else(|| OpError::Input("`stereo` has no `baseline_m`".into()))?;
+        let (l, r) = (super::gray(left)?, super::gray(right)?);
+        let descriptors: Vec<[u8; 32]> = match &kp.descriptors {
+            Some(d) if d.bytes_per == 32 && d.data.len() == 32 * kp.points.len() => {
+                d.data.chunks_exact(32).map(|c| c.try_into().unwrap_or([0; 32])).collect()
+            }
+            _ => {
+                return Err(OpError::Input(
+                    "`keypoints` need 32-byte ORB descriptors (connect `orb_extract.keypoints`)".into(),
+                ));
+            }
+        };
+        let levels = self.left.config().levels;
+        if let Some(p) = kp.points.iter().find(|p| usize::from(p.octave) >= levels) {
+            return Err(OpError::Input(format!(
+                "a keypoint of octave {} but `levels` is {levels}: set this node's `levels` and `scale_factor` to those of the keypoints' `orb_extract`",
+                p.octave
+            )));
+        }
+        let keypoints: Vec<OrbKeypoint> = kp
+            .points
+            .iter()
+            .map(|p| OrbKeypoint {
+                x: p.x,
+                y: p.y,
+                size: p.size,
+                angle: p.angle,
+                response: p.response,
+                octave: p.octave,
+            })
+            .collect();
+        let fr = self.right.extract(&r, None);
+        let rl = self.right.pyramid(&r);
+        let ll = self.left.build_pyramid(&l);
+        let scale_factor = self.right.config().scale_factor;
+        let m = stereo_match(
+            &StereoView { keypoints: &keypoints, descriptors: &descriptors, levels: &ll },
+            &StereoView { keypoints: &fr.keypoints, descriptors: &fr.descriptors, levels: &rl },
+            &StereoRig { bf: k.fx * baseline, baseline, scale_factor },
+        )
+        .map_err(|e| OpError::Input(e.to_string()))?;
+        let mut depth = DepthImage { width: left.width, height: left.height, data: vec![0.0; l.width * l.height] };
+        for (p, s) in kp.points.iter().zip(&m.matches) {
+            let Some(s) = s else { continue };
+            let (x, y) = (p.x.round(), p.y.round());
+            if x >= 0.0 && y >= 0.0 && (x as usize) < l.width && (y as usize) < l.height {
+                depth.data[y as usize * l.width + x as usize] = s.depth;
+            }
+        }
+        let stats = vec![
+            ("keypoints".into(), kp.points.len() as f64),
+            ("matched".into(), m.matched() as f64),
+            ("no_candidate".into(), m.no_candidate as f64),
+            ("no_refinement".into(), m.no_refinement as f64),
+            ("out_of_range".into(), m.out_of_range as f64),
+            ("high_cost".into(), m.high_cost as f64),
+        ];
+        Ok(Outputs::new().send(&DEPTH, msg.header.clone(), depth).send(
+            &STATS,
+            msg.header.clone(),
+            Scalars { values: stats },
+        ))
+    }
+}
