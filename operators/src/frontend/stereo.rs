@@ -24,9 +24,12 @@ params! {
 const KEYPOINTS: In<Keypoints> =
     In::required("keypoints", "the left image's ORB keypoints with descriptors (`orb_extract`)");
 const LEFT: In<Image> = In::required("left", "the left rectified image the keypoints come from");
-const RIGHT: In<Image> = In::wired("right", "the right rectified image, same size (a frame without one is an error)");
+// Optional in the graph (a graph can carry a disabled `stereo_match` wired only in its stereo
+// variant, and still read a TUM folder with `--input`); a frame without them is an error.
+const RIGHT: In<Image> =
+    In::optional("right", "the right rectified image, same size (a frame without one is an error)");
 const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "the left camera's intrinsics (fx for bf)");
-const STEREO: In<Scalars> = In::wired("stereo", "the rig: `baseline_m` (a frame without it is an error)");
+const STEREO: In<Scalars> = In::optional("stereo", "the rig: `baseline_m` (a frame without it is an error)");
 const DEPTH: Out<DepthImage> =
     Out::new("depth", "sparse depth: each matched keypoint's stereo depth at its pixel, metres (0 = none)");
 const STATS: Out<Scalars> = Out::new(
