@@ -12,7 +12,7 @@ param_enum! {
 }
 
 params! {
-    struct Config {
+    pub(super) struct Config {
         /// keypoints wanted over all levels
         features: u64 [1, 100_000] = 1000,
         /// scale between pyramid levels
@@ -46,22 +46,26 @@ pub const ORB_EXTRACT: OpSpec = OpSpec {
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
-        let c = Config::from_params(p)?;
-        let config = OrbConfig {
-            features: c.features as usize,
-            scale_factor: c.scale_factor as f32,
-            levels: c.levels as usize,
-            ini_threshold: c.ini_threshold.min(254) as u8,
-            min_threshold: c.min_threshold.min(254) as u8,
-            distribution: match c.distribution {
-                Spread::Quadtree => Distribution::Quadtree,
-                Spread::Harris => Distribution::Harris,
-            },
-            ..OrbConfig::default()
-        };
-        Ok(Instance::Transform(Box::new(OrbOp(OrbExtractor::new(config)))))
+        Ok(Instance::Transform(Box::new(OrbOp(OrbExtractor::new(orb_config(&Config::from_params(p)?))))))
     },
 };
+
+/// The extractor's settings from the operator's parameters (`stereo_match` extracts its right
+/// image with the same ones).
+pub(super) fn orb_config(c: &Config) -> OrbConfig {
+    OrbConfig {
+        features: c.features as usize,
+        scale_factor: c.scale_factor as f32,
+        levels: c.levels as usize,
+        ini_threshold: c.ini_threshold.min(254) as u8,
+        min_threshold: c.min_threshold.min(254) as u8,
+        distribution: match c.distribution {
+            Spread::Quadtree => Distribution::Quadtree,
+            Spread::Harris => Distribution::Harris,
+        },
+        ..OrbConfig::default()
+    }
+}
 
 struct OrbOp(OrbExtractor);
 

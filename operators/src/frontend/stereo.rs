@@ -2,24 +2,12 @@
 
 use dynaflow_engine::msg::{CameraInfo, DepthImage, Image, Keypoints, Scalars};
 use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
-use dynaflow_engine::params;
-use dynaflow_vision::orb::{OrbConfig, OrbExtractor, OrbKeypoint};
+use dynaflow_vision::orb::{OrbExtractor, OrbKeypoint};
 use dynaflow_vision::stereo::{StereoRig, StereoView, stereo_match};
 
-params! {
-    struct Config {
-        /// keypoints extracted from the right image (ORB-SLAM2 extracts as many as on the left)
-        features: u64 [1, 100_000] = 1000,
-        /// scale between pyramid levels: that of the left keypoints' `orb_extract`
-        scale_factor: f64 [1.01, 4.0] = 1.2,
-        /// pyramid levels: those of the left keypoints' `orb_extract`
-        levels: u64 [1, 16] = 8,
-        /// FAST threshold tried first in each cell of the right image (iniThFAST)
-        ini_threshold: u64 [1, 254] = 20,
-        /// FAST threshold for cells with no corner at the first (minThFAST)
-        min_threshold: u64 [1, 254] = 7,
-    }
-}
+// The right image is extracted with `orb_extract`'s own parameters, which must be those of
+// the left keypoints' `orb_extract` (the octaves' scales are read from them).
+use super::orb::{Config, orb_config};
 
 const KEYPOINTS: In<Keypoints> =
     In::required("keypoints", "the left image's ORB keypoints with descriptors (`orb_extract`)");
@@ -48,15 +36,7 @@ pub const STEREO_MATCH: OpSpec = OpSpec {
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
-        let c = Config::from_params(p)?;
-        let config = OrbConfig {
-            features: c.features as usize,
-            scale_factor: c.scale_factor as f32,
-            levels: c.levels as usize,
-            ini_threshold: c.ini_threshold.min(254) as u8,
-            min_threshold: c.min_threshold.min(254) as u8,
-            ..OrbConfig::default()
-        };
+        let config = orb_config(&Config::from_params(p)?);
         Ok(Instance::Transform(Box::new(StereoOp {
             left: OrbExtractor::new(config.clone()),
             right: OrbExtractor::new(config),
