@@ -303,15 +303,10 @@ impl EpipolarCull {
             let wanted = match o.long_baseline {
                 LongBaseline::Always => true,
                 LongBaseline::LowParallax => {
-                    let ratio = consecutive.as_ref().and_then(|(fit, _)| {
-                        let (p1, p2): (Vec<[f32; 2]>, Vec<[f32; 2]>) =
-                            prev.iter().zip(cur).zip(&fit_on).filter(|(_, u)| **u).map(|((a, b), _)| (*a, *b)).unzip();
-                        let (p1, p2) = (to64(&p1), to64(&p2));
-                        let quality = vec![1.0; p1.len()];
-                        let mut rng = SplitMix64::new(seed ^ 2);
-                        let h = fit_homography_prosac(&p1, &p2, &quality, CHI2_2DOF.sqrt(), 1000, &mut rng)?;
-                        Some(homography_ratio(&h.h, &fit.f, &p1, &p2))
-                    });
+                    let ratio = consecutive
+                        .as_ref()
+                        .and_then(|(fit, _)| homography_if_selected(prev, cur, &fit_on, fit, seed ^ 2))
+                        .map(|(r, _)| r);
                     homography_ratio_of_pair = ratio;
                     // No F at all is the least parallax there is.
                     ratio.is_none_or(|r| r > HOMOGRAPHY_RATIO)

@@ -130,7 +130,7 @@ impl Source for SynthSource {
         if let Some(b) = self.stereo_baseline
             && let Some(right) = self.generator.right(&f, b)
         {
-            let image = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: right.rgb };
+            let image = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: right };
             out = out.send(&RIGHT, header.clone(), image).send(&STEREO, header.clone(), Scalars::one("baseline_m", b));
         }
         let info = k.clone();

@@ -106,15 +106,6 @@ pub struct Frame {
     pub flow: Option<Vec<[f32; 2]>>,
 }
 
-/// The right image of a rectified stereo pair (the left image is [`Frame`]'s).
-#[derive(Clone, Debug)]
-pub struct RightFrame {
-    /// RGB8 with sensor effects (its own noise).
-    pub rgb: Vec<u8>,
-    /// Exact disparity of each *left* pixel, `fx * baseline / depth` (0 = no surface).
-    pub disparity: Vec<f32>,
-}
-
 /// The generator: a scene plus a clock.
 #[derive(Clone, Debug)]
 pub struct Generator {
@@ -155,29 +146,31 @@ impl Generator {
         self.scene.statics().iter().map(|p| (p.world_from_part, p.half)).collect()
     }
 
-    /// The right camera of a rectified stereo pair `baseline` metres to the right of the
-    /// camera of `left` (a frame of this generator) (same intrinsics and orientation; ORB-SLAM2's and KITTI's convention:
-    /// a left point at column `u` is at `u - d` in the right image, `d = fx * b / z`), and the
-    /// exact disparity of every left pixel. `None` for a baseline that is not positive and
-    /// finite.
-    pub fn right(&self, left: &Frame, baseline: f64) -> Option<RightFrame> {
+    /// The RGB8 image (with its own sensor noise) of the right camera of a rectified stereo
+    /// pair `baseline` metres to the right of the camera of `left` (a frame of this
+    /// generator), same intrinsics and orientation: ORB-SLAM2's and KITTI's convention, a
+    /// left point at column `u` is at `u - d` in the right image ([`disparity`](Self::disparity)).
+    /// `None` for a baseline that is not positive and finite.
+    pub fn right(&self, left: &Frame, baseline: f64) -> Option<Vec<u8>> {
         if !(baseline > 0.0 && baseline.is_finite()) {
             return None;
         }
         let c = &self.config;
         let k = left.index;
-        let t = self.time(k);
         let world_from_right = left.world_from_cam * nalgebra::Translation3::new(baseline, 0.0, 0.0);
-        let parts = self.scene.people_parts(t);
+        let parts = self.scene.people_parts(self.time(k));
         let r = render::render(&self.scene, &parts, &world_from_right, &c.intrinsics, false);
         let (w, h) = (c.intrinsics.width as usize, c.intrinsics.height as usize);
         let seed32 = (c.seed ^ (c.seed >> 32)) as u32;
-        // Its own sensor noise: another frame number for the noise hash.
-        let rgb = sensor::camera_image(&r.rgb, w, h, c.image_noise, c.blur, seed32 ^ 0x5EED_0001, k as u32);
-        let bf = c.intrinsics.fx * baseline;
-        let disparity =
-            left.depth_true.iter().map(|&z| if z > 0.0 { (bf / f64::from(z)) as f32 } else { 0.0 }).collect();
-        Some(RightFrame { rgb, disparity })
+        // Its own sensor noise: another seed for the noise hash.
+        Some(sensor::camera_image(&r.rgb, w, h, c.image_noise, c.blur, seed32 ^ 0x5EED_0001, k as u32))
+    }
+
+    /// The exact disparity `fx * baseline / z` of every pixel of `left` for a right camera
+    /// `baseline` metres to its right (0 where no surface was hit).
+    pub fn disparity(&self, left: &Frame, baseline: f64) -> Vec<f32> {
+        let bf = self.config.intrinsics.fx * baseline;
+        left.depth_true.iter().map(|&z| if z > 0.0 { (bf / f64::from(z)) as f32 } else { 0.0 }).collect()
     }
 
     /// Render frame `k` (and its flow to frame `k + 1` if `flow`).

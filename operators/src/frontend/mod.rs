@@ -15,7 +15,7 @@ pub use matching::MATCH_DESCRIPTORS;
 pub use orb::ORB_EXTRACT;
 pub use stereo::STEREO_MATCH;
 
-use dynaflow_engine::msg::{Image, PixelFormat};
+use dynaflow_engine::msg::{Image, Keypoints, PixelFormat};
 use dynaflow_engine::op::OpError;
 use dynaflow_vision::GrayImage;
 
@@ -28,4 +28,14 @@ fn gray(image: &Image) -> Result<GrayImage, OpError> {
         PixelFormat::Rgb8 => GrayImage::from_rgb8(w, h, data),
     };
     img.ok_or_else(|| OpError::Input(format!("image {w}x{h} {format:?} has {} bytes", data.len())))
+}
+
+/// The 32-byte ORB descriptors of `keypoints`, one per keypoint, as one byte slice (empty
+/// when there are no keypoints); an error naming the fix for anything else.
+pub(crate) fn orb_descriptors(keypoints: &Keypoints) -> Result<&[u8], OpError> {
+    match &keypoints.descriptors {
+        Some(d) if d.bytes_per == 32 && d.data.len() == 32 * keypoints.points.len() => Ok(&d.data),
+        Some(d) if keypoints.points.is_empty() || d.data.is_empty() => Ok(&d.data),
+        _ => Err(OpError::Input("`keypoints` need 32-byte ORB descriptors (connect `orb_extract.keypoints`)".into())),
+    }
 }

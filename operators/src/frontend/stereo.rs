@@ -62,23 +62,10 @@ impl Operator for StereoOp {
                 inputs.seq
             )));
         };
-        let baseline = rig
-            .values
-            .iter()
-            .find(|(n, _)| &**n == "baseline_m")
-            .map(|(_, v)| *v)
-            .ok_or_else(|| OpError::Input("`stereo` has no `baseline_m`".into()))?;
+        let baseline = rig.get("baseline_m").ok_or_else(|| OpError::Input("`stereo` has no `baseline_m`".into()))?;
         let (l, r) = (super::gray(left)?, super::gray(right)?);
-        let descriptors: Vec<[u8; 32]> = match &kp.descriptors {
-            Some(d) if d.bytes_per == 32 && d.data.len() == 32 * kp.points.len() => {
-                d.data.chunks_exact(32).map(|c| c.try_into().unwrap_or([0; 32])).collect()
-            }
-            _ => {
-                return Err(OpError::Input(
-                    "`keypoints` need 32-byte ORB descriptors (connect `orb_extract.keypoints`)".into(),
-                ));
-            }
-        };
+        let descriptors: Vec<[u8; 32]> =
+            super::orb_descriptors(kp)?.chunks_exact(32).map(|c| c.try_into().unwrap_or([0; 32])).collect();
         let levels = self.left.config().levels;
         if let Some(p) = kp.points.iter().find(|p| usize::from(p.octave) >= levels) {
             return Err(OpError::Input(format!(

@@ -178,15 +178,7 @@ impl Operator for PnpTrack {
                 m.width, m.height, depth.width, depth.height
             )));
         }
-        let descriptors = match &kp.descriptors {
-            Some(d) if d.bytes_per == 32 && d.data.len() == 32 * kp.points.len() => &d.data,
-            Some(d) if kp.points.is_empty() || d.data.is_empty() => &d.data,
-            _ => {
-                return Err(OpError::Input(
-                    "`keypoints` need 32-byte ORB descriptors (connect `orb_extract.keypoints`)".into(),
-                ));
-            }
-        };
+        let descriptors = crate::frontend::orb_descriptors(kp)?;
         if self.tracker.is_none() {
             let mut tc = TrackerConfig::rgbd(k.fx);
             tc.bf = k.fx * self.config.baseline;

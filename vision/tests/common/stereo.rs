@@ -23,13 +23,13 @@ pub struct Pair {
 pub fn synth_stereo(motion: Motion, seed: u64, k: u64, baseline: f64) -> Pair {
     let g = Generator::new(SynthConfig { motion, seed, ..SynthConfig::default() });
     let f = g.frame(k, false);
-    let r = g.right(&f, baseline).unwrap();
+    let right = g.right(&f, baseline).unwrap();
     let i = &g.config().intrinsics;
     let (w, h) = (i.width as usize, i.height as usize);
     Pair {
         left: GrayImage::from_rgb8(w, h, &f.rgb).unwrap(),
-        right: GrayImage::from_rgb8(w, h, &r.rgb).unwrap(),
-        disparity: r.disparity,
+        right: GrayImage::from_rgb8(w, h, &right).unwrap(),
+        disparity: g.disparity(&f, baseline),
         rig: StereoRig { bf: i.fx * baseline, baseline, scale_factor: 1.2 },
     }
 }
