@@ -423,7 +423,7 @@ fn kitti_reader_refuses_or_reads_correctly_every_corruption() {
         };
         let yaml =
             format!("name: fuzz\nnodes:\n  cam: {{ op: kitti_odometry, params: {{ path: '{}' }} }}\n", seq.display());
-        fuzz.check(i, &case, &yaml, "cam", "left");
+        fuzz.check(i, &case, &yaml, "cam", "rgb");
     }
     fuzz.report();
 }

@@ -291,7 +291,7 @@ fn kitti_sequence_reads_stereo_calibration_and_poses() {
         run(&format!("name: k\nnodes:\n  cam: {{ op: kitti_odometry, params: {{ path: '{}' }} }}\n", seq.display()))
             .unwrap();
     assert_eq!(report.status, RunStatus::Completed, "{:?}", report.failures);
-    assert_eq!((sink.port("cam", "left").len(), sink.port("cam", "right").len()), (3, 3));
+    assert_eq!((sink.port("cam", "rgb").len(), sink.port("cam", "right").len()), (3, 3));
     let Body::Scalars(s) = &sink.port("cam", "stereo")[0].body else { panic!() };
     assert!((s.get("baseline_m").unwrap() - 386.1448 / fx).abs() < 1e-9);
     let Body::CameraInfo(k) = &sink.port("cam", "camera_info")[0].body else { panic!() };
@@ -301,7 +301,7 @@ fn kitti_sequence_reads_stereo_calibration_and_poses() {
     let Body::Pose(p) = &poses[2].body else { panic!() };
     assert!((p.world_from_cam.translation.vector - nalgebra::Vector3::new(0.2, 0.0, 1.0)).norm() < 1e-9);
     assert!((p.world_from_cam.rotation.angle() - std::f64::consts::FRAC_PI_2).abs() < 1e-9);
-    assert!((sink.port("cam", "left")[1].header.stamp - 0.10363).abs() < 1e-9);
+    assert!((sink.port("cam", "rgb")[1].header.stamp - 0.10363).abs() < 1e-9);
 
     // Too few poses for the frames: an error naming the pose file.
     std::fs::write(dir.path().join("dataset/poses/07.txt"), "1 0 0 0 0 1 0 0 0 0 1 0\n").unwrap();

@@ -337,3 +337,114 @@ fn a_tracker_that_never_initialises_says_so_and_fails_its_bench_row() {
     let row = csv.lines().nth(1).unwrap();
     assert!(row.contains(",failed,") && row.contains("never initialised"), "{row}");
 }
+
+/// `orb_baseline --variant mono` on the static scene: the summary and the trajectory file.
+fn run_mono(motion: &str, frames: &str, dir: &Path) -> (String, Summary, Vec<(f64, nalgebra::Isometry3<f64>)>) {
+    let out = dir.join(format!("mono-{motion}"));
+    let o = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--frames", frames, "--variant", "mono"])
+        .args(["--set", "camera.people=0", "--set", &format!("camera.motion={motion}"), "--out"])
+        .arg(&out)
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary = common::summary(&out.join("orb_baseline-mono.summary.json"));
+    let est = read_trajectory(&out.join("orb_baseline-mono.track.trajectory.txt")).unwrap_or_default();
+    (String::from_utf8_lossy(&o.stdout).into_owned(), summary, est)
+}
+
+#[test]
+fn monocular_initialises_within_30_frames_and_reports_a_sim3_ate() {
+    // ORB-SLAM2's monocular mode (issue 33): a map from two views (H or F, chosen by score),
+    // points triangulated by local mapping, scale arbitrary, so the ATE is Sim(3)-aligned.
+    // Bounds: initialisation within the first 30 frames (the issue's); ATE within 3 cm
+    // (measured 2.0 cm on xyz and 1.5 cm on the orbit, docs/benchmarks.md).
+    let dir = common::TempDir::new("tracking-mono");
+    for motion in ["xyz", "halfsphere"] {
+        let (stdout, summary, est) = run_mono(motion, "300", dir.path());
+        let track = summary.node_report("track").unwrap();
+        let first = track["first_pose_frame"].as_u64().unwrap();
+        assert!(first <= 30, "{motion}: initialised at frame {first}");
+        assert_eq!(track["frames"]["lost"], 0, "{motion}");
+        assert_eq!(track["maps"], 1, "{motion}");
+        // Every frame from the initialisation on has a pose, none before.
+        assert_eq!(est.len() as u64, 300 - first, "{motion}");
+        let ate = summary.ate.clone().unwrap();
+        assert_eq!(ate.align.as_deref(), Some("sim3"), "{stdout}");
+        // The summary's ATE is evo's Sim(3) evaluation of the trajectory file.
+        let gt_dir = dir.path().join(format!("gt-{motion}"));
+        let o = common::bin()
+            .args(["synth", "--motion", motion, "--people", "0", "--frames", "300", "--out"])
+            .arg(&gt_dir)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0));
+        let gt = read_trajectory(&gt_dir.join("groundtruth.txt")).unwrap();
+        let e = evaluate(&gt, &est, 0.01, Align::Sim3, 1).unwrap();
+        eprintln!("{motion}, static, mono: initialised at frame {first}, ATE RMSE (sim3) {:.4} m", e.ate.rmse);
+        assert!((e.ate.rmse - ate.rmse).abs() < 1e-6, "{} vs {}", e.ate.rmse, ate.rmse);
+        assert!(e.ate.rmse <= 0.03, "{motion}: mono ATE {} m > 3 cm", e.ate.rmse);
+        // Local mapping triangulated the points tracking went on with: the map outgrew the
+        // initial two-view map.
+        let mapping = summary.node_report("mapping").unwrap();
+        assert!(mapping["keyframes"].as_u64().unwrap() >= 3, "{mapping}");
+    }
+}
+
+#[test]
+fn a_monocular_rotation_without_translation_never_claims_a_pose() {
+    // Degenerate input (issue 33): the rpy motion turns the camera about its centre, so no
+    // pair of views has parallax; ORB-SLAM2 does not initialise, and neither does this.
+    let dir = common::TempDir::new("tracking-mono-rpy");
+    let (stdout, summary, est) = run_mono("rpy", "60", dir.path());
+    assert!(est.is_empty(), "{est:?}");
+    assert!(summary.ate.is_none());
+    assert!(
+        stdout.contains("the monocular tracker never initialised in 60 frames") && stdout.contains("parallax"),
+        "{stdout}"
+    );
+}
+
+#[test]
+fn a_kitti_sequence_written_by_synth_runs_the_stereo_graphs() {
+    // `dynaflow synth --format kitti` writes a stereo sequence in the KITTI odometry layout
+    // (seed 11, walking people); `--input` reads it with `kitti_odometry` into the `stereo`
+    // variants of orb_baseline and ysag (YSAG-VINS's own setting). YSAG's culling keeps the
+    // >= 80 % ATE improvement of issue 32 on stereo; its mask scoring needs the generator's
+    // masks, which KITTI has not, so that node is left out with a warning.
+    let dir = common::TempDir::new("tracking-kitti");
+    let root = dir.path().join("kitti");
+    let o = common::bin()
+        .args(["synth", "--format", "kitti", "--people", "2", "--frames", "300", "--seed", "11", "--out"])
+        .arg(&root)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let seq = root.join("sequences/00");
+    for f in ["calib.txt", "times.txt", "image_2/000299.png", "image_3/000000.png"] {
+        assert!(seq.join(f).is_file(), "{f}");
+    }
+    let ate = |graph: &str| {
+        let out = dir.path().join(graph);
+        let o = common::bin()
+            .args(["run", "--no-progress", "--record", "none", "--variant", "stereo", "--input"])
+            .arg(&seq)
+            .arg("--out")
+            .arg(&out)
+            .arg(common::repo().join(format!("graphs/{graph}.yaml")))
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert_eq!(o.status.code(), Some(0), "{graph}: {stderr}");
+        let summary = common::summary(&out.join(format!("{graph}-stereo.summary.json")));
+        let ate = summary.ate.clone().unwrap();
+        assert_eq!(ate.pairs, 300, "{graph}: every frame against poses/00.txt");
+        (ate.rmse, stderr)
+    };
+    let (baseline, _) = ate("orb_baseline");
+    let (ysag, stderr) = ate("ysag");
+    eprintln!("KITTI layout, stereo: orb_baseline ATE {baseline:.4} m, ysag {ysag:.4} m");
+    assert!(ysag <= 0.2 * baseline, "ysag {ysag} m vs baseline {baseline} m: less than 80 % better");
+    assert!(stderr.contains("node `cull_pr` is left out of the run: it needs `camera.gt_mask`"), "{stderr}");
+}

@@ -61,6 +61,7 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
     };
     let Some(node) = spec.nodes.get_mut(*i) else { return Vec::new() };
     let span = node.id_span;
+    let old_op = registry.get(&node.op);
     node.op = over.op.clone();
     node.op_span = span;
     node.params = over
@@ -74,7 +75,67 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
         })
         .collect();
     tracing::info!("`{}`: node `{}` now reads with `{}`", over.origin, node.id, over.op);
-    Vec::new()
+    let source_id = node.id.clone();
+    // Ground truth the old source had and the new reader lacks (KITTI has no masks, an image
+    // folder no poses): optional inputs fed by it are unwired, and nodes that need it (and
+    // nodes that need those) are left out of the run, each said in a warning.
+    let new_op = registry.get(&over.op);
+    let lost: Vec<&str> = old_op
+        .map(|o| o.outputs.iter().filter(|p| p.ground_truth).map(|p| p.name).collect::<Vec<&str>>())
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|name| new_op.is_some_and(|n| !n.outputs.iter().any(|p| p.name == *name)))
+        .collect();
+    if lost.is_empty() {
+        return Vec::new();
+    }
+    let mut diags = Vec::new();
+    let mut removed: Vec<String> = Vec::new();
+    loop {
+        let mut changed = false;
+        let mut keep = Vec::with_capacity(spec.nodes.len());
+        for mut n in std::mem::take(&mut spec.nodes) {
+            let gone = |from: &crate::spec::PortRef| {
+                (from.node == source_id && lost.contains(&from.port.as_str())) || removed.contains(&from.node)
+            };
+            let op = registry.get(&n.op);
+            let required =
+                |port: &str| op.is_some_and(|o| o.inputs.iter().any(|p| p.name == port && (p.required || p.wired)));
+            if n.inputs.iter().any(|inp| inp.from.as_ref().is_some_and(gone) && required(&inp.port)) {
+                let what: Vec<String> = n
+                    .inputs
+                    .iter()
+                    .filter_map(|inp| inp.from.as_ref().filter(|f| gone(f)).map(|f| format!("`{}.{}`", f.node, f.port)))
+                    .collect();
+                diags.push(Diagnostic::warning(
+                    "input-lacks-ground-truth",
+                    Some(n.id_span),
+                    format!(
+                        "`{}`: node `{}` is left out of the run: it needs {}, which `{}` does not have",
+                        over.origin,
+                        n.id,
+                        what.join(", "),
+                        over.op
+                    ),
+                ));
+                removed.push(n.id.clone());
+                changed = true;
+                continue;
+            }
+            let before = n.inputs.len();
+            n.inputs.retain(|inp| !inp.from.as_ref().is_some_and(gone));
+            if n.inputs.len() < before {
+                changed = true;
+                tracing::info!("`{}`: node `{}` runs without the ground truth `{}` lacks", over.origin, n.id, over.op);
+            }
+            keep.push(n);
+        }
+        spec.nodes = keep;
+        if !changed {
+            break;
+        }
+    }
+    diags
 }
 
 /// The outcome of loading a graph.

@@ -148,6 +148,19 @@ pub struct MapObservation {
     pub octave: u8,
 }
 
+/// A key frame's keypoint no map point explains yet (monocular: triangulated by mapping).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapFeature {
+    /// Key frame id.
+    pub keyframe: u64,
+    /// Pixel.
+    pub uv: [f64; 2],
+    /// Pyramid level.
+    pub octave: u8,
+    /// 256-bit ORB descriptor.
+    pub descriptor: [u8; 32],
+}
+
 /// A batch of a sparse SLAM map, as tracking and local mapping exchange them: a new key frame
 /// with its observations and new points (tracking to mapping), or the refined local window
 /// and the removed points (mapping to tracking).
@@ -163,6 +176,8 @@ pub struct SparseMap {
     pub observations: Vec<MapObservation>,
     /// Ids of removed points.
     pub removed: Vec<u64>,
+    /// Unmatched keypoints of a new monocular key frame (for triangulation).
+    pub features: Vec<MapFeature>,
 }
 
 impl SparseMap {
@@ -196,6 +211,14 @@ impl SparseMap {
         d.u64(self.removed.len() as u64);
         for r in &self.removed {
             d.u64(*r);
+        }
+        d.u64(self.features.len() as u64);
+        for f in &self.features {
+            d.u64(f.keyframe);
+            d.f64(f.uv[0]);
+            d.f64(f.uv[1]);
+            d.bytes(&[f.octave]);
+            d.bytes(&f.descriptor);
         }
     }
 }

@@ -20,5 +20,5 @@ pub mod map;
 pub mod tracker;
 
 pub use local_map::{LocalMapConfig, LocalMapper};
-pub use map::{Feature, KeyFrameInfo, MapPoint, Observation, SparseMap};
+pub use map::{Feature, KeyFrameFeature, KeyFrameInfo, MapPoint, Observation, SparseMap};
 pub use tracker::{TrackState, Tracker, TrackerConfig, TrackingResult};

@@ -7,8 +7,13 @@
 //! frames). Memory stays bounded: the oldest key frames are forgotten beyond `keep_keyframes`
 //! (there is no loop closing to need them).
 //!
-//! Not done (yet): ORB-SLAM's triangulation of new points between neighbours and the fusion
-//! of duplicate points; with RGB-D, tracking creates points from depth at every key frame.
+//! Monocular (a batch that carries the key frame's unmatched keypoints): new points are
+//! triangulated between the new key frame and its best covisible neighbours, as ORB-SLAM2's
+//! `CreateNewMapPoints` (see [`LocalMapper::triangulate`]). A monocular map's first batch
+//! holds the two key frames of the initialisation, adjusted together.
+//!
+//! Not done (yet): the fusion of duplicate points (`SearchInNeighbors`); with RGB-D and stereo,
+//! tracking creates points from depth at every key frame and nothing is triangulated.
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -16,7 +21,10 @@ use dynaflow_vision::camera::Pinhole;
 use nalgebra::Point3;
 
 use crate::ba::{BaObservation, BaPose, BaReport, bundle_adjust, chi2, chi2_bound};
-use crate::map::{KeyFrameInfo, MapPoint, Observation, SparseMap, sigma};
+use dynaflow_vision::geometry::{CHI2_1DOF, CHI2_2DOF, triangulate};
+use dynaflow_vision::matching::hamming;
+
+use crate::map::{KeyFrameFeature, KeyFrameInfo, MapPoint, Observation, SparseMap, sigma};
 
 /// Local-mapping settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -31,19 +39,49 @@ pub struct LocalMapConfig {
     pub scale_factor: f64,
     /// LM iterations of the first and of the second BA stage (ORB-SLAM: 5 and 10).
     pub iterations: (usize, usize),
+    /// A point is culled two key frames after its creation when its observation count (2 per
+    /// observation with depth, 1 without) is at most this (ORB-SLAM2 `cnThObs`: 3, monocular 2).
+    pub cull_observations: u32,
+    /// Covisible neighbours a new monocular key frame triangulates against (ORB-SLAM2: 20).
+    pub triangulation_neighbours: usize,
 }
 
 impl LocalMapConfig {
     /// ORB-SLAM2's defaults for an RGB-D camera with focal length `fx` (virtual baseline 8 cm).
     pub fn rgbd(fx: f64) -> Self {
-        Self { window: 10, keep_keyframes: 60, bf: fx * 0.08, scale_factor: 1.2, iterations: (5, 10) }
+        Self {
+            window: 10,
+            keep_keyframes: 60,
+            bf: fx * 0.08,
+            scale_factor: 1.2,
+            iterations: (5, 10),
+            cull_observations: 3,
+            triangulation_neighbours: 20,
+        }
+    }
+
+    /// ORB-SLAM2's monocular defaults: no depth residual, the monocular culling threshold.
+    pub fn monocular(fx: f64) -> Self {
+        Self { bf: 0.0, cull_observations: 2, ..Self::rgbd(fx) }
     }
 }
+
+/// Ids of points made by local mapping start here (tracking counts from 0).
+const MAPPING_POINT_IDS: u64 = 1 << 48;
+/// ORB-SLAM2's triangulation gates: rays closer than this cosine have too little parallax.
+const MAX_COS_PARALLAX: f64 = 0.9998;
+/// A pair whose baseline is under this share of the neighbour's median scene depth is skipped.
+const MIN_BASELINE_RATIO: f64 = 0.01;
+/// Hamming distance and ratio of the triangulation search (ORB-SLAM2: `TH_LOW` 50, 0.6).
+const TRIANGULATION_MAX_DISTANCE: u32 = 50;
+const TRIANGULATION_RATIO: f32 = 0.6;
 
 #[derive(Clone, Debug)]
 struct Kf {
     info: KeyFrameInfo,
     obs: Vec<Observation>,
+    /// Monocular: keypoints no point explains yet (triangulation candidates).
+    features: Vec<KeyFrameFeature>,
 }
 
 #[derive(Clone, Debug)]
@@ -64,12 +102,28 @@ pub struct LocalMapper {
     kfs: BTreeMap<u64, Kf>,
     points: BTreeMap<u64, Mp>,
     last: BaReport,
+    next_point: u64,
+    triangulated: usize,
 }
 
 impl LocalMapper {
     /// An empty map.
     pub fn new(config: LocalMapConfig, cam: Pinhole) -> Self {
-        Self { config, cam, map_id: 0, kfs: BTreeMap::new(), points: BTreeMap::new(), last: BaReport::default() }
+        Self {
+            config,
+            cam,
+            map_id: 0,
+            kfs: BTreeMap::new(),
+            points: BTreeMap::new(),
+            last: BaReport::default(),
+            next_point: MAPPING_POINT_IDS,
+            triangulated: 0,
+        }
+    }
+
+    /// Points triangulated by the last insertion (monocular).
+    pub fn last_triangulated(&self) -> usize {
+        self.triangulated
     }
 
     /// Key frames held.
@@ -102,23 +156,31 @@ impl LocalMapper {
             self.points.clear();
             self.map_id = batch.map_id;
         }
-        let Some(info) = batch.keyframes.first().copied() else {
+        let Some(info) = batch.keyframes.last().copied() else {
             return SparseMap { map_id: self.map_id, ..SparseMap::default() };
         };
         for p in &batch.points {
             self.points.entry(p.id).or_insert(Mp { point: *p, kfs: Vec::new(), weight: 0 });
         }
-        let mut obs = Vec::new();
-        for o in batch.observations.iter().filter(|o| o.keyframe == info.id) {
-            if let Some(mp) = self.points.get_mut(&o.point)
-                && !mp.kfs.contains(&info.id)
-            {
-                mp.kfs.push(info.id);
-                mp.weight += if o.depth.is_some() { 2 } else { 1 };
-                obs.push(*o);
+        // Every key frame of the batch (one; two for a monocular map's start), oldest first.
+        for kinfo in &batch.keyframes {
+            let mut obs = Vec::new();
+            for o in batch.observations.iter().filter(|o| o.keyframe == kinfo.id) {
+                if let Some(mp) = self.points.get_mut(&o.point)
+                    && !mp.kfs.contains(&kinfo.id)
+                {
+                    mp.kfs.push(kinfo.id);
+                    mp.weight += if o.depth.is_some() { 2 } else { 1 };
+                    obs.push(*o);
+                }
             }
+            let features = batch.features.iter().filter(|f| f.keyframe == kinfo.id).copied().collect();
+            self.kfs.insert(kinfo.id, Kf { info: *kinfo, obs, features });
         }
-        self.kfs.insert(info.id, Kf { info, obs });
+        self.triangulated = 0;
+        if self.kfs.get(&info.id).is_some_and(|k| !k.features.is_empty()) {
+            self.triangulated = self.triangulate(info.id);
+        }
 
         // Covisibility of the new key frame; the window is it and its best neighbours.
         let mut shared: BTreeMap<u64, usize> = BTreeMap::new();
@@ -227,7 +289,10 @@ impl LocalMapper {
         let culled: Vec<u64> = self
             .points
             .iter()
-            .filter(|(_, m)| m.kfs.is_empty() || (newest.saturating_sub(m.point.first_keyframe) == 2 && m.weight <= 3))
+            .filter(|(_, m)| {
+                m.kfs.is_empty()
+                    || (newest.saturating_sub(m.point.first_keyframe) == 2 && m.weight <= self.config.cull_observations)
+            })
             .map(|(&id, _)| id)
             .collect();
         for id in culled {
@@ -258,20 +323,193 @@ impl LocalMapper {
             .collect();
         removed.sort_unstable();
         removed.dedup();
-        SparseMap { map_id: self.map_id, keyframes, points, observations: Vec::new(), removed }
+        SparseMap { map_id: self.map_id, keyframes, points, observations: Vec::new(), removed, features: Vec::new() }
     }
 
     fn erase_observation(&mut self, kf: u64, point: u64) {
+        let mut with_depth = false;
         if let Some(k) = self.kfs.get_mut(&kf) {
+            with_depth = k.obs.iter().any(|o| o.point == point && o.depth.is_some());
             k.obs.retain(|o| o.point != point);
         }
         if let Some(mp) = self.points.get_mut(&point) {
             let before = mp.kfs.len();
             mp.kfs.retain(|&k| k != kf);
             if mp.kfs.len() < before {
-                mp.weight = mp.weight.saturating_sub(2).max(mp.kfs.len() as u32);
+                mp.weight = mp.weight.saturating_sub(if with_depth { 2 } else { 1 }).max(mp.kfs.len() as u32);
             }
         }
+    }
+
+    /// ORB-SLAM2's `CreateNewMapPoints` for a monocular key frame `id`: against each of its
+    /// best covisible neighbours whose baseline is at least 1 % of the neighbour's median scene
+    /// depth, the unmatched keypoints are matched by descriptor (Hamming <= 50, ratio 0.6,
+    /// one-to-one) under the epipolar constraint (squared distance to the line within 3.84
+    /// sigma^2 of the neighbour's octave, not within 10 sigma of the epipole), then
+    /// triangulated (linear) where the rays' parallax cosine is in (0, 0.9998), the point lies
+    /// in front of both cameras, reprojects within 5.991 sigma^2 in both, and its distance
+    /// ratio agrees with the octaves' (factor 1.5 x scale). Returns the points made.
+    /// Deviations: brute-force matching in place of the BoW vocabulary's, no orientation check.
+    pub fn triangulate(&mut self, id: u64) -> usize {
+        let Some(kf1) = self.kfs.get(&id).cloned() else { return 0 };
+        let scale = self.config.scale_factor;
+        let cam = self.cam;
+        let mut shared: BTreeMap<u64, usize> = BTreeMap::new();
+        for o in &kf1.obs {
+            if let Some(mp) = self.points.get(&o.point) {
+                for &k in mp.kfs.iter().filter(|&&k| k != id) {
+                    *shared.entry(k).or_default() += 1;
+                }
+            }
+        }
+        let mut neighbours: Vec<(u64, usize)> = shared.into_iter().collect();
+        neighbours.sort_by_key(|&(k, n)| (std::cmp::Reverse(n), std::cmp::Reverse(k)));
+        neighbours.truncate(self.config.triangulation_neighbours);
+        let pose1 = kf1.info.world_from_cam;
+        let c1w = pose1.inverse();
+        let mut used1 = vec![false; kf1.features.len()];
+        let mut made = 0;
+        for (nb, _) in neighbours {
+            let Some(kf2) = self.kfs.get(&nb).cloned() else { continue };
+            let pose2 = kf2.info.world_from_cam;
+            let c2w = pose2.inverse();
+            let baseline = (pose1.translation.vector - pose2.translation.vector).norm();
+            let mut depths: Vec<f64> =
+                kf2.obs.iter().filter_map(|o| self.points.get(&o.point)).map(|m| (c2w * m.point.position).z).collect();
+            if depths.is_empty() {
+                continue;
+            }
+            depths.sort_by(f64::total_cmp);
+            let median = depths[depths.len() / 2];
+            if median.is_nan() || median <= 0.0 || baseline / median < MIN_BASELINE_RATIO {
+                continue;
+            }
+            // F21: x2^T F x1 = 0, from cam2_from_cam1 = (R, t).
+            let c2_from_c1 = c2w * pose1;
+            let (r, t) = (c2_from_c1.rotation.to_rotation_matrix().into_inner(), c2_from_c1.translation.vector);
+            let tx = nalgebra::Matrix3::new(0.0, -t.z, t.y, t.z, 0.0, -t.x, -t.y, t.x, 0.0);
+            let k = nalgebra::Matrix3::new(cam.fx, 0.0, cam.cx, 0.0, cam.fy, cam.cy, 0.0, 0.0, 1.0);
+            let Some(kinv) = k.try_inverse() else { continue };
+            let f21 = kinv.transpose() * tx * r * kinv;
+            // Epipole in image 2: the projection of camera 1's centre.
+            let epipole = cam.project(&(c2w * Point3::from(pose1.translation.vector)));
+            let mut best2: Vec<Option<(usize, u32)>> = vec![None; kf2.features.len()];
+            for (i1, f1) in kf1.features.iter().enumerate() {
+                if used1[i1] {
+                    continue;
+                }
+                let line = f21 * nalgebra::Vector3::new(f1.uv[0], f1.uv[1], 1.0);
+                let norm2 = line.x * line.x + line.y * line.y;
+                if norm2 <= 0.0 {
+                    continue;
+                }
+                let (mut d1, mut d2, mut j1) = (u32::MAX, u32::MAX, usize::MAX);
+                for (j, f2) in kf2.features.iter().enumerate() {
+                    let d = hamming(&f1.descriptor, &f2.descriptor);
+                    if d > TRIANGULATION_MAX_DISTANCE || d >= d2 {
+                        continue;
+                    }
+                    let s2 = sigma(scale, f2.octave).powi(2);
+                    if let Some(e) = epipole
+                        && (e[0] - f2.uv[0]).powi(2) + (e[1] - f2.uv[1]).powi(2) < 100.0 * s2.sqrt()
+                    {
+                        continue;
+                    }
+                    let num = line.x * f2.uv[0] + line.y * f2.uv[1] + line.z;
+                    if num * num / norm2 >= CHI2_1DOF * s2 {
+                        continue;
+                    }
+                    if d < d1 {
+                        (d2, d1, j1) = (d1, d, j);
+                    } else {
+                        d2 = d;
+                    }
+                }
+                if j1 == usize::MAX || (d2 != u32::MAX && d1 as f32 >= TRIANGULATION_RATIO * d2 as f32) {
+                    continue;
+                }
+                if best2[j1].is_none_or(|(_, d)| d1 < d) {
+                    best2[j1] = Some((i1, d1));
+                }
+            }
+            let mut new_points = Vec::new();
+            for (j, b) in best2.iter().enumerate() {
+                let Some((i1, _)) = *b else { continue };
+                let (f1, f2) = (&kf1.features[i1], &kf2.features[j]);
+                let ray = |pose: &nalgebra::Isometry3<f64>, uv: [f64; 2]| {
+                    let [x, y] = cam.normalised(uv);
+                    pose.rotation * nalgebra::Vector3::new(x, y, 1.0)
+                };
+                let (r1, r2) = (ray(&pose1, f1.uv), ray(&pose2, f2.uv));
+                let cos = r1.dot(&r2) / (r1.norm() * r2.norm());
+                if !(cos > 0.0 && cos < MAX_COS_PARALLAX) {
+                    continue;
+                }
+                let Some(x) = triangulate(&cam, &c1w, &c2w, f1.uv, f2.uv) else { continue };
+                let (x1, x2) = (c1w * x, c2w * x);
+                if x1.z <= 0.0 || x2.z <= 0.0 {
+                    continue;
+                }
+                let reproj = |pc: &Point3<f64>, uv: [f64; 2], octave: u8| {
+                    cam.project(pc).is_some_and(|q| {
+                        (q[0] - uv[0]).powi(2) + (q[1] - uv[1]).powi(2) <= CHI2_2DOF * sigma(scale, octave).powi(2)
+                    })
+                };
+                if !reproj(&x1, f1.uv, f1.octave) || !reproj(&x2, f2.uv, f2.octave) {
+                    continue;
+                }
+                let dist1 = (x.coords - pose1.translation.vector).norm();
+                let dist2 = (x.coords - pose2.translation.vector).norm();
+                if dist1 <= 0.0 || dist2 <= 0.0 {
+                    continue;
+                }
+                let ratio_dist = dist2 / dist1;
+                let ratio_octave = sigma(scale, f1.octave) / sigma(scale, f2.octave);
+                let factor = 1.5 * scale;
+                if ratio_dist * factor < ratio_octave || ratio_dist > ratio_octave * factor {
+                    continue;
+                }
+                new_points.push((i1, j, x));
+            }
+            let mut used2 = Vec::new();
+            for (i1, j, x) in new_points {
+                let (f1, f2) = (kf1.features[i1], kf2.features[j]);
+                let pid = self.next_point;
+                self.next_point += 1;
+                let point =
+                    MapPoint { id: pid, position: x, descriptor: f1.descriptor, observations: 2, first_keyframe: id };
+                self.points.insert(pid, Mp { point, kfs: vec![id, nb], weight: 2 });
+                let obs = |kf: u64, f: &KeyFrameFeature| Observation {
+                    keyframe: kf,
+                    point: pid,
+                    uv: f.uv,
+                    depth: None,
+                    octave: f.octave,
+                };
+                if let Some(k) = self.kfs.get_mut(&id) {
+                    k.obs.push(obs(id, &f1));
+                }
+                if let Some(k) = self.kfs.get_mut(&nb) {
+                    k.obs.push(obs(nb, &f2));
+                }
+                used1[i1] = true;
+                used2.push(j);
+                made += 1;
+            }
+            if let Some(k) = self.kfs.get_mut(&nb) {
+                let mut keep = vec![true; k.features.len()];
+                for j in used2 {
+                    keep[j] = false;
+                }
+                let mut it = keep.iter();
+                k.features.retain(|_| *it.next().unwrap_or(&true));
+            }
+        }
+        if let Some(k) = self.kfs.get_mut(&id) {
+            let mut it = used1.iter();
+            k.features.retain(|_| !*it.next().unwrap_or(&false));
+        }
+        made
     }
 
     fn remove_point(&mut self, id: u64) {

@@ -58,6 +58,20 @@ pub struct Observation {
     pub octave: u8,
 }
 
+/// A key frame's keypoint that no map point explains yet: what monocular local mapping
+/// triangulates new points from (ORB-SLAM2's key frames keep all their keypoints).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KeyFrameFeature {
+    /// Key frame id.
+    pub keyframe: u64,
+    /// Pixel (level-0 coordinates).
+    pub uv: [f64; 2],
+    /// Pyramid level.
+    pub octave: u8,
+    /// 256-bit ORB descriptor.
+    pub descriptor: [u8; 32],
+}
+
 /// What tracking and local mapping exchange. Tracking sends one new key frame with its
 /// observations and the points it created; local mapping answers with its window's refined
 /// key-frame poses, the refined local points and the ids of points it removed.
@@ -74,6 +88,9 @@ pub struct SparseMap {
     pub observations: Vec<Observation>,
     /// Point ids removed by local mapping.
     pub removed: Vec<u64>,
+    /// From monocular tracking: the new key frame's unmatched static keypoints, which local
+    /// mapping triangulates against its neighbours (empty with depth, which creates points).
+    pub features: Vec<KeyFrameFeature>,
 }
 
 /// Sigma of an observation on pyramid level `octave` with scale factor `scale` (ORB-SLAM).

@@ -21,11 +21,13 @@
 use std::collections::{BTreeMap, BTreeSet};
 
 use dynaflow_vision::camera::Pinhole;
-use dynaflow_vision::geometry::{PoseObservation, SplitMix64, optimize_pose, p3p_ransac, renormalised};
+use dynaflow_vision::geometry::{
+    PoseObservation, SplitMix64, TwoViewConfig, initialise, optimize_pose, p3p_ransac, renormalised,
+};
 use dynaflow_vision::matching::{GridIndex, MatchConfig, hamming, match_brute_force};
 use nalgebra::{Isometry3, Point3};
 
-use crate::map::{Feature, KeyFrameInfo, MapPoint, Observation, SparseMap, sigma};
+use crate::map::{Feature, KeyFrameFeature, KeyFrameInfo, MapPoint, Observation, SparseMap, sigma};
 
 /// Tracking settings (defaults: ORB-SLAM2's for an RGB-D camera, see [`TrackerConfig::rgbd`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,6 +56,13 @@ pub struct TrackerConfig {
     pub max_frames: u64,
     /// Lost frames in a row after which a new map starts.
     pub reset_after: u32,
+    /// A single camera: no depth; the map starts from two views (ORB-SLAM2's monocular
+    /// initialisation) and local mapping triangulates new points ([`TrackerConfig::monocular`]).
+    pub monocular: bool,
+    /// A stereo rig (ORB-SLAM2's stereo mode): every matched depth is used (no `max_depth`),
+    /// and a key frame creates points for its close keypoints, at least the 100 nearest
+    /// (ORB-SLAM2's `CreateNewKeyFrame`; the first key frame takes all).
+    pub stereo: bool,
 }
 
 impl TrackerConfig {
@@ -72,9 +81,29 @@ impl TrackerConfig {
             min_init_points: 100,
             max_frames: 30,
             reset_after: 5,
+            monocular: false,
+            stereo: false,
         }
     }
+
+    /// ORB-SLAM2's monocular settings for focal length `fx`: no depth (`bf` 0), a map from
+    /// two views with at least 100 matches (its `Tracking::MonocularInitialization`), key
+    /// frames when tracked points fall below 90 % of the reference key frame's.
+    pub fn monocular(fx: f64) -> Self {
+        Self { bf: 0.0, th_depth: 0.0, max_depth: 0.0, monocular: true, ..Self::rgbd(fx) }
+    }
 }
+
+/// ORB-SLAM2's monocular initialisation: matches between the reference and the current
+/// frame needed to try (`SearchForInitialization` < 100 restarts from the current frame).
+pub const MONO_INIT_MATCHES: usize = 100;
+/// ORB-SLAM2's `CreateNewKeyFrame` (stereo): at least this many new points, nearest first.
+const STEREO_MIN_NEW_POINTS: usize = 100;
+/// Search window of the initial matching, pixels (ORB-SLAM2: 100).
+const MONO_INIT_WINDOW: f32 = 100.0;
+/// Hamming distance and ratio of the initial matching (ORB-SLAM2: `TH_LOW` 50, 0.9).
+const MONO_INIT_MAX_DISTANCE: u32 = 50;
+const MONO_INIT_RATIO: f32 = 0.9;
 
 /// How a frame was tracked.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -155,6 +184,10 @@ pub struct Tracker {
     /// First key frame of the current map.
     first_keyframe: u64,
     lost_run: u32,
+    /// Monocular: the reference frame of the initialisation (its stamp and features).
+    init_ref: Option<(f64, Vec<Feature>)>,
+    /// Monocular: why the last initialisation attempt failed.
+    init_failure: Option<String>,
 }
 
 impl Tracker {
@@ -177,7 +210,19 @@ impl Tracker {
             ref_tracked: 0,
             first_keyframe: 0,
             lost_run: 0,
+            init_ref: None,
+            init_failure: None,
         }
+    }
+
+    /// Monocular: why the last attempt to initialise failed (`None` after a success).
+    pub fn init_failure(&self) -> Option<&str> {
+        self.init_failure.as_deref()
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &TrackerConfig {
+        &self.config
     }
 
     /// The current map number.
@@ -209,7 +254,11 @@ impl Tracker {
     pub fn track(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
         let predicted = self.last.map(|l| renormalised(&(l * self.velocity)));
         if !self.initialised {
-            return self.start_map(stamp, features, predicted.unwrap_or_else(Isometry3::identity), TrackState::NewMap);
+            let origin = predicted.unwrap_or_else(Isometry3::identity);
+            if self.config.monocular {
+                return self.start_monocular(stamp, features, origin);
+            }
+            return self.start_map(stamp, features, origin, TrackState::NewMap);
         }
         let predicted = predicted.unwrap_or_else(Isometry3::identity);
         let mut fit = self.track_projection(features, &predicted, self.config.search_radius);
@@ -251,7 +300,13 @@ impl Tracker {
             None => {
                 self.lost_run += 1;
                 self.last = Some(predicted);
-                if self.lost_run > self.config.reset_after {
+                if self.lost_run > self.config.reset_after && self.config.monocular {
+                    // A single view cannot start a map: initialise again from two views (the
+                    // new map at the dead-reckoned pose, in a scale of its own).
+                    self.initialised = false;
+                    self.init_ref = None;
+                    self.points.clear();
+                } else if self.lost_run > self.config.reset_after {
                     let r = self.start_map(stamp, features, predicted, TrackState::NewMap);
                     if r.state == TrackState::NewMap {
                         return r;
@@ -425,6 +480,11 @@ impl Tracker {
     }
 
     fn need_keyframe(&self, features: &[Feature], fit: &Fit) -> bool {
+        if self.config.monocular {
+            // ORB-SLAM2, monocular: fewer than 90 % of the reference's points tracked (local
+            // mapping is always idle in lockstep, so its other conditions hold).
+            return (fit.inliers as f64) < 0.9 * self.ref_tracked as f64 && fit.inliers > 15;
+        }
         let close = |f: &Feature| f.depth.is_some_and(|d| d > 0.0 && d <= self.config.th_depth) && !f.dynamic;
         let tracked_close = features.iter().zip(&fit.matched).filter(|(f, m)| m.is_some() && close(f)).count();
         let untracked_close = features.iter().zip(&fit.matched).filter(|(f, m)| m.is_none() && close(f)).count();
@@ -463,6 +523,10 @@ impl Tracker {
             .filter_map(|(i, f)| self.usable(f).map(|d| (d, i)))
             .collect();
         candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        if self.config.stereo && id > self.first_keyframe {
+            let close = candidates.iter().take_while(|c| c.0 <= self.config.th_depth).count();
+            candidates.truncate(close.max(STEREO_MIN_NEW_POINTS));
+        }
         let mut points = Vec::new();
         for &(d, i) in &candidates {
             let f = &features[i];
@@ -478,7 +542,168 @@ impl Tracker {
         // The reference for the next decision: points of this key frame seen twice (ORB-SLAM2's
         // `TrackedMapPoints(nMinObs)`), all of them while the map has at most two key frames.
         self.ref_tracked = fit.inliers + if id <= self.first_keyframe + 1 { points.len() } else { 0 };
-        SparseMap { map_id: self.map_id, keyframes: vec![info], points, observations, removed: Vec::new() }
+        let features = if self.config.monocular { Self::candidates(id, features, &fit.matched) } else { Vec::new() };
+        SparseMap { map_id: self.map_id, keyframes: vec![info], points, observations, removed: Vec::new(), features }
+    }
+
+    /// A monocular key frame's keypoints for triangulation: static and unmatched.
+    fn candidates(keyframe: u64, features: &[Feature], matched: &[Option<u64>]) -> Vec<KeyFrameFeature> {
+        features
+            .iter()
+            .zip(matched)
+            .filter(|(f, m)| m.is_none() && !f.dynamic)
+            .map(|(f, _)| KeyFrameFeature { keyframe, uv: f.uv, octave: f.octave, descriptor: f.descriptor })
+            .collect()
+    }
+
+    /// ORB-SLAM2's `SearchForInitialization`: each reference keypoint's best match among the
+    /// current frame's within a 100 px window (Hamming <= 50, ratio 0.9), one-to-one (a
+    /// current keypoint keeps its closest reference). Dynamic keypoints take no part.
+    /// Deviations: every pyramid level takes part (ORB-SLAM2 extracts twice the features
+    /// before initialising and matches level 0 only) and there is no orientation check (the
+    /// keypoint angle does not reach tracking).
+    fn initial_matches(&self, reference: &[Feature], current: &[Feature]) -> Vec<(usize, usize)> {
+        let idx: Vec<usize> = (0..current.len()).filter(|&i| !current[i].dynamic).collect();
+        let pts: Vec<[f32; 2]> = idx.iter().map(|&i| [current[i].uv[0] as f32, current[i].uv[1] as f32]).collect();
+        let grid = GridIndex::new(&pts, self.width.ceil() as usize, self.height.ceil() as usize, 32.0);
+        let mut best: Vec<Option<(usize, u32)>> = vec![None; current.len()];
+        for (ri, r) in reference.iter().enumerate().filter(|(_, r)| !r.dynamic) {
+            let (mut d1, mut d2, mut i1) = (u32::MAX, u32::MAX, usize::MAX);
+            for c in grid.within([r.uv[0] as f32, r.uv[1] as f32], MONO_INIT_WINDOW) {
+                let ci = idx[c as usize];
+                let d = hamming(&r.descriptor, &current[ci].descriptor);
+                if d < d1 {
+                    (d2, d1, i1) = (d1, d, ci);
+                } else if d < d2 {
+                    d2 = d;
+                }
+            }
+            if i1 == usize::MAX || d1 > MONO_INIT_MAX_DISTANCE {
+                continue;
+            }
+            if d2 != u32::MAX && d1 as f32 >= MONO_INIT_RATIO * d2 as f32 {
+                continue;
+            }
+            if best[i1].is_none_or(|(_, d)| d1 < d) {
+                best[i1] = Some((ri, d1));
+            }
+        }
+        best.iter().enumerate().filter_map(|(ci, b)| b.map(|(ri, _)| (ri, ci))).collect()
+    }
+
+    /// Monocular: try to start a map from the reference frame and this one.
+    fn start_monocular(&mut self, stamp: f64, features: &[Feature], origin: Isometry3<f64>) -> TrackingResult {
+        let state = if self.map_id > 0 { TrackState::Lost } else { TrackState::NotInitialised };
+        let keypoints = features.iter().filter(|f| !f.dynamic).count();
+        let Some((ref_stamp, reference)) = self.init_ref.take() else {
+            if keypoints > MONO_INIT_MATCHES {
+                self.init_ref = Some((stamp, features.to_vec()));
+                self.init_failure = Some("waiting for a second view".into());
+            } else {
+                self.init_failure = Some(format!(
+                    "{keypoints} static keypoints; a reference frame for initialisation needs more than {MONO_INIT_MATCHES}"
+                ));
+            }
+            return self.untracked(None, state, features.len());
+        };
+        let matches = self.initial_matches(&reference, features);
+        if matches.len() < MONO_INIT_MATCHES {
+            // ORB-SLAM2: the current frame becomes the new reference.
+            self.init_failure = Some(format!(
+                "{} matches with the reference frame; initialisation needs {MONO_INIT_MATCHES}",
+                matches.len()
+            ));
+            self.init_ref = (keypoints > MONO_INIT_MATCHES).then(|| (stamp, features.to_vec()));
+            return self.untracked(None, state, features.len());
+        }
+        let p1: Vec<[f64; 2]> = matches.iter().map(|&(r, _)| reference[r].uv).collect();
+        let p2: Vec<[f64; 2]> = matches.iter().map(|&(_, c)| features[c].uv).collect();
+        let init = match initialise(&p1, &p2, &self.cam, &TwoViewConfig::default(), &mut self.rng) {
+            Ok(i) => i,
+            Err(e) => {
+                self.init_failure = Some(e.to_string());
+                self.init_ref = Some((ref_stamp, reference));
+                return self.untracked(None, state, features.len());
+            }
+        };
+        let triangulated = init.points.iter().flatten().count();
+        let depths: Vec<f64> = init.points.iter().flatten().map(|p| p.z).collect();
+        // ORB-SLAM2 resets when fewer than 100 points survive, and sets the scale so that the
+        // first key frame's median depth is 1.
+        if triangulated < MONO_INIT_MATCHES {
+            self.init_failure =
+                Some(format!("{triangulated} points triangulated; a monocular map needs {MONO_INIT_MATCHES}"));
+            self.init_ref = Some((ref_stamp, reference));
+            return self.untracked(None, state, features.len());
+        }
+        let mut sorted = depths.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted[sorted.len() / 2];
+        if !(median > 0.0 && median.is_finite()) {
+            self.init_failure = Some(format!("median depth {median} of the initial points"));
+            self.init_ref = Some((ref_stamp, reference));
+            return self.untracked(None, state, features.len());
+        }
+        let scale = 1.0 / median;
+        let mut c2_from_c1 = init.cam2_from_cam1;
+        c2_from_c1.translation.vector *= scale;
+        let world_from_c1 = origin;
+        let world_from_c2 = renormalised(&(world_from_c1 * c2_from_c1.inverse()));
+
+        self.map_id += 1;
+        self.points.clear();
+        self.initialised = true;
+        self.init_failure = None;
+        self.lost_run = 0;
+        self.velocity = Isometry3::identity();
+        self.last = Some(world_from_c2);
+        let (k0, k1) = (self.next_keyframe, self.next_keyframe + 1);
+        self.next_keyframe += 2;
+        self.first_keyframe = k0;
+        self.frames_since_kf = 0;
+        let mut points = Vec::new();
+        let mut observations = Vec::new();
+        let mut matched0 = vec![None; reference.len()];
+        let mut matched1 = vec![None; features.len()];
+        for (&(r, c), p) in matches.iter().zip(&init.points) {
+            let Some(p) = p else { continue };
+            let position = world_from_c1 * Point3::from(p.coords * scale);
+            let pid = self.next_point;
+            self.next_point += 1;
+            let (fr, fc) = (&reference[r], &features[c]);
+            self.points.insert(pid, TPoint { position, descriptor: fc.descriptor, first_keyframe: k0 });
+            points.push(MapPoint { id: pid, position, descriptor: fc.descriptor, observations: 2, first_keyframe: k0 });
+            observations.push(Observation { keyframe: k0, point: pid, uv: fr.uv, depth: None, octave: fr.octave });
+            observations.push(Observation { keyframe: k1, point: pid, uv: fc.uv, depth: None, octave: fc.octave });
+            matched0[r] = Some(pid);
+            matched1[c] = Some(pid);
+        }
+        self.ref_tracked = points.len();
+        let mut candidates = Self::candidates(k0, &reference, &matched0);
+        candidates.extend(Self::candidates(k1, features, &matched1));
+        let keyframes = vec![
+            KeyFrameInfo { id: k0, stamp: ref_stamp, world_from_cam: world_from_c1 },
+            KeyFrameInfo { id: k1, stamp, world_from_cam: world_from_c2 },
+        ];
+        let inliers = points.len();
+        let batch = SparseMap {
+            map_id: self.map_id,
+            keyframes,
+            points,
+            observations,
+            removed: Vec::new(),
+            features: candidates,
+        };
+        TrackingResult {
+            pose: Some(world_from_c2),
+            state: TrackState::NewMap,
+            matches: matches.len(),
+            inliers,
+            map_points: self.points.len(),
+            map_id: self.map_id,
+            keyframe: Some(batch),
+            matched: matched1,
+        }
     }
 }
 

@@ -92,6 +92,8 @@ struct Row {
     /// generator's masks), by node.
     labels: Vec<(String, f64, f64)>,
     trajectory: Option<(PathBuf, PathBuf)>,
+    /// The ATE's alignment (`sim3` for a monocular tracker).
+    sim3: bool,
 }
 
 fn jobs(args: &BenchArgs) -> Result<Vec<Job>, String> {
@@ -199,6 +201,7 @@ fn run_one(exe: &Path, job: &Job, args: &BenchArgs) -> Row {
         }
     }
     let node = s.ate.as_ref().and_then(|a| a.node.clone()).unwrap_or_else(|| "track".into());
+    row.sim3 = s.ate.as_ref().and_then(|a| a.align.as_deref()) == Some("sim3");
     for n in &s.run.nodes {
         let report = n.report.as_ref();
         let rpe = |k: &str| report.and_then(|r| r.get("rpe")?.get(k)?.as_f64());
@@ -391,9 +394,11 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
 /// Trajectory plots per run, ATE per variant, time per node.
 fn plots(jobs: &[Job], rows: &[Row], out: &Path) -> Result<(), String> {
     for (j, r) in jobs.iter().zip(rows) {
-        let Some((gt, est)) = &r.trajectory else { continue };
+        // A failed run (e.g. a tracker that never initialised) has no trajectory to plot.
+        let Some((gt, est)) = r.trajectory.as_ref().filter(|_| r.ok) else { continue };
         let read = |p: &Path| dynaflow_datasets::tum::read_trajectory(p).map_err(|e| e.to_string());
-        let e = evaluate(&read(gt)?, &read(est)?, 0.01, Align::Se3, 1).map_err(|e| e.to_string())?;
+        let align = if r.sim3 { Align::Sim3 } else { Align::Se3 };
+        let e = evaluate(&read(gt)?, &read(est)?, 0.01, align, 1).map_err(|e| e.to_string())?;
         let oracle = if r.oracle { " (oracle)" } else { "" };
         let title =
             format!("{} {}{oracle} {}: ATE {:.2} cm", j.name, j.variant_name(), j.sequence(), 100.0 * e.ate.rmse);

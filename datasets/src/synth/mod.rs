@@ -10,6 +10,7 @@
 //! (writing the TUM RGB-D layout). The `synth` operator that streams it into a graph lives in
 //! `dynaflow-operators`.
 
+mod kitti;
 mod motion;
 mod render;
 mod scene;
@@ -17,6 +18,7 @@ mod sensor;
 mod texture;
 mod tum;
 
+pub use kitti::{KittiWriteOptions, write_kitti};
 pub use motion::Motion;
 pub use render::Intrinsics;
 pub use scene::PeopleMode;

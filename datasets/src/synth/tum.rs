@@ -32,7 +32,7 @@ fn err(path: &Path, e: impl std::fmt::Display) -> Error {
     Error::file(path, e)
 }
 
-fn png(path: &Path, data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<(), Error> {
+pub(super) fn png(path: &Path, data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<(), Error> {
     let file = fs::File::create(path).map_err(|e| err(path, e))?;
     image::codecs::png::PngEncoder::new_with_quality(
         std::io::BufWriter::new(file),

@@ -112,6 +112,10 @@ pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, dyn
     }
     if dir.join("calib.txt").is_file() && dir.join("times.txt").is_file() {
         params.retain(|(k, _)| *k != "intrinsics"); // KITTI carries its own calibration
+        // The grey pair when there is one (what ORB-SLAM2's KITTI examples read), else colour.
+        if !dir.join("image_0").is_dir() && dir.join("image_2").is_dir() {
+            params.push(("camera", "color".to_owned()));
+        }
         return Ok(Layout { op: "kitti_odometry", params });
     }
     for pattern in ["*.png", "*.jpg", "*.jpeg"] {

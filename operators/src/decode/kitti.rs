@@ -28,7 +28,10 @@ params! {
     }
 }
 
-const LEFT: Out<Image> = Out::new("left", "left rectified image");
+const LEFT: Out<Image> = Out::new(
+    "rgb",
+    "left rectified image (grey or colour; named `rgb` as every source's main image, so a graph runs on KITTI with `--input`)",
+);
 const RIGHT: Out<Image> = Out::new("right", "right rectified image");
 const CAMERA_INFO: Out<CameraInfo> = Out::new("camera_info", "left camera intrinsics (rectified, no distortion)");
 const STEREO: Out<Scalars> = Out::new("stereo", "`baseline_m`: stereo baseline in metres");

@@ -35,6 +35,11 @@ pub fn to_msg(b: &s::SparseMap) -> m::SparseMap {
             })
             .collect(),
         removed: b.removed.clone(),
+        features: b
+            .features
+            .iter()
+            .map(|f| m::MapFeature { keyframe: f.keyframe, uv: f.uv, octave: f.octave, descriptor: f.descriptor })
+            .collect(),
     }
 }
 
@@ -69,5 +74,10 @@ pub fn from_msg(b: &m::SparseMap) -> s::SparseMap {
             })
             .collect(),
         removed: b.removed.clone(),
+        features: b
+            .features
+            .iter()
+            .map(|f| s::KeyFrameFeature { keyframe: f.keyframe, uv: f.uv, octave: f.octave, descriptor: f.descriptor })
+            .collect(),
     }
 }

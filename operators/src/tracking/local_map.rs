@@ -24,11 +24,15 @@ params! {
 
 const KEYFRAME: In<SparseMap> = In::required("keyframe", "a key frame from `pnp_track`");
 const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
+const STEREO: In<Scalars> = In::optional(
+    "stereo",
+    "the stereo rig (`baseline_m`): with a stereo `pnp_track`, its baseline replaces `baseline`",
+);
 const MAP: Out<SparseMap> = Out::new("map", "the refined local window: key frames, points, removed point ids");
 const POINTS: Out<PointCloud> = Out::new("points", "every map point held (on key frames)");
 const STATS: Out<Scalars> = Out::new(
     "stats",
-    "`keyframes`, `points`, `window`, `removed`, `ba_iterations`, `ba_cost_before`, `ba_cost_after` (insertion times: the summary's `report.local_ba_ms`)",
+    "`keyframes`, `points`, `window`, `removed`, `triangulated` (monocular), `ba_iterations`, `ba_cost_before`, `ba_cost_after` (insertion times: the summary's `report.local_ba_ms`)",
 );
 
 pub const LOCAL_MAP: OpSpec = OpSpec {
@@ -36,7 +40,7 @@ pub const LOCAL_MAP: OpSpec = OpSpec {
     family: "pnp_ba",
     doc: dynaflow_engine::op::doc_line(include_str!("docs/local_map.md")),
     kind: OpKind::Transform,
-    inputs: &[KEYFRAME.spec, CAMERA_INFO.spec],
+    inputs: &[KEYFRAME.spec, CAMERA_INFO.spec, STEREO.spec],
     outputs: &[MAP.spec, POINTS.spec, STATS.spec],
     params: Config::PARAMS,
     cpu_heavy: true,
@@ -57,11 +61,17 @@ impl Operator for LocalMap {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (msg, batch) = KEYFRAME.require(inputs)?;
         let (_, k) = CAMERA_INFO.require(inputs)?;
+        let rig = STEREO.get(inputs)?.and_then(|r| r.get("baseline_m")).filter(|b| *b > 0.0 && b.is_finite());
         let mapper = self.mapper.get_or_insert_with(|| {
-            let mut c = LocalMapConfig::rgbd(k.fx);
+            // A monocular tracker's key frames carry their unmatched keypoints: triangulate
+            // them, with ORB-SLAM2's monocular settings.
+            let mut c =
+                if batch.features.is_empty() { LocalMapConfig::rgbd(k.fx) } else { LocalMapConfig::monocular(k.fx) };
             c.window = self.config.window as usize;
             c.keep_keyframes = self.config.keep_keyframes as usize;
-            c.bf = k.fx * self.config.baseline;
+            if batch.features.is_empty() {
+                c.bf = k.fx * rig.unwrap_or(self.config.baseline);
+            }
             LocalMapper::new(c, Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy })
         });
         let t0 = Instant::now();
@@ -76,6 +86,7 @@ impl Operator for LocalMap {
             ("points".into(), mapper.points() as f64),
             ("window".into(), update.keyframes.len() as f64),
             ("removed".into(), update.removed.len() as f64),
+            ("triangulated".into(), mapper.last_triangulated() as f64),
             ("ba_iterations".into(), ba.iterations as f64),
             ("ba_cost_before".into(), ba.initial_cost),
             ("ba_cost_after".into(), ba.final_cost),

@@ -9,7 +9,7 @@ use dynaflow_engine::msg::{
 use dynaflow_engine::op::{
     Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
 };
-use dynaflow_engine::params;
+use dynaflow_engine::{param_enum, params};
 use dynaflow_slam::eval::{Align, evaluate};
 use dynaflow_slam::{Feature, Tracker, TrackerConfig};
 use dynaflow_vision::camera::Pinhole;
@@ -18,8 +18,15 @@ use rand_core::Rng;
 
 use super::convert;
 
+param_enum! {
+    /// What gives keypoints their depth (ORB-SLAM2's three sensor modes).
+    enum Sensor { Rgbd = "rgbd", Stereo = "stereo", Mono = "mono" }
+}
+
 params! {
     struct Config {
+        /// `rgbd`: `depth` from a depth camera; `stereo`: `depth` from `stereo_match` and the rig on `stereo` (its baseline replaces `baseline`, close depth 40 baselines, ORB-SLAM2's ThDepth; every matched depth used, no `max_depth`); `mono`: no depth (`depth` ignored), the map starts from two views and scale is arbitrary (ATE Sim(3)-aligned)
+        sensor: Sensor = Sensor::Rgbd,
         /// fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30)
         min_inliers: u64 [6, 100_000] = 30,
         /// projection search radius, pixels (ORB-SLAM2's motion-model search: 15; widened 3x once)
@@ -39,8 +46,13 @@ params! {
     }
 }
 
+/// ORB-SLAM2's `ThDepth` for stereo cameras: points closer than 40 baselines are close.
+const STEREO_CLOSE_BASELINES: f64 = 40.0;
+
 const KEYPOINTS: In<Keypoints> = In::required("keypoints", "this frame's ORB keypoints with descriptors");
-const DEPTH: In<DepthImage> = In::required("depth", "depth in metres");
+const DEPTH: In<DepthImage> = In::optional("depth", "depth in metres (`sensor: rgbd` or `stereo`; ignored by `mono`)");
+const STEREO: In<Scalars> =
+    In::optional("stereo", "the stereo rig (`sensor: stereo`): `baseline_m`, as `kitti_odometry` and `synth` send it");
 const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
 const MAP: In<SparseMap> = In::optional("map", "local mapping's refined local map (`delay: 1`, `join: latest`)");
 const MASK: In<SegmentationMask> = In::optional("mask", "pixels of a non-zero class are dynamic");
@@ -67,6 +79,7 @@ pub const PNP_TRACK: OpSpec = OpSpec {
     inputs: &[
         KEYPOINTS.spec,
         DEPTH.spec,
+        STEREO.spec,
         CAMERA_INFO.spec,
         MAP.spec,
         MASK.spec,
@@ -87,6 +100,8 @@ pub const PNP_TRACK: OpSpec = OpSpec {
             counts: [0; 5],
             last_map: None,
             best_usable: 0,
+            frames: 0,
+            first_pose_frame: None,
         })))
     },
 };
@@ -103,6 +118,9 @@ struct PnpTrack {
     /// The most keypoints of one frame that a map could start from (static, with a depth up
     /// to `max_depth`): what the end-of-run message says when no map ever started.
     best_usable: usize,
+    /// Frames seen, and the index of the first one with a pose (monocular: initialisation).
+    frames: u64,
+    first_pose_frame: Option<u64>,
 }
 
 /// Nearest-neighbour label transfer: each point whose nearest labelled track lies within
@@ -168,22 +186,64 @@ fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]], label_radius: f32) ->
 impl Operator for PnpTrack {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (msg, kp) = KEYPOINTS.require(inputs)?;
-        let (_, depth) = DEPTH.require(inputs)?;
         let (_, k) = CAMERA_INFO.require(inputs)?;
+        let sensor = self.config.sensor;
+        let depth = match sensor {
+            Sensor::Mono => None,
+            Sensor::Rgbd | Sensor::Stereo => Some(
+                DEPTH
+                    .get(inputs)?
+                    .ok_or_else(|| {
+                        OpError::Input(format!(
+                            "`sensor: {}` needs `depth` (a depth camera's, or `stereo_match`'s); wire it, or set `sensor: mono`",
+                            sensor.as_str()
+                        ))
+                    })?,
+            ),
+        };
+        let rig_baseline = match sensor {
+            Sensor::Stereo => {
+                let rig = STEREO.get(inputs)?.ok_or_else(|| {
+                    OpError::Input(
+                        "`sensor: stereo` needs the rig on `stereo` (`baseline_m`, from the source's `stereo` port)"
+                            .into(),
+                    )
+                })?;
+                let b = rig.get("baseline_m").ok_or_else(|| OpError::Input("`stereo` has no `baseline_m`".into()))?;
+                if !(b > 0.0 && b.is_finite()) {
+                    return Err(OpError::Input(format!("the stereo baseline is {b} m; it must be positive")));
+                }
+                Some(b)
+            }
+            _ => None,
+        };
         if let Some(m) = MASK.get(inputs)?
-            && (m.width, m.height) != (depth.width, depth.height)
+            && (m.width, m.height) != (k.width, k.height)
         {
             return Err(OpError::Input(format!(
-                "`mask` is {}x{} but `depth` is {}x{}: a mask must cover the image the keypoints come from, pixel for pixel",
-                m.width, m.height, depth.width, depth.height
+                "`mask` is {}x{} but the camera's images are {}x{}: a mask must cover the image the keypoints come from, pixel for pixel",
+                m.width, m.height, k.width, k.height
             )));
         }
         let descriptors = crate::frontend::orb_descriptors(kp)?;
         if self.tracker.is_none() {
-            let mut tc = TrackerConfig::rgbd(k.fx);
-            tc.bf = k.fx * self.config.baseline;
-            tc.th_depth = self.config.close_depth;
-            tc.max_depth = self.config.max_depth;
+            let mut tc = match sensor {
+                Sensor::Mono => TrackerConfig::monocular(k.fx),
+                _ => {
+                    let mut tc = TrackerConfig::rgbd(k.fx);
+                    tc.bf = k.fx * self.config.baseline;
+                    tc.th_depth = self.config.close_depth;
+                    tc.max_depth = self.config.max_depth;
+                    if let Some(b) = rig_baseline {
+                        // ORB-SLAM2's stereo settings: bf from the rig, ThDepth 40 baselines.
+                        tc.bf = k.fx * b;
+                        tc.th_depth = STEREO_CLOSE_BASELINES * b;
+                        tc.max_depth = f64::INFINITY;
+                        tc.stereo = true;
+                    }
+                    tc
+                }
+            };
             tc.search_radius = self.config.search_radius;
             tc.min_inliers = self.config.min_inliers as usize;
             tc.ransac_threshold = self.config.ransac_threshold;
@@ -206,7 +266,7 @@ impl Operator for PnpTrack {
             .zip(descriptors.chunks_exact(32))
             .zip(&dynamic)
             .map(|((p, d), &dynamic)| {
-                let z = f64::from(depth.at_nearest(p.x, p.y));
+                let z = depth.map_or(0.0, |d| f64::from(d.at_nearest(p.x, p.y)));
                 let mut descriptor = [0u8; 32];
                 descriptor.copy_from_slice(d);
                 Feature {
@@ -218,12 +278,16 @@ impl Operator for PnpTrack {
                 }
             })
             .collect();
-        let max_depth = self.config.max_depth;
+        let max_depth = tracker.config().max_depth;
         let usable = features.iter().filter(|f| !f.dynamic && f.depth.is_some_and(|z| z <= max_depth)).count();
         self.best_usable = self.best_usable.max(usable);
         let stamp = msg.header.stamp;
         let r = tracker.track(stamp, &features);
         self.counts[r.state.code() as usize] += 1;
+        if r.pose.is_some() && self.first_pose_frame.is_none() {
+            self.first_pose_frame = Some(self.frames);
+        }
+        self.frames += 1;
         if let Some(gt) = GT_POSE.get(inputs)? {
             self.ground_truth.push((stamp, gt.world_from_cam));
         }
@@ -255,8 +319,18 @@ impl Operator for PnpTrack {
             "frames": { "not_initialised": not_initialised, "new_map": new_map, "tracked": tracked,
                         "relocalised": relocalised, "lost": lost },
             "maps": self.tracker.as_ref().map_or(0, Tracker::map_id),
+            "sensor": self.config.sensor.as_str(),
+            "first_pose_frame": self.first_pose_frame,
         });
-        if new_map == 0 {
+        if new_map == 0 && self.config.sensor == Sensor::Mono {
+            let last = self.tracker.as_ref().and_then(Tracker::init_failure).unwrap_or("no frame");
+            let why = format!(
+                "the monocular tracker never initialised in {not_initialised} frames (it needs two views with enough parallax); the last attempt: {last}"
+            );
+            tracing::warn!("`{}`: {why}", ctx.node);
+            report["initialised"] = serde_json::json!(false);
+            report["not_initialised_because"] = serde_json::json!(why);
+        } else if new_map == 0 {
             // No map ever started: no pose, no ATE. Said here, in the summary and by `run`.
             let why = format!(
                 "the tracker never initialised in {not_initialised} frames: at most {} keypoints of a frame had a depth up to max_depth {} m and no mask or dynamic label; a map needs {}",
@@ -269,12 +343,15 @@ impl Operator for PnpTrack {
             report["not_initialised_because"] = serde_json::json!(why);
         }
         if !self.ground_truth.is_empty() && !self.trajectory.is_empty() {
-            // evo's default tolerance (10 ms); SE(3) alignment as the RGB-D papers report it.
-            match evaluate(&self.ground_truth, &self.trajectory, 0.01, Align::Se3, 1) {
+            // evo's default tolerance (10 ms); SE(3) alignment as the RGB-D papers report it,
+            // Sim(3) for a single camera (its scale is arbitrary; evo `-as`).
+            let (align, name) =
+                if self.config.sensor == Sensor::Mono { (Align::Sim3, "sim3") } else { (Align::Se3, "se3") };
+            match evaluate(&self.ground_truth, &self.trajectory, 0.01, align, 1) {
                 Ok(e) => {
                     report["ate"] = serde_json::json!({
                         "rmse": e.ate.rmse, "mean": e.ate.mean, "median": e.ate.median, "std": e.ate.std,
-                        "max": e.ate.max, "align": "se3", "pairs": e.matched,
+                        "max": e.ate.max, "align": name, "pairs": e.matched, "scale": e.scale,
                     });
                     report["rpe"] = serde_json::json!({
                         "delta_frames": e.rpe_delta, "translation_rmse": e.rpe_translation.rmse,

@@ -17,6 +17,7 @@ mod model_selection;
 mod p3p;
 mod pose;
 mod ransac;
+mod two_view;
 
 pub use fundamental::{eight_point, epipolar_distance, epipolar_error, seven_point};
 pub use homography::{HomographyFit, fit_homography_prosac, homography_dlt, transfer, transfer_error};
@@ -29,6 +30,10 @@ pub use pose::{
     optimize_pose, p3p_ransac, pnp_dlt, pnp_ransac, refine_pose, renormalised,
 };
 pub use ransac::{FundamentalFit, RansacConfig, SplitMix64, fit_fundamental};
+pub use two_view::{
+    InitFailure, TwoViewConfig, TwoViewInit, TwoViewModel, decompose_essential, decompose_homography, initialise,
+    triangulate,
+};
 
 /// A 3x3 matrix, row-major, `x2^T F x1 = 0` for homogeneous pixel coordinates.
 pub type Mat3 = nalgebra::Matrix3<f64>;
