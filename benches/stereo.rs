@@ -10,6 +10,10 @@
 //! whole-system peer (issue 35's bench script).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
+#[path = "../tests/common/mod.rs"]
+mod common;
+#[path = "../vision/tests/common/frontend.rs"]
+mod frontend;
 #[path = "../vision/tests/common/stereo.rs"]
 mod stereo;
 
@@ -46,12 +50,12 @@ fn main() {
         let pair = stereo::synth_stereo(motion, 3, k, 0.12);
         let mut left = OrbExtractor::new(OrbConfig::default());
         let mut right = OrbExtractor::new(OrbConfig::default());
-        let fl = left.extract(&pair.left, None);
-        let fr = right.extract(&pair.right, None);
-        let (ll, rl) = (left.pyramid(&pair.left), right.pyramid(&pair.right));
         let orb_ms = median_ms(reps, || {
             std::hint::black_box(right.extract(&pair.right, None));
         });
+        let fl = left.extract(&pair.left, None);
+        let fr = right.extract(&pair.right, None);
+        let (ll, rl) = (left.pyramid(&pair.left), right.pyramid(&pair.right));
         let mut matched = 0;
         let match_ms = median_ms(reps, || {
             let m = stereo_match(
@@ -71,7 +75,7 @@ fn main() {
     // (cross-checked, ratio 0.9) as the pixel pairs.
     for (motion, a, b) in [(Motion::Xyz, 0, 10), (Motion::Halfsphere, 0, 10)] {
         let g = Generator::new(SynthConfig { motion, people: 0, seed: 3, ..SynthConfig::default() });
-        let i = g.config().intrinsics;
+        let i = g.config().intrinsics.clone();
         let gray = |k: u64| GrayImage::from_rgb8(i.width as usize, i.height as usize, &g.frame(k, false).rgb).unwrap();
         let mut orb = OrbExtractor::new(OrbConfig::default());
         let (f1, f2) = (orb.extract(&gray(a), None), orb.extract(&gray(b), None));

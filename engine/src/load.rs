@@ -86,7 +86,11 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
         .into_iter()
         .filter(|name| new_op.is_some_and(|n| !n.outputs.iter().any(|p| p.name == *name)))
         .collect();
-    if lost.is_empty() {
+    let missing = |port: &str| new_op.is_some_and(|n| !n.outputs.iter().any(|p| p.name == port));
+    let disabled_miss = spec.nodes.iter().any(|n| {
+        n.disabled && n.inputs.iter().any(|i| i.from.as_ref().is_some_and(|f| f.node == source_id && missing(&f.port)))
+    });
+    if lost.is_empty() && !disabled_miss {
         return Vec::new();
     }
     let mut diags = Vec::new();
@@ -98,6 +102,21 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
             let gone = |from: &crate::spec::PortRef| {
                 (from.node == source_id && lost.contains(&from.port.as_str())) || removed.contains(&from.node)
             };
+            // A disabled node (it runs in no frame) that reads a port the reader lacks is left
+            // out quietly: variants were applied before this, so none can enable it.
+            if n.disabled
+                && n.inputs.iter().any(|i| i.from.as_ref().is_some_and(|f| f.node == source_id && missing(&f.port)))
+            {
+                tracing::info!(
+                    "`{}`: disabled node `{}` reads a port `{}` lacks; left out",
+                    over.origin,
+                    n.id,
+                    over.op
+                );
+                removed.push(n.id.clone());
+                changed = true;
+                continue;
+            }
             let op = registry.get(&n.op);
             let required =
                 |port: &str| op.is_some_and(|o| o.inputs.iter().any(|p| p.name == port && (p.required || p.wired)));
