@@ -9,11 +9,13 @@
 //!
 //! Monocular (a batch that carries the key frame's unmatched keypoints): new points are
 //! triangulated between the new key frame and its best covisible neighbours, as ORB-SLAM2's
-//! `CreateNewMapPoints` (see [`LocalMapper::triangulate`]). A monocular map's first batch
-//! holds the two key frames of the initialisation, adjusted together.
+//! `CreateNewMapPoints` (see [`LocalMapper::triangulate`]), and duplicates fused with the
+//! neighbours' points (`SearchInNeighbors`, [`LocalMapper::fuse`]). A monocular map's first
+//! batch holds the two key frames of the initialisation, adjusted together; the map returned
+//! carries the new key frame's observations, from which tracking counts its reference points.
 //!
-//! Not done (yet): the fusion of duplicate points (`SearchInNeighbors`); with RGB-D and stereo,
-//! tracking creates points from depth at every key frame and nothing is triangulated.
+//! With RGB-D and stereo, tracking creates points from depth at every key frame and nothing
+//! is triangulated or fused (ORB-SLAM2 does both in every mode: not done here yet).
 
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -104,6 +106,7 @@ pub struct LocalMapper {
     last: BaReport,
     next_point: u64,
     triangulated: usize,
+    fused: usize,
 }
 
 impl LocalMapper {
@@ -118,12 +121,18 @@ impl LocalMapper {
             last: BaReport::default(),
             next_point: MAPPING_POINT_IDS,
             triangulated: 0,
+            fused: 0,
         }
     }
 
     /// Points triangulated by the last insertion (monocular).
     pub fn last_triangulated(&self) -> usize {
         self.triangulated
+    }
+
+    /// Observations added or points merged by the last insertion's fusion (monocular).
+    pub fn last_fused(&self) -> usize {
+        self.fused
     }
 
     /// Key frames held.
@@ -178,8 +187,12 @@ impl LocalMapper {
             self.kfs.insert(kinfo.id, Kf { info: *kinfo, obs, features });
         }
         self.triangulated = 0;
+        self.fused = 0;
         if self.kfs.get(&info.id).is_some_and(|k| !k.features.is_empty()) {
             self.triangulated = self.triangulate(info.id);
+            let (fused, replaced) = self.fuse(info.id);
+            self.fused = fused;
+            removed.extend(replaced);
         }
 
         // Covisibility of the new key frame; the window is it and its best neighbours.
@@ -323,7 +336,14 @@ impl LocalMapper {
             .collect();
         removed.sort_unstable();
         removed.dedup();
-        SparseMap { map_id: self.map_id, keyframes, points, observations: Vec::new(), removed, features: Vec::new() }
+        // Monocular: the new key frame's observations go back too, so that tracking counts its
+        // reference key frame's points as ORB-SLAM2 does (`TrackedMapPoints(nMinObs)`).
+        let observations = if batch.features.is_empty() {
+            Vec::new()
+        } else {
+            self.kfs.get(&info.id).map(|k| k.obs.clone()).unwrap_or_default()
+        };
+        SparseMap { map_id: self.map_id, keyframes, points, observations, removed, features: Vec::new() }
     }
 
     fn erase_observation(&mut self, kf: u64, point: u64) {
@@ -510,6 +530,179 @@ impl LocalMapper {
             k.features.retain(|_| !*it.next().unwrap_or(&false));
         }
         made
+    }
+
+    /// ORB-SLAM2's `SearchInNeighbors` for a monocular key frame `id`: its points are
+    /// projected into its covisible key frames (the 20 best and their 5 best each) and theirs
+    /// into it; a projection that lands within `3 x scale^octave` px of a keypoint of the
+    /// predicted octave (or the one below), reprojects within 5.991 sigma^2 and matches its
+    /// descriptor (Hamming <= 50) either adds an observation (the keypoint had no point) or
+    /// merges two points (the one with more observations stays): ORB-SLAM2's `Fuse`. A map
+    /// re-observed from a new key frame then keeps one point per place, and one scale.
+    /// Returns the fusions and the ids of the points merged away. Deviation: a keypoint that
+    /// already has a point is compared through that point's descriptor (key frames here keep
+    /// the descriptors of their unmatched keypoints only).
+    pub fn fuse(&mut self, id: u64) -> (usize, Vec<u64>) {
+        let covisible = |this: &Self, k: u64, n: usize| -> Vec<u64> {
+            let mut shared: BTreeMap<u64, usize> = BTreeMap::new();
+            if let Some(kf) = this.kfs.get(&k) {
+                for o in &kf.obs {
+                    if let Some(mp) = this.points.get(&o.point) {
+                        for &other in mp.kfs.iter().filter(|&&x| x != k) {
+                            *shared.entry(other).or_default() += 1;
+                        }
+                    }
+                }
+            }
+            let mut v: Vec<(u64, usize)> = shared.into_iter().collect();
+            v.sort_by_key(|&(k, c)| (std::cmp::Reverse(c), std::cmp::Reverse(k)));
+            v.into_iter().take(n).map(|(k, _)| k).collect()
+        };
+        let mut targets: Vec<u64> = Vec::new();
+        for k in covisible(self, id, self.config.triangulation_neighbours) {
+            if !targets.contains(&k) {
+                targets.push(k);
+            }
+            for k2 in covisible(self, k, 5) {
+                if k2 != id && !targets.contains(&k2) {
+                    targets.push(k2);
+                }
+            }
+        }
+        let mut fused = 0;
+        let mut replaced = Vec::new();
+        // The new key frame's points into each target.
+        for &t in &targets {
+            let ids: Vec<u64> = self.kfs.get(&id).map(|k| k.obs.iter().map(|o| o.point).collect()).unwrap_or_default();
+            let (f, r) = self.fuse_into(t, &ids);
+            fused += f;
+            replaced.extend(r);
+        }
+        // The targets' points into the new key frame.
+        let mut ids: Vec<u64> = Vec::new();
+        for &t in &targets {
+            if let Some(k) = self.kfs.get(&t) {
+                ids.extend(k.obs.iter().map(|o| o.point));
+            }
+        }
+        ids.sort_unstable();
+        ids.dedup();
+        let (f, r) = self.fuse_into(id, &ids);
+        fused += f;
+        replaced.extend(r);
+        replaced.sort_unstable();
+        replaced.dedup();
+        replaced.retain(|p| !self.points.contains_key(p));
+        (fused, replaced)
+    }
+
+    /// ORB-SLAM2's `ORBmatcher::Fuse` of `points` into key frame `kf`.
+    fn fuse_into(&mut self, kf: u64, points: &[u64]) -> (usize, Vec<u64>) {
+        let scale = self.config.scale_factor;
+        let cam = self.cam;
+        let mut fused = 0;
+        let mut replaced = Vec::new();
+        for &pid in points {
+            let Some(k) = self.kfs.get(&kf) else { break };
+            let Some(mp) = self.points.get(&pid) else { continue };
+            if mp.kfs.contains(&kf) {
+                continue;
+            }
+            let pose = k.info.world_from_cam;
+            let pc = pose.inverse() * mp.point.position;
+            let Some(uv) = cam.project(&pc) else { continue };
+            // The octave the point's distance predicts, from its first observation's.
+            let first = mp.kfs.iter().find_map(|&o| {
+                let ok = self.kfs.get(&o)?;
+                let ob = ok.obs.iter().find(|x| x.point == pid)?;
+                let d = (mp.point.position.coords - ok.info.world_from_cam.translation.vector).norm();
+                Some((d, ob.octave))
+            });
+            let Some((d0, oct0)) = first else { continue };
+            let dist = (mp.point.position.coords - pose.translation.vector).norm();
+            if !(dist > 0.0 && d0 > 0.0) {
+                continue;
+            }
+            let predicted = (f64::from(oct0) + (d0 / dist).ln() / scale.ln()).round().clamp(0.0, 7.0) as u8;
+            let radius = 3.0 * sigma(scale, predicted);
+            let descriptor = mp.point.descriptor;
+            // Candidates: keypoints with a point (through that point's descriptor) and without.
+            let mut best: Option<(u32, Option<u64>, usize)> = None;
+            let ok_octave = |o: u8| o + 1 >= predicted && o <= predicted;
+            let near = |q: [f64; 2], o: u8| {
+                let e2 = (q[0] - uv[0]).powi(2) + (q[1] - uv[1]).powi(2);
+                e2 <= radius * radius && e2 <= CHI2_2DOF * sigma(scale, o).powi(2)
+            };
+            for (i, o) in k.obs.iter().enumerate() {
+                if !ok_octave(o.octave) || !near(o.uv, o.octave) {
+                    continue;
+                }
+                let Some(other) = self.points.get(&o.point) else { continue };
+                let d = hamming(&descriptor, &other.point.descriptor);
+                if d <= TRIANGULATION_MAX_DISTANCE && best.is_none_or(|b| d < b.0) {
+                    best = Some((d, Some(o.point), i));
+                }
+            }
+            for (i, f) in k.features.iter().enumerate() {
+                if !ok_octave(f.octave) || !near(f.uv, f.octave) {
+                    continue;
+                }
+                let d = hamming(&descriptor, &f.descriptor);
+                if d <= TRIANGULATION_MAX_DISTANCE && best.is_none_or(|b| d < b.0) {
+                    best = Some((d, None, i));
+                }
+            }
+            match best {
+                Some((_, Some(other), _)) if other != pid => {
+                    let (keep, drop) = {
+                        let (a, b) = (self.points.get(&pid), self.points.get(&other));
+                        match (a, b) {
+                            (Some(a), Some(b)) if b.kfs.len() > a.kfs.len() => (other, pid),
+                            (Some(_), Some(_)) => (pid, other),
+                            _ => continue,
+                        }
+                    };
+                    self.replace_point(drop, keep);
+                    replaced.push(drop);
+                    fused += 1;
+                }
+                Some((_, None, i)) => {
+                    let Some(k) = self.kfs.get_mut(&kf) else { continue };
+                    let f = k.features.swap_remove(i);
+                    k.obs.push(Observation { keyframe: kf, point: pid, uv: f.uv, depth: None, octave: f.octave });
+                    if let Some(mp) = self.points.get_mut(&pid) {
+                        mp.kfs.push(kf);
+                        mp.weight += 1;
+                    }
+                    fused += 1;
+                }
+                _ => {}
+            }
+        }
+        (fused, replaced)
+    }
+
+    /// Merge point `drop` into `keep`: every key frame observing `drop` observes `keep` there
+    /// (unless it already observes `keep`), and `drop` is removed.
+    fn replace_point(&mut self, drop: u64, keep: u64) {
+        let Some(old) = self.points.remove(&drop) else { return };
+        for k in old.kfs {
+            let Some(kf) = self.kfs.get_mut(&k) else { continue };
+            let already = kf.obs.iter().any(|o| o.point == keep);
+            if already {
+                kf.obs.retain(|o| o.point != drop);
+                continue;
+            }
+            let mut depth = false;
+            for o in kf.obs.iter_mut().filter(|o| o.point == drop) {
+                o.point = keep;
+                depth = o.depth.is_some();
+            }
+            if let Some(mp) = self.points.get_mut(&keep) {
+                mp.kfs.push(k);
+                mp.weight += if depth { 2 } else { 1 };
+            }
+        }
     }
 
     fn remove_point(&mut self, id: u64) {

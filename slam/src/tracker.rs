@@ -248,6 +248,17 @@ impl Tracker {
         for id in &update.removed {
             self.points.remove(id);
         }
+        // Monocular: the reference key frame's tracked points as ORB-SLAM2 counts them for its
+        // key-frame rule: those seen by at least 3 key frames (2 while the map has two).
+        if self.config.monocular && !update.observations.is_empty() {
+            let min_obs = if newest <= self.first_keyframe + 1 { 2 } else { 3 };
+            let seen: BTreeMap<u64, u32> = update.points.iter().map(|p| (p.id, p.observations)).collect();
+            self.ref_tracked = update
+                .observations
+                .iter()
+                .filter(|o| o.keyframe == newest && seen.get(&o.point).is_some_and(|&n| n >= min_obs))
+                .count();
+        }
     }
 
     /// Track one frame.

@@ -257,3 +257,59 @@ fn a_long_loss_in_a_new_place_starts_a_new_map() {
     // The new map continues from the dead-reckoned pose: every frame still has a pose.
     assert_eq!(slam.est.len(), 40);
 }
+
+/// The monocular pipeline on its own (no engine): two-view initialisation, tracking without
+/// depth, triangulation and fusion in local mapping; scored after Sim(3) alignment.
+fn mono_run(world: &World, frames: usize, path: impl Fn(usize) -> Isometry3<f64>) -> (Slam, Vec<Option<u64>>) {
+    let mut slam = Slam::new();
+    slam.tracker = Tracker::new(TrackerConfig::monocular(CAM.fx), CAM, 640, 480, 1);
+    slam.mapper = LocalMapper::new(LocalMapConfig::monocular(CAM.fx), CAM);
+    let mut rng = SplitMix64::new(9);
+    let mut triangulated = Vec::new();
+    for k in 0..frames {
+        let f = world.frame(&path(k), &mut rng, false);
+        let r = slam.tracker.track(k as f64 / 30.0, &f);
+        if let Some(kf) = &r.keyframe {
+            let update = slam.mapper.insert(kf);
+            triangulated.push(Some(slam.mapper.last_triangulated() as u64));
+            slam.tracker.apply_map_update(&update);
+        }
+        if let Some(p) = r.pose {
+            slam.est.push((k as f64 / 30.0, p));
+            slam.gt.push((k as f64 / 30.0, path(k)));
+        }
+        slam.states.push(r.state);
+    }
+    (slam, triangulated)
+}
+
+#[test]
+fn monocular_initialises_from_two_views_and_maps_new_points() {
+    let world = World::new(3000, 4, false);
+    let (slam, triangulated) = mono_run(&world, 120, pose);
+    // The first frames wait for parallax; then a map from two views, tracked to the end.
+    let first = slam.states.iter().position(|s| *s == TrackState::NewMap).unwrap();
+    assert!(first <= 30, "initialised at frame {first}");
+    assert!(slam.states[..first].iter().all(|s| *s == TrackState::NotInitialised));
+    assert!(slam.states[first + 1..].iter().all(|s| *s == TrackState::Tracked), "{:?}", slam.states);
+    // The camera moves 1.2 m past what the first two views saw: local mapping had to
+    // triangulate new points for tracking to go on.
+    assert!(triangulated.iter().flatten().sum::<u64>() > 200, "{triangulated:?}");
+    let e = evaluate(&slam.gt, &slam.est, 1e-3, Align::Sim3, 1).unwrap();
+    assert!(e.ate.rmse < 0.01, "ATE (sim3) {} m", e.ate.rmse);
+    // The initial map's scale: median depth 1 (the scene is 2-6 m deep: scale about 4).
+    assert!(e.scale > 2.0 && e.scale < 8.0, "scale {}", e.scale);
+}
+
+#[test]
+fn monocular_without_translation_never_claims_a_pose() {
+    // A camera that only turns about its centre: no parallax, no initialisation, no pose.
+    let world = World::new(3000, 5, false);
+    let turn = |k: usize| {
+        Isometry3::from_parts(Translation3::identity(), UnitQuaternion::from_euler_angles(0.0, 0.004 * k as f64, 0.0))
+    };
+    let (slam, _) = mono_run(&world, 60, turn);
+    assert!(slam.est.is_empty());
+    assert!(slam.states.iter().all(|s| *s == TrackState::NotInitialised));
+    assert!(slam.tracker.init_failure().is_some_and(|w| w.contains("parallax")), "{:?}", slam.tracker.init_failure());
+}

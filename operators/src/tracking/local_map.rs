@@ -32,7 +32,7 @@ const MAP: Out<SparseMap> = Out::new("map", "the refined local window: key frame
 const POINTS: Out<PointCloud> = Out::new("points", "every map point held (on key frames)");
 const STATS: Out<Scalars> = Out::new(
     "stats",
-    "`keyframes`, `points`, `window`, `removed`, `triangulated` (monocular), `ba_iterations`, `ba_cost_before`, `ba_cost_after` (insertion times: the summary's `report.local_ba_ms`)",
+    "`keyframes`, `points`, `window`, `removed`, `triangulated`, `fused` (monocular), `ba_iterations`, `ba_cost_before`, `ba_cost_after` (insertion times: the summary's `report.local_ba_ms`)",
 );
 
 pub const LOCAL_MAP: OpSpec = OpSpec {
@@ -87,6 +87,7 @@ impl Operator for LocalMap {
             ("window".into(), update.keyframes.len() as f64),
             ("removed".into(), update.removed.len() as f64),
             ("triangulated".into(), mapper.last_triangulated() as f64),
+            ("fused".into(), mapper.last_fused() as f64),
             ("ba_iterations".into(), ba.iterations as f64),
             ("ba_cost_before".into(), ba.initial_cost),
             ("ba_cost_after".into(), ba.final_cost),
