@@ -7,30 +7,21 @@
 //! `<target folder>/peers`, as `scripts/peers.sh` makes it).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
+#[path = "common/timing.rs"]
+mod timing;
+
 #[path = "../tests/common/mod.rs"]
 mod common;
 #[path = "../vision/tests/common/frontend.rs"]
 mod frontend;
 
-use std::time::Instant;
+use timing::median_ms;
 
 use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid};
 use dynaflow_vision::geometry::{RansacConfig, SplitMix64, fit_fundamental, pnp_ransac};
 use dynaflow_vision::matching::{MatchConfig, match_brute_force};
 use dynaflow_vision::orb::{Distribution, OrbConfig, OrbExtractor};
 use serde_json::json;
-
-fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
-    let mut t: Vec<f64> = (0..reps)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
-}
 
 fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {

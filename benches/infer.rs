@@ -11,10 +11,15 @@
 //! models and fixtures are (for a copied binary); `DYNAFLOW_BENCH_JSON` writes the figures.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
+#[path = "common/timing.rs"]
+mod timing;
+
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::Instant;
+
+use timing::median_ms;
 
 use dynaflow_gpu::{Gpu, GpuModel};
 use dynaflow_infer::detect::{Decoder, Detector, letterbox_bgr, resize_bgr_unit};
@@ -26,19 +31,6 @@ use serde_json::json;
 
 fn repo() -> PathBuf {
     std::env::var_os("DYNAFLOW_REPO").map_or_else(|| PathBuf::from(env!("CARGO_MANIFEST_DIR")), PathBuf::from)
-}
-
-fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
-    f();
-    let mut t: Vec<f64> = (0..reps)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
 }
 
 fn max_diff(a: &[Tensor], b: &[f32]) -> f64 {

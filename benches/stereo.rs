@@ -10,6 +10,9 @@
 //! whole-system peer (issue 35's bench script).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
+#[path = "common/timing.rs"]
+mod timing;
+
 #[path = "../tests/common/mod.rs"]
 mod common;
 #[path = "../vision/tests/common/frontend.rs"]
@@ -17,7 +20,7 @@ mod frontend;
 #[path = "../vision/tests/common/stereo.rs"]
 mod stereo;
 
-use std::time::Instant;
+use timing::median_ms;
 
 use dynaflow_datasets::synth::{Generator, Motion, SynthConfig};
 use dynaflow_vision::GrayImage;
@@ -26,18 +29,6 @@ use dynaflow_vision::geometry::{SplitMix64, TwoViewConfig, initialise};
 use dynaflow_vision::matching::{MatchConfig, match_brute_force};
 use dynaflow_vision::orb::{OrbConfig, OrbExtractor};
 use dynaflow_vision::stereo::{StereoView, stereo_match};
-
-fn median_ms(reps: usize, mut f: impl FnMut()) -> f64 {
-    let mut t: Vec<f64> = (0..reps)
-        .map(|_| {
-            let s = Instant::now();
-            f();
-            s.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
-}
 
 fn xy(k: &dynaflow_vision::orb::OrbKeypoint) -> [f64; 2] {
     [f64::from(k.x), f64::from(k.y)]

@@ -395,17 +395,12 @@ impl Tracker {
             if !(uv[0] >= 0.0 && uv[0] < self.width && uv[1] >= 0.0 && uv[1] < self.height) {
                 continue;
             }
-            let (mut d1, mut d2, mut i1) = (u32::MAX, u32::MAX, usize::MAX);
-            for c in grid.within([uv[0] as f32, uv[1] as f32], radius as f32) {
-                let fi = static_idx[c as usize];
-                let d = hamming(&p.descriptor, &features[fi].descriptor);
-                if d < d1 {
-                    (d2, d1, i1) = (d1, d, fi);
-                } else if d < d2 {
-                    d2 = d;
-                }
-            }
-            if i1 == usize::MAX || d1 > self.config.max_distance {
+            let near = grid.within([uv[0] as f32, uv[1] as f32], radius as f32);
+            let Some((i1, d1, d2)) = nearest_two(&p.descriptor, near.iter().map(|&c| static_idx[c as usize]), features)
+            else {
+                continue;
+            };
+            if d1 > self.config.max_distance {
                 continue;
             }
             if d2 != u32::MAX && d1 as f32 > self.config.ratio * d2 as f32 {
@@ -579,17 +574,11 @@ impl Tracker {
         let grid = GridIndex::new(&pts, self.width.ceil() as usize, self.height.ceil() as usize, 32.0);
         let mut best: Vec<Option<(usize, u32)>> = vec![None; current.len()];
         for (ri, r) in reference.iter().enumerate().filter(|(_, r)| !r.dynamic) {
-            let (mut d1, mut d2, mut i1) = (u32::MAX, u32::MAX, usize::MAX);
-            for c in grid.within([r.uv[0] as f32, r.uv[1] as f32], MONO_INIT_WINDOW) {
-                let ci = idx[c as usize];
-                let d = hamming(&r.descriptor, &current[ci].descriptor);
-                if d < d1 {
-                    (d2, d1, i1) = (d1, d, ci);
-                } else if d < d2 {
-                    d2 = d;
-                }
-            }
-            if i1 == usize::MAX || d1 > MONO_INIT_MAX_DISTANCE {
+            let near = grid.within([r.uv[0] as f32, r.uv[1] as f32], MONO_INIT_WINDOW);
+            let Some((i1, d1, d2)) = nearest_two(&r.descriptor, near.iter().map(|&c| idx[c as usize]), current) else {
+                continue;
+            };
+            if d1 > MONO_INIT_MAX_DISTANCE {
                 continue;
             }
             if d2 != u32::MAX && d1 as f32 >= MONO_INIT_RATIO * d2 as f32 {
@@ -716,6 +705,25 @@ impl Tracker {
             matched: matched1,
         }
     }
+}
+
+/// The feature among `candidates` (indices into `features`) nearest to `descriptor` in Hamming
+/// distance: `(index, best distance, second-best distance or u32::MAX)`; `None` for no candidate.
+fn nearest_two(
+    descriptor: &[u8; 32],
+    candidates: impl Iterator<Item = usize>,
+    features: &[Feature],
+) -> Option<(usize, u32, u32)> {
+    let (mut d1, mut d2, mut i1) = (u32::MAX, u32::MAX, None);
+    for i in candidates {
+        let d = hamming(descriptor, &features[i].descriptor);
+        if d < d1 {
+            (d2, d1, i1) = (d1, d, Some(i));
+        } else if d < d2 {
+            d2 = d;
+        }
+    }
+    i1.map(|i| (i, d1, d2))
 }
 
 #[derive(Clone, Debug)]
