@@ -249,6 +249,49 @@ fn input_flag_points_the_default_graph_at_a_folder() {
 }
 
 #[test]
+fn an_image_folder_runs_monocular_and_a_graph_needing_depth_fails_validation() {
+    // An image folder has no depth and no ground truth (issue 33): `--input` unwires the
+    // monocular tracker's depth and leaves out the nodes scoring against masks; a culling
+    // rule that judges with depth fails validation at its place in the file; the RGB-D
+    // tracker says on the first frame what it needs.
+    let dir = common::TempDir::new("input-images");
+    let seq = dir.path().join("seq");
+    let out = common::bin().args(["synth", "--frames", "40", "--people", "0", "--out"]).arg(&seq).output().unwrap();
+    assert!(out.status.success());
+    let images = seq.join("rgb");
+    let run = |graph: &str, extra: &[&str]| {
+        common::bin()
+            .args(["run", "--no-progress", "--record", "none", "--intrinsics", "fr3", "--out"])
+            .arg(dir.path().join(graph))
+            .args(extra)
+            .arg("--input")
+            .arg(&images)
+            .arg(common::repo().join(format!("graphs/{graph}.yaml")))
+            .output()
+            .unwrap()
+    };
+    let o = run("orb_baseline", &["--variant", "mono"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let summary = common::summary(&dir.path().join("orb_baseline/orb_baseline-mono.summary.json"));
+    let track = summary.node_report("track").unwrap();
+    assert!(track["frames"]["tracked"].as_u64().unwrap() > 20, "{track}");
+    assert!(summary.ate.is_none(), "an image folder has no ground truth");
+
+    let o = run("yoec_dslam", &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("yoec_dslam.yaml:") && stderr.contains("(op `image_folder`) has no output `depth`"),
+        "{stderr}"
+    );
+
+    let o = run("orb_baseline", &[]);
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("`sensor: rgbd` needs `depth`") && stderr.contains("sensor: mono"), "{stderr}");
+}
+
+#[test]
 fn kitti_sequence_reads_stereo_calibration_and_poses() {
     let dir = common::TempDir::new("kitti");
     let synth = dir.path().join("synth");

@@ -78,7 +78,8 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
     let source_id = node.id.clone();
     // Ground truth the old source had and the new reader lacks (KITTI has no masks, an image
     // folder no poses): optional inputs fed by it are unwired, and nodes that need it (and
-    // nodes that need those) are left out of the run, each said in a warning.
+    // nodes that need those) are left out of the run, each said in a warning. Other ports the
+    // reader lacks (an image folder has no depth) unwire the optional inputs they fed.
     let new_op = registry.get(&over.op);
     let lost: Vec<&str> = old_op
         .map(|o| o.outputs.iter().filter(|p| p.ground_truth).map(|p| p.name).collect::<Vec<&str>>())
@@ -87,10 +88,11 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
         .filter(|name| new_op.is_some_and(|n| !n.outputs.iter().any(|p| p.name == *name)))
         .collect();
     let missing = |port: &str| new_op.is_some_and(|n| !n.outputs.iter().any(|p| p.name == port));
-    let disabled_miss = spec.nodes.iter().any(|n| {
-        n.disabled && n.inputs.iter().any(|i| i.from.as_ref().is_some_and(|f| f.node == source_id && missing(&f.port)))
-    });
-    if lost.is_empty() && !disabled_miss {
+    let any_miss = spec
+        .nodes
+        .iter()
+        .any(|n| n.inputs.iter().any(|i| i.from.as_ref().is_some_and(|f| f.node == source_id && missing(&f.port))));
+    if lost.is_empty() && !any_miss {
         return Vec::new();
     }
     let mut diags = Vec::new();
@@ -146,6 +148,20 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
             if n.inputs.len() < before {
                 changed = true;
                 tracing::info!("`{}`: node `{}` runs without the ground truth `{}` lacks", over.origin, n.id, over.op);
+            }
+            // An optional input (one the node runs without: a monocular tracker's `depth`) fed
+            // by a port the reader lacks is unwired; a required or `wired` one stays, and
+            // validation names the missing port at its place in the file (a culling rule
+            // that judges with depth, on a reader without depth).
+            let optional =
+                |port: &str| op.is_some_and(|o| o.inputs.iter().any(|p| p.name == port && !p.required && !p.wired));
+            let before = n.inputs.len();
+            n.inputs.retain(|inp| {
+                !(inp.from.as_ref().is_some_and(|f| f.node == source_id && missing(&f.port)) && optional(&inp.port))
+            });
+            if n.inputs.len() < before {
+                changed = true;
+                tracing::info!("`{}`: node `{}` runs without what `{}` does not read", over.origin, n.id, over.op);
             }
             keep.push(n);
         }

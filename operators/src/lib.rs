@@ -26,6 +26,7 @@ pub fn registry() -> Registry {
     r.register(synth_op::SYNTH);
     r.register(decode::TUM_RGBD);
     r.register(decode::IMAGE_FOLDER);
+    r.register(decode::RGBD_FOLDER);
     r.register(decode::KITTI_ODOMETRY);
     r.register(frontend::ORB_EXTRACT);
     r.register(frontend::MATCH_DESCRIPTORS);

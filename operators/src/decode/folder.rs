@@ -1,4 +1,6 @@
-//! `image_folder`: a sorted list of images (optionally with a matching depth folder) played
+//! `image_folder`: a sorted list of images played at a fixed rate (a monocular source: it
+//! has no depth port, so a graph that judges with depth fails validation on it), `rgbd_folder`:
+//! the same with a matching folder of depth PNGs,
 //! at a fixed rate, and layout detection for `dynaflow run --input DIR`.
 
 use std::path::{Path, PathBuf};
@@ -23,45 +25,81 @@ params! {
         rate_hz: f64 [0.001, 10_000.0] = 30.0,
         /// `fr1`/`fr2`/`fr3`, `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`, or `auto` (the folder's calibration.txt)
         intrinsics: CameraParam = CameraParam::Auto,
-        /// folder of 16-bit depth PNGs (empty: no depth)
-        depth_path: PathBuf = PathBuf::new(),
+    }
+}
+
+params! {
+    struct RgbdConfig {
+        /// image folder
+        path: PathBuf,
+        /// file-name glob (`*` and `?`), e.g. `*.jpg`
+        pattern: String = "*.png".into(),
+        /// frame rate that sets the stamps
+        rate_hz: f64 [0.001, 10_000.0] = 30.0,
+        /// `fr1`/`fr2`/`fr3`, `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`, or `auto` (the folder's calibration.txt)
+        intrinsics: CameraParam = CameraParam::Auto,
+        /// folder of 16-bit depth PNGs, the n-th (in name order) paired with the n-th image
+        depth_path: PathBuf,
         /// depth PNG value per metre
         depth_factor: f64 [1e-6, 1e9] = 5000.0,
     }
 }
 
 const RGB: Out<Image> = Out::new("rgb", "the image (RGB8 or Gray8)");
-const DEPTH: Out<DepthImage> = Out::new("depth", "depth in metres, when `depth_path` is set");
+const DEPTH: Out<DepthImage> = Out::new("depth", "depth in metres");
 const CAMERA_INFO: Out<CameraInfo> = Out::new("camera_info", "intrinsics");
 
 pub(crate) const IMAGE_FOLDER: OpSpec = OpSpec {
     name: "image_folder",
     family: "decode",
-    doc: "Plays the images of a folder that match `pattern` in file-name order at `rate_hz`, with the given intrinsics; with `depth_path`, the n-th depth PNG (in name order) pairs with the n-th image.",
+    doc: "Plays the images of a folder that match `pattern` in file-name order at `rate_hz`, with the given intrinsics: a monocular source (no depth port; `rgbd_folder` adds a depth folder).",
     kind: OpKind::Source,
     inputs: &[],
-    outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec],
+    outputs: &[RGB.spec, CAMERA_INFO.spec],
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
-    build,
+    build: |params: &Params| {
+        let c = Config::from_params(params)?;
+        open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, None, 1.0)
+    },
 };
 
-fn build(params: &Params) -> Result<Instance, OpError> {
-    let c = Config::from_params(params)?;
-    let intrinsics = match c.intrinsics {
-        CameraParam::Auto => read_calibration(&c.path).unwrap_or_else(|| {
+pub(crate) const RGBD_FOLDER: OpSpec = OpSpec {
+    name: "rgbd_folder",
+    family: "decode",
+    doc: "Plays the images of a folder that match `pattern` in file-name order at `rate_hz`, with the given intrinsics, each with the depth PNG of the same rank in `depth_path`.",
+    kind: OpKind::Source,
+    inputs: &[],
+    outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec],
+    params: RgbdConfig::PARAMS,
+    cpu_heavy: true,
+    ground_truth_outputs: None,
+    build: |params: &Params| {
+        let c = RgbdConfig::from_params(params)?;
+        open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, Some(&c.depth_path), c.depth_factor)
+    },
+};
+
+fn open(
+    path: &Path,
+    pattern: &str,
+    rate_hz: f64,
+    intrinsics: CameraParam,
+    depth: Option<&Path>,
+    depth_factor: f64,
+) -> Result<Instance, OpError> {
+    let intrinsics = match intrinsics {
+        CameraParam::Auto => read_calibration(path).unwrap_or_else(|| {
             Err(dynaflow_datasets::Error::file(
-                &c.path,
+                path,
                 "no calibration.txt; set `intrinsics: fx,fy,cx,cy` (or `--intrinsics`)",
             ))
         }),
         CameraParam::Given(k) => Ok(k),
     }
     .map_err(|e| OpError::Config { key: "intrinsics".into(), message: e.to_string() })?;
-    let depth_dir = (!c.depth_path.as_os_str().is_empty()).then_some(c.depth_path.as_path());
-    let folder = ImageFolder::open(&c.path, &c.pattern, depth_dir, intrinsics, c.rate_hz, c.depth_factor)
-        .map_err(super::input)?;
+    let folder = ImageFolder::open(path, pattern, depth, intrinsics, rate_hz, depth_factor).map_err(super::input)?;
     Ok(Instance::Source(Box::new(Folder { folder, frame_id: "camera".into() })))
 }
 

@@ -9,7 +9,7 @@ mod tum;
 use dynaflow_datasets::intrinsics::Intrinsics;
 use dynaflow_engine::op::{OpError, Param, ParamType, Params};
 
-pub(crate) use folder::IMAGE_FOLDER;
+pub(crate) use folder::{IMAGE_FOLDER, RGBD_FOLDER};
 pub use folder::{Layout, detect_layout};
 pub(crate) use kitti::KITTI_ODOMETRY;
 pub(crate) use tum::TUM_RGBD;
