@@ -84,6 +84,9 @@ enum Command {
     Octree(commands::octree::OctreeArgs),
     /// Generate a semi-synthetic dynamic RGB-D sequence in the TUM layout, with ground truth.
     Synth(commands::synth::SynthArgs),
+    /// Bag-of-words vocabularies for ORB descriptors (place recognition).
+    #[command(subcommand)]
+    Vocab(commands::vocab::VocabCommand),
     /// Open a `.rrd` recording in the rerun viewer (if installed).
     View {
         /// Recording file.
@@ -228,6 +231,7 @@ fn main() -> ExitCode {
         Command::Diff(args) => commands::diff::diff(&args),
         Command::Eval(args) => commands::eval::eval(&args),
         Command::Synth(args) => commands::synth::synth(&args),
+        Command::Vocab(c) => commands::vocab::vocab(&c),
         Command::Infer(args) => commands::infer::infer(&args),
         Command::Segment(args) => commands::segment::segment(&args),
         Command::Bench(args) => commands::bench::bench(&args),

@@ -11,9 +11,12 @@
 //!   of bad observations and points.
 //! - `ba`: sparse bundle adjustment (Levenberg-Marquardt, Schur complement on the points,
 //!   Huber kernel).
+//! - `bow`: a bag-of-binary-words vocabulary for ORB descriptors (DBoW2's design): training,
+//!   words and tf-idf vectors, the L1 score, a versioned file format.
 //! - `eval`: trajectory evaluation (association, Umeyama alignment, ATE and RPE) as evo does it.
 
 pub mod ba;
+pub mod bow;
 pub mod eval;
 pub mod local_map;
 pub mod map;

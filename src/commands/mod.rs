@@ -12,6 +12,7 @@ pub mod segment;
 pub mod synth;
 pub mod validate;
 pub mod view;
+pub mod vocab;
 
 use std::path::Path;
 
