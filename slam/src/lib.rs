@@ -13,11 +13,14 @@
 //!   Huber kernel).
 //! - `bow`: a bag-of-binary-words vocabulary for ORB descriptors (DBoW2's design): training,
 //!   words and tf-idf vectors, the L1 score, a versioned file format.
+//! - `keyframe_db`: ORB-SLAM2's key-frame database (inverted index, loop and relocalisation
+//!   candidates) and its loop-consistency check.
 //! - `eval`: trajectory evaluation (association, Umeyama alignment, ATE and RPE) as evo does it.
 
 pub mod ba;
 pub mod bow;
 pub mod eval;
+pub mod keyframe_db;
 pub mod local_map;
 pub mod map;
 pub mod tracker;
