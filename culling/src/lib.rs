@@ -714,22 +714,25 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn the_longer_baseline_runs_where_orbslam2_finds_no_parallax() {
-        let options = |long_baseline| EpipolarOptions {
+    /// The ten-frame epipolar rule (0.4 px) over `frames`, one result per frame pair.
+    fn label_frames(frames: &[Vec<[f32; 2]>], long_baseline: LongBaseline, select_model: bool) -> Vec<EpipolarFrame> {
+        let options = EpipolarOptions {
             threshold: 0.4,
             ransac: RansacConfig { threshold: 0.4, ..RansacConfig::default() },
             sticky: false,
             fit_static: false,
             baseline: 10,
             long_baseline,
-            select_model: false,
+            select_model,
         };
-        let run = |frames: &[Vec<[f32; 2]>], long_baseline| {
-            let ids: Vec<u64> = (0..frames[0].len() as u64).collect();
-            let mut cull = EpipolarCull::new(options(long_baseline));
-            (1..frames.len()).map(|f| cull.label(&ids, &frames[f - 1], &frames[f], f as u64)).collect::<Vec<_>>()
-        };
+        let ids: Vec<u64> = (0..frames[0].len() as u64).collect();
+        let mut cull = EpipolarCull::new(options);
+        (1..frames.len()).map(|f| cull.label(&ids, &frames[f - 1], &frames[f], f as u64)).collect()
+    }
+
+    #[test]
+    fn the_longer_baseline_runs_where_orbslam2_finds_no_parallax() {
+        let run = |frames: &[Vec<[f32; 2]>], long_baseline| label_frames(frames, long_baseline, false);
         // A camera that only rotates: no parallax, ORB-SLAM2 would take the homography, so
         // every track tracked ten frames is tested over them, as without the gate.
         let rotating = frames_of(12, (0.3, 0.0));
@@ -749,19 +752,8 @@ mod tests {
 
     #[test]
     fn model_selection_tests_a_rotation_against_its_homography() {
-        let options = |select_model| EpipolarOptions {
-            threshold: 0.4,
-            ransac: RansacConfig { threshold: 0.4, ..RansacConfig::default() },
-            sticky: false,
-            fit_static: false,
-            baseline: 10,
-            long_baseline: LongBaseline::Always,
-            select_model,
-        };
         let last = |frames: &[Vec<[f32; 2]>], select_model| {
-            let ids: Vec<u64> = (0..frames[0].len() as u64).collect();
-            let mut cull = EpipolarCull::new(options(select_model));
-            (1..frames.len()).map(|f| cull.label(&ids, &frames[f - 1], &frames[f], f as u64)).last().unwrap()
+            label_frames(frames, LongBaseline::Always, select_model).pop().unwrap()
         };
         // A rotating camera: the ten-frame pair is a homography (R_H > 0.40), so the walkers
         // (every fifth point, 6 px off over ten frames) are judged by their transfer error,

@@ -81,18 +81,10 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
     // nodes that need those) are left out of the run, each said in a warning. Other ports the
     // reader lacks (an image folder has no depth) unwire the optional inputs they fed.
     let new_op = registry.get(&over.op);
-    let lost: Vec<&str> = old_op
-        .map(|o| o.outputs.iter().filter(|p| p.ground_truth).map(|p| p.name).collect::<Vec<&str>>())
-        .unwrap_or_default()
-        .into_iter()
-        .filter(|name| new_op.is_some_and(|n| !n.outputs.iter().any(|p| p.name == *name)))
-        .collect();
     let missing = |port: &str| new_op.is_some_and(|n| !n.outputs.iter().any(|p| p.name == port));
-    let any_miss = spec
-        .nodes
-        .iter()
-        .any(|n| n.inputs.iter().any(|i| i.from.as_ref().is_some_and(|f| f.node == source_id && missing(&f.port))));
-    if lost.is_empty() && !any_miss {
+    let ground_truth = |port: &str| old_op.is_some_and(|o| o.outputs.iter().any(|p| p.name == port && p.ground_truth));
+    let reads_missing = |f: &crate::spec::PortRef| f.node == source_id && missing(&f.port);
+    if !spec.nodes.iter().any(|n| n.inputs.iter().any(|i| i.from.as_ref().is_some_and(reads_missing))) {
         return Vec::new();
     }
     let mut diags = Vec::new();
@@ -101,14 +93,9 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
         let mut changed = false;
         let mut keep = Vec::with_capacity(spec.nodes.len());
         for mut n in std::mem::take(&mut spec.nodes) {
-            let gone = |from: &crate::spec::PortRef| {
-                (from.node == source_id && lost.contains(&from.port.as_str())) || removed.contains(&from.node)
-            };
             // A disabled node (it runs in no frame) that reads a port the reader lacks is left
             // out quietly: variants were applied before this, so none can enable it.
-            if n.disabled
-                && n.inputs.iter().any(|i| i.from.as_ref().is_some_and(|f| f.node == source_id && missing(&f.port)))
-            {
+            if n.disabled && n.inputs.iter().any(|i| i.from.as_ref().is_some_and(reads_missing)) {
                 tracing::info!(
                     "`{}`: disabled node `{}` reads a port `{}` lacks; left out",
                     over.origin,
@@ -120,9 +107,12 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
                 continue;
             }
             let op = registry.get(&n.op);
-            let required =
+            let needed =
                 |port: &str| op.is_some_and(|o| o.inputs.iter().any(|p| p.name == port && (p.required || p.wired)));
-            if n.inputs.iter().any(|inp| inp.from.as_ref().is_some_and(gone) && required(&inp.port)) {
+            // Lost ground truth, or the output of a node left out.
+            let gone =
+                |f: &crate::spec::PortRef| (reads_missing(f) && ground_truth(&f.port)) || removed.contains(&f.node);
+            if n.inputs.iter().any(|inp| inp.from.as_ref().is_some_and(gone) && needed(&inp.port)) {
                 let what: Vec<String> = n
                     .inputs
                     .iter()
@@ -143,25 +133,18 @@ fn apply_source(spec: &mut GraphSpec, registry: &Registry, over: &SourceOverride
                 changed = true;
                 continue;
             }
+            // An optional input (one the node runs without: a monocular tracker's `depth`, a
+            // tracker's `gt_pose`) fed by what the reader lacks is unwired; a needed one that is
+            // not ground truth stays, and validation names the missing port at its place in
+            // the file (a culling rule that judges with depth, on a reader without depth).
             let before = n.inputs.len();
-            n.inputs.retain(|inp| !inp.from.as_ref().is_some_and(gone));
-            if n.inputs.len() < before {
-                changed = true;
-                tracing::info!("`{}`: node `{}` runs without the ground truth `{}` lacks", over.origin, n.id, over.op);
-            }
-            // An optional input (one the node runs without: a monocular tracker's `depth`) fed
-            // by a port the reader lacks is unwired; a required or `wired` one stays, and
-            // validation names the missing port at its place in the file (a culling rule
-            // that judges with depth, on a reader without depth).
             let optional =
                 |port: &str| op.is_some_and(|o| o.inputs.iter().any(|p| p.name == port && !p.required && !p.wired));
-            let before = n.inputs.len();
-            n.inputs.retain(|inp| {
-                !(inp.from.as_ref().is_some_and(|f| f.node == source_id && missing(&f.port)) && optional(&inp.port))
-            });
+            n.inputs
+                .retain(|inp| !inp.from.as_ref().is_some_and(|f| gone(f) || (reads_missing(f) && optional(&inp.port))));
             if n.inputs.len() < before {
                 changed = true;
-                tracing::info!("`{}`: node `{}` runs without what `{}` does not read", over.origin, n.id, over.op);
+                tracing::info!("`{}`: node `{}` runs without what `{}` does not give", over.origin, n.id, over.op);
             }
             keep.push(n);
         }

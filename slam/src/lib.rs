@@ -27,4 +27,4 @@ pub mod tracker;
 
 pub use local_map::{LocalMapConfig, LocalMapper};
 pub use map::{Feature, KeyFrameFeature, KeyFrameInfo, MapPoint, Observation, SparseMap};
-pub use tracker::{TrackState, Tracker, TrackerConfig, TrackingResult};
+pub use tracker::{Sensor, TrackState, Tracker, TrackerConfig, TrackingResult};

@@ -195,21 +195,9 @@ impl LocalMapper {
             removed.extend(replaced);
         }
 
-        // Covisibility of the new key frame; the window is it and its best neighbours.
-        let mut shared: BTreeMap<u64, usize> = BTreeMap::new();
-        if let Some(kf) = self.kfs.get(&info.id) {
-            for o in &kf.obs {
-                if let Some(mp) = self.points.get(&o.point) {
-                    for &k in mp.kfs.iter().filter(|&&k| k != info.id) {
-                        *shared.entry(k).or_default() += 1;
-                    }
-                }
-            }
-        }
-        let mut neighbours: Vec<(u64, usize)> = shared.into_iter().collect();
-        neighbours.sort_by_key(|&(k, n)| (std::cmp::Reverse(n), std::cmp::Reverse(k)));
+        // The window: the new key frame and its best covisible neighbours.
         let mut window: Vec<u64> = vec![info.id];
-        window.extend(neighbours.iter().take(self.config.window.saturating_sub(1)).map(|&(k, _)| k));
+        window.extend(self.covisible(info.id, self.config.window.saturating_sub(1)));
         let window_set: BTreeSet<u64> = window.iter().copied().collect();
         let mut local: BTreeSet<u64> = BTreeSet::new();
         for k in &window {
@@ -346,6 +334,22 @@ impl LocalMapper {
         SparseMap { map_id: self.map_id, keyframes, points, observations, removed, features: Vec::new() }
     }
 
+    /// Key frame `kf`'s `n` best covisible key frames: most points shared first, then the
+    /// newest.
+    fn covisible(&self, kf: u64, n: usize) -> Vec<u64> {
+        let mut shared: BTreeMap<u64, usize> = BTreeMap::new();
+        for o in self.kfs.get(&kf).map_or(&[][..], |k| k.obs.as_slice()) {
+            if let Some(mp) = self.points.get(&o.point) {
+                for &other in mp.kfs.iter().filter(|&&x| x != kf) {
+                    *shared.entry(other).or_default() += 1;
+                }
+            }
+        }
+        let mut v: Vec<(u64, usize)> = shared.into_iter().collect();
+        v.sort_by_key(|&(k, c)| (std::cmp::Reverse(c), std::cmp::Reverse(k)));
+        v.into_iter().take(n).map(|(k, _)| k).collect()
+    }
+
     fn erase_observation(&mut self, kf: u64, point: u64) {
         let mut with_depth = false;
         if let Some(k) = self.kfs.get_mut(&kf) {
@@ -374,22 +378,12 @@ impl LocalMapper {
         let Some(kf1) = self.kfs.get(&id).cloned() else { return 0 };
         let scale = self.config.scale_factor;
         let cam = self.cam;
-        let mut shared: BTreeMap<u64, usize> = BTreeMap::new();
-        for o in &kf1.obs {
-            if let Some(mp) = self.points.get(&o.point) {
-                for &k in mp.kfs.iter().filter(|&&k| k != id) {
-                    *shared.entry(k).or_default() += 1;
-                }
-            }
-        }
-        let mut neighbours: Vec<(u64, usize)> = shared.into_iter().collect();
-        neighbours.sort_by_key(|&(k, n)| (std::cmp::Reverse(n), std::cmp::Reverse(k)));
-        neighbours.truncate(self.config.triangulation_neighbours);
+        let neighbours = self.covisible(id, self.config.triangulation_neighbours);
         let pose1 = kf1.info.world_from_cam;
         let c1w = pose1.inverse();
         let mut used1 = vec![false; kf1.features.len()];
         let mut made = 0;
-        for (nb, _) in neighbours {
+        for nb in neighbours {
             let Some(kf2) = self.kfs.get(&nb).cloned() else { continue };
             let pose2 = kf2.info.world_from_cam;
             let c2w = pose2.inverse();
@@ -543,27 +537,12 @@ impl LocalMapper {
     /// already has a point is compared through that point's descriptor (key frames here keep
     /// the descriptors of their unmatched keypoints only).
     pub fn fuse(&mut self, id: u64) -> (usize, Vec<u64>) {
-        let covisible = |this: &Self, k: u64, n: usize| -> Vec<u64> {
-            let mut shared: BTreeMap<u64, usize> = BTreeMap::new();
-            if let Some(kf) = this.kfs.get(&k) {
-                for o in &kf.obs {
-                    if let Some(mp) = this.points.get(&o.point) {
-                        for &other in mp.kfs.iter().filter(|&&x| x != k) {
-                            *shared.entry(other).or_default() += 1;
-                        }
-                    }
-                }
-            }
-            let mut v: Vec<(u64, usize)> = shared.into_iter().collect();
-            v.sort_by_key(|&(k, c)| (std::cmp::Reverse(c), std::cmp::Reverse(k)));
-            v.into_iter().take(n).map(|(k, _)| k).collect()
-        };
         let mut targets: Vec<u64> = Vec::new();
-        for k in covisible(self, id, self.config.triangulation_neighbours) {
+        for k in self.covisible(id, self.config.triangulation_neighbours) {
             if !targets.contains(&k) {
                 targets.push(k);
             }
-            for k2 in covisible(self, k, 5) {
+            for k2 in self.covisible(k, 5) {
                 if k2 != id && !targets.contains(&k2) {
                     targets.push(k2);
                 }

@@ -22,9 +22,9 @@ use std::collections::{BTreeMap, BTreeSet};
 
 use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{
-    PoseObservation, SplitMix64, TwoViewConfig, initialise, optimize_pose, p3p_ransac, renormalised,
+    PoseObservation, SplitMix64, TwoViewConfig, TwoViewInit, initialise, optimize_pose, p3p_ransac, renormalised,
 };
-use dynaflow_vision::matching::{GridIndex, MatchConfig, hamming, match_brute_force};
+use dynaflow_vision::matching::{GridIndex, MatchConfig, match_brute_force, nearest_two};
 use nalgebra::{Isometry3, Point3};
 
 use crate::map::{Feature, KeyFrameFeature, KeyFrameInfo, MapPoint, Observation, SparseMap, sigma};
@@ -56,13 +56,23 @@ pub struct TrackerConfig {
     pub max_frames: u64,
     /// Lost frames in a row after which a new map starts.
     pub reset_after: u32,
+    /// Which of ORB-SLAM2's three sensor modes.
+    pub sensor: Sensor,
+}
+
+/// ORB-SLAM2's sensor modes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sensor {
+    /// Depth from a depth camera; a key frame creates points for every keypoint with a depth
+    /// up to `max_depth` ([`TrackerConfig::rgbd`]).
+    Rgbd,
+    /// Depth from a rectified pair: every matched depth is used (no `max_depth`), and a key
+    /// frame creates points for its close keypoints, at least the 100 nearest (ORB-SLAM2's
+    /// `CreateNewKeyFrame`; the first key frame takes all) ([`TrackerConfig::stereo`]).
+    Stereo,
     /// A single camera: no depth; the map starts from two views (ORB-SLAM2's monocular
     /// initialisation) and local mapping triangulates new points ([`TrackerConfig::monocular`]).
-    pub monocular: bool,
-    /// A stereo rig (ORB-SLAM2's stereo mode): every matched depth is used (no `max_depth`),
-    /// and a key frame creates points for its close keypoints, at least the 100 nearest
-    /// (ORB-SLAM2's `CreateNewKeyFrame`; the first key frame takes all).
-    pub stereo: bool,
+    Monocular,
 }
 
 impl TrackerConfig {
@@ -81,8 +91,20 @@ impl TrackerConfig {
             min_init_points: 100,
             max_frames: 30,
             reset_after: 5,
-            monocular: false,
-            stereo: false,
+            sensor: Sensor::Rgbd,
+        }
+    }
+
+    /// ORB-SLAM2's stereo settings for focal length `fx` and a rig `baseline` metres wide: bf
+    /// from the rig, points closer than 40 baselines are close (its `ThDepth`), every matched
+    /// depth is used.
+    pub fn stereo(fx: f64, baseline: f64) -> Self {
+        Self {
+            bf: fx * baseline,
+            th_depth: STEREO_CLOSE_BASELINES * baseline,
+            max_depth: f64::INFINITY,
+            sensor: Sensor::Stereo,
+            ..Self::rgbd(fx)
         }
     }
 
@@ -90,13 +112,15 @@ impl TrackerConfig {
     /// two views with at least 100 matches (its `Tracking::MonocularInitialization`), key
     /// frames when tracked points fall below 90 % of the reference key frame's.
     pub fn monocular(fx: f64) -> Self {
-        Self { bf: 0.0, th_depth: 0.0, max_depth: 0.0, monocular: true, ..Self::rgbd(fx) }
+        Self { bf: 0.0, th_depth: 0.0, max_depth: 0.0, sensor: Sensor::Monocular, ..Self::rgbd(fx) }
     }
 }
 
 /// ORB-SLAM2's monocular initialisation: matches between the reference and the current
 /// frame needed to try (`SearchForInitialization` < 100 restarts from the current frame).
 pub const MONO_INIT_MATCHES: usize = 100;
+/// ORB-SLAM2's `ThDepth` for stereo cameras: points closer than 40 baselines are close.
+const STEREO_CLOSE_BASELINES: f64 = 40.0;
 /// ORB-SLAM2's `CreateNewKeyFrame` (stereo): at least this many new points, nearest first.
 const STEREO_MIN_NEW_POINTS: usize = 100;
 /// Search window of the initial matching, pixels (ORB-SLAM2: 100).
@@ -250,7 +274,7 @@ impl Tracker {
         }
         // Monocular: the reference key frame's tracked points as ORB-SLAM2 counts them for its
         // key-frame rule: those seen by at least 3 key frames (2 while the map has two).
-        if self.config.monocular && !update.observations.is_empty() {
+        if self.config.sensor == Sensor::Monocular && !update.observations.is_empty() {
             let min_obs = if newest <= self.first_keyframe + 1 { 2 } else { 3 };
             let seen: BTreeMap<u64, u32> = update.points.iter().map(|p| (p.id, p.observations)).collect();
             self.ref_tracked = update
@@ -266,7 +290,7 @@ impl Tracker {
         let predicted = self.last.map(|l| renormalised(&(l * self.velocity)));
         if !self.initialised {
             let origin = predicted.unwrap_or_else(Isometry3::identity);
-            if self.config.monocular {
+            if self.config.sensor == Sensor::Monocular {
                 return self.start_monocular(stamp, features, origin);
             }
             return self.start_map(stamp, features, origin, TrackState::NewMap);
@@ -311,7 +335,7 @@ impl Tracker {
             None => {
                 self.lost_run += 1;
                 self.last = Some(predicted);
-                if self.lost_run > self.config.reset_after && self.config.monocular {
+                if self.lost_run > self.config.reset_after && self.config.sensor == Sensor::Monocular {
                     // A single view cannot start a map: initialise again from two views (the
                     // new map at the dead-reckoned pose, in a scale of its own).
                     self.initialised = false;
@@ -396,10 +420,8 @@ impl Tracker {
                 continue;
             }
             let near = grid.within([uv[0] as f32, uv[1] as f32], radius as f32);
-            let Some((i1, d1, d2)) = nearest_two(&p.descriptor, near.iter().map(|&c| static_idx[c as usize]), features)
-            else {
-                continue;
-            };
+            let candidates = near.iter().map(|&c| static_idx[c as usize]).map(|i| (i, &features[i].descriptor));
+            let Some((i1, d1, d2)) = nearest_two(&p.descriptor, candidates) else { continue };
             if d1 > self.config.max_distance {
                 continue;
             }
@@ -486,7 +508,7 @@ impl Tracker {
     }
 
     fn need_keyframe(&self, features: &[Feature], fit: &Fit) -> bool {
-        if self.config.monocular {
+        if self.config.sensor == Sensor::Monocular {
             // ORB-SLAM2, monocular: fewer than 90 % of the reference's points tracked (local
             // mapping is always idle in lockstep, so its other conditions hold).
             return (fit.inliers as f64) < 0.9 * self.ref_tracked as f64 && fit.inliers > 15;
@@ -529,7 +551,7 @@ impl Tracker {
             .filter_map(|(i, f)| self.usable(f).map(|d| (d, i)))
             .collect();
         candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        if self.config.stereo && id > self.first_keyframe {
+        if self.config.sensor == Sensor::Stereo && id > self.first_keyframe {
             let close = candidates.iter().take_while(|c| c.0 <= self.config.th_depth).count();
             candidates.truncate(close.max(STEREO_MIN_NEW_POINTS));
         }
@@ -548,7 +570,11 @@ impl Tracker {
         // The reference for the next decision: points of this key frame seen twice (ORB-SLAM2's
         // `TrackedMapPoints(nMinObs)`), all of them while the map has at most two key frames.
         self.ref_tracked = fit.inliers + if id <= self.first_keyframe + 1 { points.len() } else { 0 };
-        let features = if self.config.monocular { Self::candidates(id, features, &fit.matched) } else { Vec::new() };
+        let features = if self.config.sensor == Sensor::Monocular {
+            Self::candidates(id, features, &fit.matched)
+        } else {
+            Vec::new()
+        };
         SparseMap { map_id: self.map_id, keyframes: vec![info], points, observations, removed: Vec::new(), features }
     }
 
@@ -575,9 +601,8 @@ impl Tracker {
         let mut best: Vec<Option<(usize, u32)>> = vec![None; current.len()];
         for (ri, r) in reference.iter().enumerate().filter(|(_, r)| !r.dynamic) {
             let near = grid.within([r.uv[0] as f32, r.uv[1] as f32], MONO_INIT_WINDOW);
-            let Some((i1, d1, d2)) = nearest_two(&r.descriptor, near.iter().map(|&c| idx[c as usize]), current) else {
-                continue;
-            };
+            let candidates = near.iter().map(|&c| idx[c as usize]).map(|i| (i, &current[i].descriptor));
+            let Some((i1, d1, d2)) = nearest_two(&r.descriptor, candidates) else { continue };
             if d1 > MONO_INIT_MAX_DISTANCE {
                 continue;
             }
@@ -589,6 +614,24 @@ impl Tracker {
             }
         }
         best.iter().enumerate().filter_map(|(ci, b)| b.map(|(ri, _)| (ri, ci))).collect()
+    }
+
+    /// ORB-SLAM2's two-view map of matched pixels: the motion and points, and the scale that
+    /// sets the first view's median depth to 1; or why not (fewer than 100 points survive, as
+    /// ORB-SLAM2 requires, or no positive median depth).
+    fn two_view_map(&mut self, p1: &[[f64; 2]], p2: &[[f64; 2]]) -> Result<(TwoViewInit, f64), String> {
+        let init =
+            initialise(p1, p2, &self.cam, &TwoViewConfig::default(), &mut self.rng).map_err(|e| e.to_string())?;
+        let mut depths: Vec<f64> = init.points.iter().flatten().map(|p| p.z).collect();
+        if depths.len() < MONO_INIT_MATCHES {
+            return Err(format!("{} points triangulated; a monocular map needs {MONO_INIT_MATCHES}", depths.len()));
+        }
+        depths.sort_by(f64::total_cmp);
+        let median = depths[depths.len() / 2];
+        if !(median > 0.0 && median.is_finite()) {
+            return Err(format!("median depth {median} of the initial points"));
+        }
+        Ok((init, 1.0 / median))
     }
 
     /// Monocular: try to start a map from the reference frame and this one.
@@ -618,33 +661,15 @@ impl Tracker {
         }
         let p1: Vec<[f64; 2]> = matches.iter().map(|&(r, _)| reference[r].uv).collect();
         let p2: Vec<[f64; 2]> = matches.iter().map(|&(_, c)| features[c].uv).collect();
-        let init = match initialise(&p1, &p2, &self.cam, &TwoViewConfig::default(), &mut self.rng) {
-            Ok(i) => i,
-            Err(e) => {
-                self.init_failure = Some(e.to_string());
+        let (init, scale) = match self.two_view_map(&p1, &p2) {
+            Ok(m) => m,
+            Err(why) => {
+                // ORB-SLAM2 keeps the reference and tries again with the next frame.
+                self.init_failure = Some(why);
                 self.init_ref = Some((ref_stamp, reference));
                 return self.untracked(None, state, features.len());
             }
         };
-        let triangulated = init.points.iter().flatten().count();
-        let depths: Vec<f64> = init.points.iter().flatten().map(|p| p.z).collect();
-        // ORB-SLAM2 resets when fewer than 100 points survive, and sets the scale so that the
-        // first key frame's median depth is 1.
-        if triangulated < MONO_INIT_MATCHES {
-            self.init_failure =
-                Some(format!("{triangulated} points triangulated; a monocular map needs {MONO_INIT_MATCHES}"));
-            self.init_ref = Some((ref_stamp, reference));
-            return self.untracked(None, state, features.len());
-        }
-        let mut sorted = depths.clone();
-        sorted.sort_by(f64::total_cmp);
-        let median = sorted[sorted.len() / 2];
-        if !(median > 0.0 && median.is_finite()) {
-            self.init_failure = Some(format!("median depth {median} of the initial points"));
-            self.init_ref = Some((ref_stamp, reference));
-            return self.untracked(None, state, features.len());
-        }
-        let scale = 1.0 / median;
         let mut c2_from_c1 = init.cam2_from_cam1;
         c2_from_c1.translation.vector *= scale;
         let world_from_c1 = origin;
@@ -705,25 +730,6 @@ impl Tracker {
             matched: matched1,
         }
     }
-}
-
-/// The feature among `candidates` (indices into `features`) nearest to `descriptor` in Hamming
-/// distance: `(index, best distance, second-best distance or u32::MAX)`; `None` for no candidate.
-fn nearest_two(
-    descriptor: &[u8; 32],
-    candidates: impl Iterator<Item = usize>,
-    features: &[Feature],
-) -> Option<(usize, u32, u32)> {
-    let (mut d1, mut d2, mut i1) = (u32::MAX, u32::MAX, None);
-    for i in candidates {
-        let d = hamming(descriptor, &features[i].descriptor);
-        if d < d1 {
-            (d2, d1, i1) = (d1, d, Some(i));
-        } else if d < d2 {
-            d2 = d;
-        }
-    }
-    i1.map(|i| (i, d1, d2))
 }
 
 #[derive(Clone, Debug)]

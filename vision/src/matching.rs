@@ -44,20 +44,32 @@ pub struct Match {
     pub distance: u32,
 }
 
-/// Best and second-best train index/distance for one query.
-fn two_best(q: &[u8; 32], train: &[[u8; 32]]) -> (Option<(u32, u32)>, u32) {
+/// The candidate nearest to `q` in Hamming distance: `(index, best, second best)`, the second
+/// `u32::MAX` with one candidate; `None` with none. Ties keep the first candidate.
+pub fn nearest_two<'a>(
+    q: &[u8; 32],
+    candidates: impl IntoIterator<Item = (usize, &'a [u8; 32])>,
+) -> Option<(usize, u32, u32)> {
     let (mut best, mut best_i, mut second) = (u32::MAX, None, u32::MAX);
-    for (i, t) in train.iter().enumerate() {
+    for (i, t) in candidates {
         let d = hamming(q, t);
         if d < best {
             second = best;
             best = d;
-            best_i = Some(i as u32);
+            best_i = Some(i);
         } else if d < second {
             second = d;
         }
     }
-    (best_i.map(|i| (i, best)), second)
+    best_i.map(|i| (i, best, second))
+}
+
+/// Best and second-best train index/distance for one query.
+fn two_best(q: &[u8; 32], train: &[[u8; 32]]) -> (Option<(u32, u32)>, u32) {
+    match nearest_two(q, train.iter().enumerate()) {
+        Some((i, best, second)) => (Some((i as u32, best)), second),
+        None => (None, u32::MAX),
+    }
 }
 
 /// Brute-force matches of `query` against `train`. `angles` (degrees, per query and per
@@ -185,19 +197,10 @@ pub fn match_in_windows(
 ) -> Vec<Match> {
     let mut out = Vec::new();
     for (qi, (q, p)) in query.iter().zip(predicted).enumerate() {
-        let (mut best, mut best_i, mut second) = (u32::MAX, None, u32::MAX);
-        for ti in index.within(*p, radius) {
-            let Some(t) = train.get(ti as usize) else { continue };
-            let d = hamming(q, t);
-            if d < best {
-                second = best;
-                best = d;
-                best_i = Some(ti);
-            } else if d < second {
-                second = d;
-            }
-        }
-        let Some(ti) = best_i else { continue };
+        let near = index.within(*p, radius);
+        let candidates = near.iter().filter_map(|&ti| train.get(ti as usize).map(|t| (ti as usize, t)));
+        let Some((ti, best, second)) = nearest_two(q, candidates) else { continue };
+        let ti = ti as u32;
         if best > config.max_distance || (second != u32::MAX && best as f32 >= config.ratio * second as f32) {
             continue;
         }

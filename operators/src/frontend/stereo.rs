@@ -62,7 +62,7 @@ impl Operator for StereoOp {
                 inputs.seq
             )));
         };
-        let baseline = rig.get("baseline_m").ok_or_else(|| OpError::Input("`stereo` has no `baseline_m`".into()))?;
+        let baseline = super::stereo_baseline(rig)?;
         let (l, r) = (super::gray(left)?, super::gray(right)?);
         let descriptors: Vec<[u8; 32]> =
             super::orb_descriptors(kp)?.chunks_exact(32).map(|c| c.try_into().unwrap_or([0; 32])).collect();

@@ -61,7 +61,7 @@ impl Operator for LocalMap {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (msg, batch) = KEYFRAME.require(inputs)?;
         let (_, k) = CAMERA_INFO.require(inputs)?;
-        let rig = STEREO.get(inputs)?.and_then(|r| r.get("baseline_m")).filter(|b| *b > 0.0 && b.is_finite());
+        let rig = STEREO.get(inputs)?.map(crate::frontend::stereo_baseline).transpose()?;
         let mapper = self.mapper.get_or_insert_with(|| {
             // A monocular tracker's key frames carry their unmatched keypoints: triangulate
             // them, with ORB-SLAM2's monocular settings.

@@ -46,9 +46,6 @@ params! {
     }
 }
 
-/// ORB-SLAM2's `ThDepth` for stereo cameras: points closer than 40 baselines are close.
-const STEREO_CLOSE_BASELINES: f64 = 40.0;
-
 const KEYPOINTS: In<Keypoints> = In::required("keypoints", "this frame's ORB keypoints with descriptors");
 const DEPTH: In<DepthImage> = In::optional("depth", "depth in metres (`sensor: rgbd` or `stereo`; ignored by `mono`)");
 const STEREO: In<Scalars> =
@@ -209,11 +206,7 @@ impl Operator for PnpTrack {
                             .into(),
                     )
                 })?;
-                let b = rig.get("baseline_m").ok_or_else(|| OpError::Input("`stereo` has no `baseline_m`".into()))?;
-                if !(b > 0.0 && b.is_finite()) {
-                    return Err(OpError::Input(format!("the stereo baseline is {b} m; it must be positive")));
-                }
-                Some(b)
+                Some(crate::frontend::stereo_baseline(rig)?)
             }
             _ => None,
         };
@@ -227,22 +220,15 @@ impl Operator for PnpTrack {
         }
         let descriptors = crate::frontend::orb_descriptors(kp)?;
         if self.tracker.is_none() {
-            let mut tc = match sensor {
-                Sensor::Mono => TrackerConfig::monocular(k.fx),
-                _ => {
-                    let mut tc = TrackerConfig::rgbd(k.fx);
-                    tc.bf = k.fx * self.config.baseline;
-                    tc.th_depth = self.config.close_depth;
-                    tc.max_depth = self.config.max_depth;
-                    if let Some(b) = rig_baseline {
-                        // ORB-SLAM2's stereo settings: bf from the rig, ThDepth 40 baselines.
-                        tc.bf = k.fx * b;
-                        tc.th_depth = STEREO_CLOSE_BASELINES * b;
-                        tc.max_depth = f64::INFINITY;
-                        tc.stereo = true;
-                    }
-                    tc
-                }
+            let mut tc = match (sensor, rig_baseline) {
+                (Sensor::Mono, _) => TrackerConfig::monocular(k.fx),
+                (_, Some(b)) => TrackerConfig::stereo(k.fx, b),
+                _ => TrackerConfig {
+                    bf: k.fx * self.config.baseline,
+                    th_depth: self.config.close_depth,
+                    max_depth: self.config.max_depth,
+                    ..TrackerConfig::rgbd(k.fx)
+                },
             };
             tc.search_radius = self.config.search_radius;
             tc.min_inliers = self.config.min_inliers as usize;
