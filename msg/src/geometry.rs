@@ -161,6 +161,23 @@ pub struct MapFeature {
     pub descriptor: [u8; 32],
 }
 
+/// A static keypoint of a new key frame, with its depth and its map point (loop closing).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct MapKeypoint {
+    /// Key frame id.
+    pub keyframe: u64,
+    /// Pixel.
+    pub uv: [f64; 2],
+    /// Pyramid level.
+    pub octave: u8,
+    /// Measured depth in metres (0: none).
+    pub depth: f64,
+    /// 256-bit ORB descriptor.
+    pub descriptor: [u8; 32],
+    /// The map point it observes.
+    pub point: Option<u64>,
+}
+
 /// A batch of a sparse SLAM map, as tracking and local mapping exchange them: a new key frame
 /// with its observations and new points (tracking to mapping), or the refined local window
 /// and the removed points (mapping to tracking).
@@ -178,6 +195,8 @@ pub struct SparseMap {
     pub removed: Vec<u64>,
     /// Unmatched keypoints of a new monocular key frame (for triangulation).
     pub features: Vec<MapFeature>,
+    /// Every static keypoint of a new key frame (tracking, forwarded by mapping: loop closing).
+    pub keypoints: Vec<MapKeypoint>,
 }
 
 impl SparseMap {
@@ -219,6 +238,16 @@ impl SparseMap {
             d.f64(f.uv[1]);
             d.bytes(&[f.octave]);
             d.bytes(&f.descriptor);
+        }
+        d.u64(self.keypoints.len() as u64);
+        for k in &self.keypoints {
+            d.u64(k.keyframe);
+            for v in [k.uv[0], k.uv[1], k.depth] {
+                d.f64(v);
+            }
+            d.bytes(&[k.octave]);
+            d.bytes(&k.descriptor);
+            d.u64(k.point.map_or(u64::MAX, |p| p));
         }
     }
 }

@@ -27,8 +27,8 @@ use std::sync::Arc;
 pub use digest::{DIGEST_SCHEME, Digest};
 pub use features::{Descriptors, Keypoint, Keypoints, LabelReason, PointLabel, PointLabels, Track, Tracks};
 pub use geometry::{
-    Isometry3, MapFeature, MapKeyFrame, MapObservation, MapPoint, OctreeUpdate, PointCloud, Pose, SparseMap,
-    StampedPose, Trajectory,
+    Isometry3, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, OctreeUpdate, PointCloud, Pose,
+    SparseMap, StampedPose, Trajectory,
 };
 pub use image::{CameraInfo, DepthImage, Image, PixelFormat};
 pub use scalar::Scalars;

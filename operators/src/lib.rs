@@ -45,6 +45,7 @@ pub fn registry() -> Registry {
     r.register(culling::ORACLE_BOXES);
     r.register(tracking::PNP_TRACK);
     r.register(tracking::LOCAL_MAP);
+    r.register(tracking::LOOP_CLOSE);
     r.register(inference::DETECT);
     r.register(inference::BOX_TO_MASK);
     r.register(inference::KEYFRAME_GATE);

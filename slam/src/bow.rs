@@ -360,7 +360,8 @@ impl Vocabulary {
         Self::from_bytes(&b, &p)
     }
 
-    fn from_bytes(b: &[u8], p: &str) -> Result<Self, BowError> {
+    /// Read from the bytes of a vocabulary file; `p` names it in errors.
+    pub fn from_bytes(b: &[u8], p: &str) -> Result<Self, BowError> {
         if b.len() < MAGIC.len() || &b[..MAGIC.len()] != MAGIC {
             return Err(BowError::NotAVocabulary { path: p.into() });
         }

@@ -15,6 +15,9 @@
 //!   words and tf-idf vectors, the L1 score, a versioned file format.
 //! - `keyframe_db`: ORB-SLAM2's key-frame database (inverted index, loop and relocalisation
 //!   candidates) and its loop-consistency check.
+//! - `loop_closing`: ORB-SLAM2's loop closing for rigid maps: detection with the key-frame
+//!   database, SE(3) RANSAC and guided matching, fusion, the essential graph.
+//! - `pose_graph`: SE(3) pose-graph optimisation (the essential graph).
 //! - `eval`: trajectory evaluation (association, Umeyama alignment, ATE and RPE) as evo does it.
 
 pub mod ba;
@@ -22,9 +25,11 @@ pub mod bow;
 pub mod eval;
 pub mod keyframe_db;
 pub mod local_map;
+pub mod loop_closing;
 pub mod map;
+pub mod pose_graph;
 pub mod tracker;
 
 pub use local_map::{LocalMapConfig, LocalMapper};
-pub use map::{Feature, KeyFrameFeature, KeyFrameInfo, MapPoint, Observation, SparseMap};
+pub use map::{Feature, KeyFrameFeature, KeyFrameInfo, KeyFrameKeypoint, MapPoint, Observation, SparseMap};
 pub use tracker::{Sensor, TrackState, Tracker, TrackerConfig, TrackingResult};

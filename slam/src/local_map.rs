@@ -155,6 +155,44 @@ impl LocalMapper {
         self.points.values().map(|m| &m.point)
     }
 
+    /// Take loop closing's corrected map (ignored if it is of another map): the poses of the
+    /// key frames held and the positions of the points held are replaced; points fusion
+    /// removed are dropped, and its new observations added (with their point, which may be
+    /// one this window had forgotten).
+    pub fn apply_correction(&mut self, correction: &SparseMap) {
+        if correction.map_id != self.map_id {
+            return;
+        }
+        for k in &correction.keyframes {
+            if let Some(kf) = self.kfs.get_mut(&k.id) {
+                kf.info.world_from_cam = k.world_from_cam;
+            }
+        }
+        let by_id: BTreeMap<u64, &MapPoint> = correction.points.iter().map(|p| (p.id, p)).collect();
+        for (id, mp) in &mut self.points {
+            if let Some(p) = by_id.get(id) {
+                mp.point.position = p.position;
+            }
+        }
+        for id in &correction.removed {
+            if self.points.remove(id).is_some() {
+                for kf in self.kfs.values_mut() {
+                    kf.obs.retain(|o| o.point != *id);
+                }
+            }
+        }
+        for o in &correction.observations {
+            let Some(kf) = self.kfs.get_mut(&o.keyframe) else { continue };
+            let Some(p) = by_id.get(&o.point) else { continue };
+            let mp = self.points.entry(o.point).or_insert(Mp { point: **p, kfs: Vec::new(), weight: 0 });
+            if !mp.kfs.contains(&o.keyframe) {
+                mp.kfs.push(o.keyframe);
+                mp.weight += if o.depth.is_some() { 2 } else { 1 };
+                kf.obs.push(*o);
+            }
+        }
+    }
+
     /// Take one key frame from tracking (`batch`: one key frame, its observations, new
     /// points), run local BA and culling, and return the local map: the window's key frames
     /// and points with refined positions, and the ids of removed points.
@@ -331,7 +369,9 @@ impl LocalMapper {
         } else {
             self.kfs.get(&info.id).map(|k| k.obs.clone()).unwrap_or_default()
         };
-        SparseMap { map_id: self.map_id, keyframes, points, observations, removed, features: Vec::new() }
+        // The new key frame's keypoints go on to loop closing.
+        let keypoints = batch.keypoints.clone();
+        SparseMap { map_id: self.map_id, keyframes, points, observations, removed, features: Vec::new(), keypoints }
     }
 
     /// Key frame `kf`'s `n` best covisible key frames: most points shared first, then the

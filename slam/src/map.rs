@@ -72,6 +72,25 @@ pub struct KeyFrameFeature {
     pub descriptor: [u8; 32],
 }
 
+/// One static keypoint of a new key frame, with its depth and the map point it observes:
+/// what place recognition and loop closing see of a key frame (ORB-SLAM2's key frames keep all
+/// their keypoints).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KeyFrameKeypoint {
+    /// Key frame id.
+    pub keyframe: u64,
+    /// Pixel (level-0 coordinates).
+    pub uv: [f64; 2],
+    /// Pyramid level.
+    pub octave: u8,
+    /// Measured depth, metres.
+    pub depth: Option<f64>,
+    /// 256-bit ORB descriptor.
+    pub descriptor: [u8; 32],
+    /// The map point it observes.
+    pub point: Option<u64>,
+}
+
 /// What tracking and local mapping exchange. Tracking sends one new key frame with its
 /// observations and the points it created; local mapping answers with its window's refined
 /// key-frame poses, the refined local points and the ids of points it removed.
@@ -91,6 +110,9 @@ pub struct SparseMap {
     /// From monocular tracking: the new key frame's unmatched static keypoints, which local
     /// mapping triangulates against its neighbours (empty with depth, which creates points).
     pub features: Vec<KeyFrameFeature>,
+    /// From tracking, forwarded by local mapping: every static keypoint of the new key frame
+    /// (place recognition and loop closing). A loop correction leaves it empty.
+    pub keypoints: Vec<KeyFrameKeypoint>,
 }
 
 /// Sigma of an observation on pyramid level `octave` with scale factor `scale` (ORB-SLAM).

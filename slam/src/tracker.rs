@@ -27,7 +27,7 @@ use dynaflow_vision::geometry::{
 use dynaflow_vision::matching::{GridIndex, MatchConfig, match_brute_force, nearest_two};
 use nalgebra::{Isometry3, Point3};
 
-use crate::map::{Feature, KeyFrameFeature, KeyFrameInfo, MapPoint, Observation, SparseMap, sigma};
+use crate::map::{Feature, KeyFrameFeature, KeyFrameInfo, KeyFrameKeypoint, MapPoint, Observation, SparseMap, sigma};
 
 /// Tracking settings (defaults: ORB-SLAM2's for an RGB-D camera, see [`TrackerConfig::rgbd`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -212,6 +212,13 @@ pub struct Tracker {
     init_ref: Option<(f64, Vec<Feature>)>,
     /// Monocular: why the last initialisation attempt failed.
     init_failure: Option<String>,
+    /// Every key frame's latest pose (from tracking, then local mapping and loop closing).
+    keyframe_poses: BTreeMap<u64, Isometry3<f64>>,
+    /// Per posed frame: its stamp, reference key frame and `ref_from_frame` (ORB-SLAM2's
+    /// relative frame poses, from which the final trajectory is rebuilt).
+    anchors: Vec<(f64, u64, Isometry3<f64>)>,
+    /// The newest key frame.
+    reference: Option<u64>,
 }
 
 impl Tracker {
@@ -236,6 +243,51 @@ impl Tracker {
             lost_run: 0,
             init_ref: None,
             init_failure: None,
+            keyframe_poses: BTreeMap::new(),
+            anchors: Vec::new(),
+            reference: None,
+        }
+    }
+
+    /// The trajectory as ORB-SLAM2 saves it at the end (`SaveTrajectoryTUM`): each frame's pose
+    /// relative to its reference key frame, composed with that key frame's latest pose (refined
+    /// by local mapping, corrected by loop closing). Frames before the first key frame are left
+    /// out.
+    pub fn keyframe_trajectory(&self) -> Vec<(f64, Isometry3<f64>)> {
+        self.anchors
+            .iter()
+            .filter_map(|(t, k, rel)| self.keyframe_poses.get(k).map(|p| (*t, renormalised(&(p * rel)))))
+            .collect()
+    }
+
+    /// Take loop closing's corrected map (ignored if it is of another map): key-frame poses,
+    /// point positions and the points fusion removed. The last pose moves with the newest key
+    /// frame's correction (ORB-SLAM2 re-anchors its last frame to its reference key frame), and
+    /// points loop closing does not know move with the key frame that made them.
+    pub fn apply_correction(&mut self, correction: &SparseMap) {
+        if correction.map_id != self.map_id || !self.initialised {
+            return;
+        }
+        let mut delta: BTreeMap<u64, Isometry3<f64>> = BTreeMap::new();
+        for k in &correction.keyframes {
+            if let Some(old) = self.keyframe_poses.insert(k.id, k.world_from_cam) {
+                delta.insert(k.id, k.world_from_cam * old.inverse());
+            }
+        }
+        let newest = self.reference.and_then(|r| delta.get(&r).copied());
+        if let (Some(d), Some(last)) = (newest, self.last) {
+            self.last = Some(renormalised(&(d * last)));
+        }
+        let corrected: BTreeMap<u64, Point3<f64>> = correction.points.iter().map(|p| (p.id, p.position)).collect();
+        for (id, p) in &mut self.points {
+            if let Some(c) = corrected.get(id) {
+                p.position = *c;
+            } else if let Some(d) = delta.get(&p.first_keyframe).copied().or(newest) {
+                p.position = d * p.position;
+            }
+        }
+        for id in &correction.removed {
+            self.points.remove(id);
         }
     }
 
@@ -260,6 +312,9 @@ impl Tracker {
             return;
         }
         let newest = update.keyframes.iter().map(|k| k.id).max().unwrap_or(0);
+        for k in &update.keyframes {
+            self.keyframe_poses.insert(k.id, k.world_from_cam);
+        }
         let incoming: BTreeSet<u64> = update.points.iter().map(|p| p.id).collect();
         for p in &update.points {
             self.points.insert(
@@ -287,6 +342,16 @@ impl Tracker {
 
     /// Track one frame.
     pub fn track(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
+        let r = self.track_frame(stamp, features);
+        if let (Some(pose), Some(k)) = (r.pose, self.reference)
+            && let Some(kp) = self.keyframe_poses.get(&k)
+        {
+            self.anchors.push((stamp, k, kp.inverse() * pose));
+        }
+        r
+    }
+
+    fn track_frame(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
         let predicted = self.last.map(|l| renormalised(&(l * self.velocity)));
         if !self.initialised {
             let origin = predicted.unwrap_or_else(Isometry3::identity);
@@ -526,6 +591,8 @@ impl Tracker {
     fn make_keyframe(&mut self, stamp: f64, features: &[Feature], fit: &Fit) -> SparseMap {
         let id = self.next_keyframe;
         self.next_keyframe += 1;
+        self.keyframe_poses.insert(id, fit.world_from_cam);
+        self.reference = Some(id);
         self.frames_since_kf = 0;
         let info = KeyFrameInfo { id, stamp, world_from_cam: fit.world_from_cam };
         let depth_of = |f: &Feature| f.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth);
@@ -556,6 +623,7 @@ impl Tracker {
             candidates.truncate(close.max(STEREO_MIN_NEW_POINTS));
         }
         let mut points = Vec::new();
+        let mut point_of: Vec<Option<u64>> = fit.matched.clone();
         for &(d, i) in &candidates {
             let f = &features[i];
             let pc =
@@ -566,7 +634,21 @@ impl Tracker {
             self.points.insert(pid, TPoint { position, descriptor: f.descriptor, first_keyframe: id });
             points.push(MapPoint { id: pid, position, descriptor: f.descriptor, observations: 1, first_keyframe: id });
             observations.push(Observation { keyframe: id, point: pid, uv: f.uv, depth: depth_of(f), octave: f.octave });
+            point_of[i] = Some(pid);
         }
+        let keypoints = features
+            .iter()
+            .zip(&point_of)
+            .filter(|(f, _)| !f.dynamic)
+            .map(|(f, p)| KeyFrameKeypoint {
+                keyframe: id,
+                uv: f.uv,
+                octave: f.octave,
+                depth: depth_of(f),
+                descriptor: f.descriptor,
+                point: *p,
+            })
+            .collect();
         // The reference for the next decision: points of this key frame seen twice (ORB-SLAM2's
         // `TrackedMapPoints(nMinObs)`), all of them while the map has at most two key frames.
         self.ref_tracked = fit.inliers + if id <= self.first_keyframe + 1 { points.len() } else { 0 };
@@ -575,7 +657,15 @@ impl Tracker {
         } else {
             Vec::new()
         };
-        SparseMap { map_id: self.map_id, keyframes: vec![info], points, observations, removed: Vec::new(), features }
+        SparseMap {
+            map_id: self.map_id,
+            keyframes: vec![info],
+            points,
+            observations,
+            removed: Vec::new(),
+            features,
+            keypoints,
+        }
     }
 
     /// A monocular key frame's keypoints for triangulation: static and unmatched.
@@ -684,6 +774,9 @@ impl Tracker {
         self.last = Some(world_from_c2);
         let (k0, k1) = (self.next_keyframe, self.next_keyframe + 1);
         self.next_keyframe += 2;
+        self.keyframe_poses.insert(k0, world_from_c1);
+        self.keyframe_poses.insert(k1, world_from_c2);
+        self.reference = Some(k1);
         self.first_keyframe = k0;
         self.frames_since_kf = 0;
         let mut points = Vec::new();
@@ -718,6 +811,8 @@ impl Tracker {
             observations,
             removed: Vec::new(),
             features: candidates,
+            // (Loop closing takes no monocular map: it would need Sim(3).)
+            keypoints: Vec::new(),
         };
         TrackingResult {
             pose: Some(world_from_c2),

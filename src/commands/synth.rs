@@ -14,7 +14,7 @@ use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 #[derive(Debug, clap::Args)]
 pub struct SynthArgs {
     /// Camera motion.
-    #[arg(long, default_value = "xyz", value_parser = ["static", "xyz", "rpy", "halfsphere"])]
+    #[arg(long, default_value = "xyz", value_parser = ["static", "xyz", "rpy", "halfsphere", "loop"])]
     pub motion: String,
     /// Number of people.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(0..=16))]

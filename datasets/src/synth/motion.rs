@@ -1,4 +1,5 @@
-//! Camera trajectories modelled on the TUM fr3 sequences: `static`, `xyz`, `rpy`, `halfsphere`.
+//! Camera trajectories modelled on the TUM fr3 sequences (`static`, `xyz`, `rpy`, `halfsphere`),
+//! and `loop`, a walk around the room that comes back to where it started (loop closing).
 
 use std::f64::consts::PI;
 
@@ -17,11 +18,18 @@ pub enum Motion {
     Rpy,
     /// The camera moves on a half sphere around the scene, looking at its centre.
     Halfsphere,
+    /// The camera walks a circle of 0.6 m radius in the middle of the room, looking outwards
+    /// (it sees every wall in turn), and is back where it started after [`LOOP_PERIOD`]
+    /// seconds: frames after that revisit the first ones.
+    Loop,
 }
+
+/// Seconds of one round of [`Motion::Loop`] (900 frames at 30 Hz).
+pub const LOOP_PERIOD: f64 = 30.0;
 
 impl Motion {
     /// Names used in graphs and on the command line.
-    pub const NAMES: &'static [&'static str] = &["static", "xyz", "rpy", "halfsphere"];
+    pub const NAMES: &'static [&'static str] = &["static", "xyz", "rpy", "halfsphere", "loop"];
 
     /// Parse a name.
     pub fn from_name(name: &str) -> Option<Self> {
@@ -30,6 +38,7 @@ impl Motion {
             "xyz" => Some(Self::Xyz),
             "rpy" => Some(Self::Rpy),
             "halfsphere" => Some(Self::Halfsphere),
+            "loop" => Some(Self::Loop),
             _ => None,
         }
     }
@@ -67,6 +76,17 @@ impl Motion {
                         elevation.sin(),
                     );
                 Isometry3::from_parts(Translation3::from(p), look_rotation(&(centre - p), &up))
+            }
+            Motion::Loop => {
+                // Start where the other motions are looking from, facing the same wall (+y);
+                // turn left (counter-clockwise seen from above) once per period. A slow bob in
+                // height keeps the views of one round from being a pure rotation.
+                let a = w(LOOP_PERIOD);
+                let centre = Vector3::new(0.0, -0.4, 1.4);
+                let radial = Vector3::new(-a.sin(), a.cos(), 0.0);
+                let p = centre + 0.6 * radial + Vector3::new(0.0, 0.0, 0.1 * (2.0 * a).sin());
+                let forward = radial - Vector3::new(0.0, 0.0, 0.08);
+                Isometry3::from_parts(Translation3::from(p), look_rotation(&forward, &up))
             }
         }
     }

@@ -40,6 +40,18 @@ pub fn to_msg(b: &s::SparseMap) -> m::SparseMap {
             .iter()
             .map(|f| m::MapFeature { keyframe: f.keyframe, uv: f.uv, octave: f.octave, descriptor: f.descriptor })
             .collect(),
+        keypoints: b
+            .keypoints
+            .iter()
+            .map(|k| m::MapKeypoint {
+                keyframe: k.keyframe,
+                uv: k.uv,
+                octave: k.octave,
+                depth: k.depth.unwrap_or(0.0),
+                descriptor: k.descriptor,
+                point: k.point,
+            })
+            .collect(),
     }
 }
 
@@ -78,6 +90,18 @@ pub fn from_msg(b: &m::SparseMap) -> s::SparseMap {
             .features
             .iter()
             .map(|f| s::KeyFrameFeature { keyframe: f.keyframe, uv: f.uv, octave: f.octave, descriptor: f.descriptor })
+            .collect(),
+        keypoints: b
+            .keypoints
+            .iter()
+            .map(|k| s::KeyFrameKeypoint {
+                keyframe: k.keyframe,
+                uv: k.uv,
+                octave: k.octave,
+                depth: (k.depth > 0.0).then_some(k.depth),
+                descriptor: k.descriptor,
+                point: k.point,
+            })
             .collect(),
     }
 }

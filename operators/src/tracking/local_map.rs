@@ -3,7 +3,7 @@
 use std::sync::Arc;
 use std::time::Instant;
 
-use dynaflow_engine::msg::{CameraInfo, Header, PointCloud, Scalars, SparseMap};
+use dynaflow_engine::msg::{CameraInfo, Header, Message, PointCloud, Scalars, SparseMap};
 use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 use dynaflow_slam::{LocalMapConfig, LocalMapper};
@@ -15,7 +15,7 @@ params! {
     struct Config {
         /// key frames refined by local BA: the new one and its best covisible neighbours
         window: u64 [2, 100] = 10,
-        /// key frames kept at most (the oldest are forgotten; no loop closing needs them)
+        /// key frames kept at most (the oldest are forgotten: `loop_close` keeps the whole map)
         keep_keyframes: u64 [2, 100_000] = 60,
         /// virtual baseline, metres (as `pnp_track`'s)
         baseline: f64 [0.0, 10.0] = 0.08,
@@ -27,6 +27,10 @@ const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
 const STEREO: In<Scalars> = In::optional(
     "stereo",
     "the stereo rig (`baseline_m`): with a stereo `pnp_track`, its baseline replaces `baseline`",
+);
+const LOOP: In<SparseMap> = In::optional(
+    "loop",
+    "`loop_close`'s corrected map (`delay: 1`, `join: latest`): applied before the next key frame",
 );
 const MAP: Out<SparseMap> = Out::new("map", "the refined local window: key frames, points, removed point ids");
 const POINTS: Out<PointCloud> = Out::new("points", "every map point held (on key frames)");
@@ -40,13 +44,18 @@ pub const LOCAL_MAP: OpSpec = OpSpec {
     family: "pnp_ba",
     doc: dynaflow_engine::op::doc_line(include_str!("docs/local_map.md")),
     kind: OpKind::Transform,
-    inputs: &[KEYFRAME.spec, CAMERA_INFO.spec, STEREO.spec],
+    inputs: &[KEYFRAME.spec, CAMERA_INFO.spec, STEREO.spec, LOOP.spec],
     outputs: &[MAP.spec, POINTS.spec, STATS.spec],
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
-        Ok(Instance::Transform(Box::new(LocalMap { config: Config::from_params(p)?, mapper: None, ba_ms: Vec::new() })))
+        Ok(Instance::Transform(Box::new(LocalMap {
+            config: Config::from_params(p)?,
+            mapper: None,
+            ba_ms: Vec::new(),
+            last_loop: None,
+        })))
     },
 };
 
@@ -55,6 +64,8 @@ struct LocalMap {
     mapper: Option<LocalMapper>,
     /// Milliseconds per key-frame insertion (local BA and culling).
     ba_ms: Vec<f64>,
+    /// The loop correction last applied (a `latest` join repeats it).
+    last_loop: Option<Arc<Message>>,
 }
 
 impl Operator for LocalMap {
@@ -74,6 +85,12 @@ impl Operator for LocalMap {
             }
             LocalMapper::new(c, Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy })
         });
+        if let Some((m, correction)) = LOOP.find(inputs)?
+            && self.last_loop.as_ref().is_none_or(|last| !Arc::ptr_eq(last, m))
+        {
+            mapper.apply_correction(&convert::from_msg(correction));
+            self.last_loop = Some(m.clone());
+        }
         let t0 = Instant::now();
         let update = mapper.insert(&convert::from_msg(batch));
         // Wall time stays out of the messages (they must be identical run to run); it goes

@@ -52,6 +52,10 @@ const STEREO: In<Scalars> =
     In::optional("stereo", "the stereo rig (`sensor: stereo`): `baseline_m`, as `kitti_odometry` and `synth` send it");
 const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
 const MAP: In<SparseMap> = In::optional("map", "local mapping's refined local map (`delay: 1`, `join: latest`)");
+const LOOP: In<SparseMap> = In::optional(
+    "loop",
+    "`loop_close`'s corrected map (`delay: 1`, `join: latest`): key frames, points and the last pose move with it",
+);
 const MASK: In<SegmentationMask> = In::optional("mask", "pixels of a non-zero class are dynamic");
 const LABELS: In<PointLabels> = In::optional("labels", "culling's labels of `tracks`");
 const TRACKS: In<Tracks> = In::optional(
@@ -79,6 +83,7 @@ pub const PNP_TRACK: OpSpec = OpSpec {
         STEREO.spec,
         CAMERA_INFO.spec,
         MAP.spec,
+        LOOP.spec,
         MASK.spec,
         LABELS.spec,
         TRACKS.spec,
@@ -96,6 +101,7 @@ pub const PNP_TRACK: OpSpec = OpSpec {
             ground_truth: Vec::new(),
             counts: [0; 5],
             last_map: None,
+            last_loop: None,
             best_usable: 0,
             frames: 0,
             first_pose_frame: None,
@@ -112,6 +118,8 @@ struct PnpTrack {
     counts: [u64; 5],
     /// The map batch last applied (a `latest` join may repeat it).
     last_map: Option<Arc<Message>>,
+    /// The loop correction last applied.
+    last_loop: Option<Arc<Message>>,
     /// The most keypoints of one frame that a map could start from (static, with a depth up
     /// to `max_depth`): what the end-of-run message says when no map ever started.
     best_usable: usize,
@@ -244,6 +252,12 @@ impl Operator for PnpTrack {
             tracker.apply_map_update(&convert::from_msg(update));
             self.last_map = Some(m.clone());
         }
+        if let Some((m, correction)) = LOOP.find(inputs)?
+            && self.last_loop.as_ref().is_none_or(|last| !Arc::ptr_eq(last, m))
+        {
+            tracker.apply_correction(&convert::from_msg(correction));
+            self.last_loop = Some(m.clone());
+        }
         let uv: Vec<[f32; 2]> = kp.points.iter().map(|p| [p.x, p.y]).collect();
         let dynamic = dynamic_keypoints(inputs, &uv, self.config.label_radius as f32)?;
         let features: Vec<Feature> = kp
@@ -328,23 +342,33 @@ impl Operator for PnpTrack {
             report["initialised"] = serde_json::json!(false);
             report["not_initialised_because"] = serde_json::json!(why);
         }
-        if !self.ground_truth.is_empty() && !self.trajectory.is_empty() {
+        // The online estimate (each frame's pose as it was sent) and the final one (rebuilt
+        // from the key frames at the end, as ORB-SLAM2 saves it: local BA's refinements and
+        // loop corrections included).
+        let final_trajectory = self.final_trajectory();
+        for (poses, ate, rpe, error) in [
+            (&self.trajectory, "ate", "rpe", "ate_error"),
+            (&final_trajectory, "ate_final", "rpe_final", "ate_final_error"),
+        ] {
+            if self.ground_truth.is_empty() || poses.is_empty() {
+                continue;
+            }
             // evo's default tolerance (10 ms); SE(3) alignment as the RGB-D papers report it,
             // Sim(3) for a single camera (its scale is arbitrary; evo `-as`).
             let (align, name) =
                 if self.config.sensor == Sensor::Mono { (Align::Sim3, "sim3") } else { (Align::Se3, "se3") };
-            match evaluate(&self.ground_truth, &self.trajectory, 0.01, align, 1) {
+            match evaluate(&self.ground_truth, poses, 0.01, align, 1) {
                 Ok(e) => {
-                    report["ate"] = serde_json::json!({
+                    report[ate] = serde_json::json!({
                         "rmse": e.ate.rmse, "mean": e.ate.mean, "median": e.ate.median, "std": e.ate.std,
                         "max": e.ate.max, "align": name, "pairs": e.matched, "scale": e.scale,
                     });
-                    report["rpe"] = serde_json::json!({
+                    report[rpe] = serde_json::json!({
                         "delta_frames": e.rpe_delta, "translation_rmse": e.rpe_translation.rmse,
                         "rotation_rmse_deg": e.rpe_rotation_deg.rmse,
                     });
                 }
-                Err(e) => report["ate_error"] = serde_json::json!(e.to_string()),
+                Err(e) => report[error] = serde_json::json!(e.to_string()),
             }
         }
         ctx.report = Some(report);
@@ -353,10 +377,21 @@ impl Operator for PnpTrack {
 }
 
 impl PnpTrack {
-    /// `<out>/<stem>.<node>.trajectory.txt`, and with `gt_pose` the ground truth of the same
-    /// frames beside it (`.groundtruth.txt`), both TUM format (`dynaflow eval`, `dynaflow bench`).
+    fn final_trajectory(&self) -> Vec<(f64, Isometry3<f64>)> {
+        self.tracker.as_ref().map(Tracker::keyframe_trajectory).unwrap_or_default()
+    }
+
+    /// `<out>/<stem>.<node>.trajectory.txt` (the online estimate), `.final_trajectory.txt`
+    /// (rebuilt from the final key frames, ORB-SLAM2's `SaveTrajectoryTUM`), and with `gt_pose`
+    /// the ground truth of the same frames beside them (`.groundtruth.txt`), all TUM format
+    /// (`dynaflow eval`, `dynaflow bench`).
     fn write_trajectory(&self, ctx: &Context) -> Result<(), OpError> {
-        for (what, poses) in [("trajectory", &self.trajectory), ("groundtruth", &self.ground_truth)] {
+        let final_trajectory = self.final_trajectory();
+        for (what, poses) in [
+            ("trajectory", &self.trajectory),
+            ("final_trajectory", &final_trajectory),
+            ("groundtruth", &self.ground_truth),
+        ] {
             // The estimate's file is written even empty (a tracker that never initialised),
             // so a script finds it; the ground truth only when there is some.
             if poses.is_empty() && what == "groundtruth" {

@@ -1,0 +1,246 @@
+//! `loop_close`.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Instant;
+
+use dynaflow_engine::msg::{CameraInfo, Header, Pose, Scalars, SparseMap, StampedPose, Trajectory};
+use dynaflow_engine::op::{
+    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
+};
+use dynaflow_engine::params;
+use dynaflow_slam::bow::Vocabulary;
+use dynaflow_slam::loop_closing::{LoopCloser, LoopConfig, LoopError};
+use dynaflow_vision::camera::Pinhole;
+use rand_core::Rng;
+
+use super::convert;
+
+/// The default vocabulary (k 10, L 5), trained by `scripts/train_vocabulary.sh`: see
+/// `slam/vocabulary/SOURCE.md` for what it was trained on.
+pub const DEFAULT_VOCABULARY: &[u8] = include_bytes!("../../../slam/vocabulary/default.voc");
+
+params! {
+    struct Config {
+        /// vocabulary file (`dynaflow vocab train`); empty: the embedded default (k 10, L 5, trained on synthetic frames of seed 31 and nine real frames: slam/vocabulary/SOURCE.md)
+        vocabulary: PathBuf = PathBuf::new(),
+        /// virtual baseline, metres (as `pnp_track`'s): weighs the depth term of the loop pose's refinement
+        baseline: f64 [0.0, 10.0] = 0.08,
+    }
+}
+
+const MAP: In<SparseMap> =
+    In::required("map", "`local_map`'s output: the refined window and the new key frame's keypoints");
+const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
+const STEREO: In<Scalars> = In::optional(
+    "stereo",
+    "the stereo rig (`baseline_m`): with a stereo `pnp_track`, its baseline replaces `baseline`",
+);
+const GT_POSE: In<Pose> = In::optional(
+    "gt_pose",
+    "ground truth: each loop is checked against it (do the two key frames' views overlap?) for the summary's `false_loops`; never used to decide",
+)
+.with_role(InputRole::Evaluation);
+const CORRECTION: Out<SparseMap> = Out::new(
+    "correction",
+    "after a loop: the whole corrected map (every key frame's pose, every point, fusion's observations and removed points), for `pnp_track` and `local_map` (`delay: 1`, `join: latest`)",
+);
+const KEYFRAMES: Out<Trajectory> =
+    Out::new("keyframes", "after a loop: every key frame's corrected pose (the corrected trajectory)");
+const LOOP_EDGE: Out<Trajectory> =
+    Out::new("loop_edge", "after a loop: the key frame that closed it and the one it revisits (a line in the viewer)");
+const STATS: Out<Scalars> = Out::new(
+    "stats",
+    "per key frame: `keyframes`, `points`, `loops`, `loop` (1 when this key frame closed one), `loop_keyframe`, `matches`, `correction_m`, `correction_deg`, `fused` (times: the summary's `report`)",
+);
+
+pub const LOOP_CLOSE: OpSpec = OpSpec {
+    name: "loop_close",
+    family: "pnp_ba",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/loop_close.md")),
+    kind: OpKind::Transform,
+    inputs: &[MAP.spec, CAMERA_INFO.spec, STEREO.spec, GT_POSE.spec],
+    outputs: &[CORRECTION.spec, KEYFRAMES.spec, LOOP_EDGE.spec, STATS.spec],
+    params: Config::PARAMS,
+    cpu_heavy: true,
+    ground_truth_outputs: None,
+    build: |p: &Params| {
+        let config = Config::from_params(p)?;
+        let t0 = Instant::now();
+        let (vocabulary, name) = if config.vocabulary.as_os_str().is_empty() {
+            let v = Vocabulary::from_bytes(DEFAULT_VOCABULARY, "the embedded default vocabulary")
+                .map_err(|e| OpError::Input(e.to_string()))?;
+            (v, "default".to_owned())
+        } else {
+            let v = Vocabulary::load(&config.vocabulary).map_err(|e| OpError::Input(e.to_string()))?;
+            (v, config.vocabulary.display().to_string())
+        };
+        let load_ms = t0.elapsed().as_secs_f64() * 1e3;
+        Ok(Instance::Transform(Box::new(LoopClose {
+            config,
+            vocabulary: Arc::new(vocabulary),
+            vocabulary_name: name,
+            load_ms,
+            closer: None,
+            insert_ms: Vec::new(),
+            loop_ms: Vec::new(),
+            refused: None,
+            ground_truth: Vec::new(),
+        })))
+    },
+};
+
+struct LoopClose {
+    config: Config,
+    vocabulary: Arc<Vocabulary>,
+    vocabulary_name: String,
+    load_ms: f64,
+    closer: Option<LoopCloser>,
+    /// Milliseconds per key frame without a loop (detection), and per closed loop.
+    insert_ms: Vec<f64>,
+    loop_ms: Vec<f64>,
+    /// Why key frames are not taken (a monocular map).
+    refused: Option<String>,
+    /// Ground truth at the key frames' stamps (evaluation only).
+    ground_truth: Vec<(f64, nalgebra::Isometry3<f64>)>,
+}
+
+/// Two views overlap when their optical axes are within this angle and their centres within
+/// [`OVERLAP_DISTANCE`] (chosen on the synthetic scene: with a 62-degree field of view, axes 30
+/// degrees apart still share half the image at room depths). Evaluation only.
+const OVERLAP_ANGLE_DEG: f64 = 30.0;
+const OVERLAP_DISTANCE: f64 = 1.0;
+
+fn views_overlap(a: &nalgebra::Isometry3<f64>, b: &nalgebra::Isometry3<f64>) -> bool {
+    let axis = |p: &nalgebra::Isometry3<f64>| p.rotation * nalgebra::Vector3::z();
+    let angle = axis(a).angle(&axis(b)).to_degrees();
+    angle <= OVERLAP_ANGLE_DEG && (a.translation.vector - b.translation.vector).norm() <= OVERLAP_DISTANCE
+}
+
+impl Operator for LoopClose {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (msg, update) = MAP.require(inputs)?;
+        let (_, k) = CAMERA_INFO.require(inputs)?;
+        let rig = STEREO.get(inputs)?.map(crate::frontend::stereo_baseline).transpose()?;
+        if self.refused.is_some() {
+            return Ok(Outputs::new());
+        }
+        let closer = self.closer.get_or_insert_with(|| {
+            let bf = k.fx * rig.unwrap_or(self.config.baseline);
+            let cam = Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
+            LoopCloser::new(
+                LoopConfig::new(bf, f64::from(k.width), f64::from(k.height)),
+                cam,
+                self.vocabulary.clone(),
+                ctx.rng.next_u64(),
+            )
+        });
+        if let Some(gt) = GT_POSE.get(inputs)? {
+            self.ground_truth.push((msg.header.stamp, gt.world_from_cam));
+        }
+        let t0 = Instant::now();
+        let closed = match closer.insert(&convert::from_msg(update)) {
+            Ok(c) => c,
+            Err(e @ LoopError::Monocular(_)) => {
+                tracing::warn!("`{}`: {e}", ctx.node);
+                self.refused = Some(e.to_string());
+                return Ok(Outputs::new());
+            }
+        };
+        let ms = t0.elapsed().as_secs_f64() * 1e3;
+        if update.keypoints.is_empty() {
+            return Ok(Outputs::new());
+        }
+        if closed.is_some() {
+            self.loop_ms.push(ms)
+        } else {
+            self.insert_ms.push(ms)
+        }
+        let header = Header { frame_id: Arc::from("world"), ..msg.header.clone() };
+        let c = closed.as_ref();
+        let stats = vec![
+            ("keyframes".into(), closer.keyframes() as f64),
+            ("points".into(), closer.points() as f64),
+            ("loops".into(), closer.loops().len() as f64),
+            ("loop".into(), if closed.is_some() { 1.0 } else { 0.0 }),
+            ("loop_keyframe".into(), c.map_or(-1.0, |c| c.loop_keyframe as f64)),
+            ("matches".into(), c.map_or(0.0, |c| c.matches as f64)),
+            ("correction_m".into(), c.map_or(0.0, |c| c.correction_m)),
+            ("correction_deg".into(), c.map_or(0.0, |c| c.correction_deg)),
+            ("fused".into(), c.map_or(0.0, |c| c.fused as f64)),
+        ];
+        let mut out = Outputs::new().send(&STATS, header.clone(), Scalars { values: stats });
+        if let Some(c) = closed {
+            tracing::info!(
+                "`{}`: loop closed: key frame {} revisits {} ({} matches), corrected by {:.3} m / {:.2} deg",
+                ctx.node,
+                c.current,
+                c.loop_keyframe,
+                c.matches,
+                c.correction_m,
+                c.correction_deg
+            );
+            let poses: Vec<StampedPose> = closer
+                .keyframe_poses()
+                .map(|k| StampedPose { stamp: k.stamp, world_from_cam: k.world_from_cam })
+                .collect();
+            let pick = |id: u64| closer.keyframe_poses().find(|k| k.id == id).copied();
+            let edge: Vec<StampedPose> = [pick(c.current), pick(c.loop_keyframe)]
+                .into_iter()
+                .flatten()
+                .map(|k| StampedPose { stamp: k.stamp, world_from_cam: k.world_from_cam })
+                .collect();
+            out = out
+                .send(&CORRECTION, header.clone(), convert::to_msg(&closer.correction()))
+                .send(&KEYFRAMES, header.clone(), Trajectory { poses })
+                .send(&LOOP_EDGE, header, Trajectory { poses: edge });
+        }
+        Ok(out)
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
+        let stats = |v: &[f64]| {
+            let mut t = v.to_vec();
+            t.sort_by(f64::total_cmp);
+            let q = |p: f64| t.get(((t.len() as f64 - 1.0) * p).round() as usize).copied().unwrap_or(0.0);
+            let mean = if t.is_empty() { 0.0 } else { t.iter().sum::<f64>() / t.len() as f64 };
+            serde_json::json!({ "count": t.len(), "mean": mean, "median": q(0.5), "p95": q(0.95), "max": q(1.0) })
+        };
+        let gt_at = |t: f64| self.ground_truth.iter().find(|g| (g.0 - t).abs() < 1e-6).map(|g| g.1);
+        let mut false_loops = 0;
+        let loops: Vec<serde_json::Value> = self
+            .closer
+            .as_ref()
+            .map(|c| {
+                c.loops()
+                    .iter()
+                    .map(|l| {
+                        let overlap =
+                            gt_at(l.current_stamp).zip(gt_at(l.loop_stamp)).map(|(a, b)| views_overlap(&a, &b));
+                        false_loops += usize::from(overlap == Some(false));
+                        serde_json::json!({
+                            "ground_truth_overlap": overlap,
+                            "keyframe": l.current, "loop_keyframe": l.loop_keyframe, "stamp": l.current_stamp,
+                            "loop_stamp": l.loop_stamp, "bow_matches": l.bow_matches,
+                            "inliers": l.inliers, "matches": l.matches, "correction_m": l.correction_m,
+                            "correction_deg": l.correction_deg, "fused": l.fused, "keyframes": l.keyframes,
+                            "edges": l.edges, "graph_cost_before": l.cost_before, "graph_cost_after": l.cost_after,
+                        })
+                    })
+                    .collect()
+            })
+            .unwrap_or_default();
+        ctx.report = Some(serde_json::json!({
+            "vocabulary": { "file": self.vocabulary_name, "id": self.vocabulary.id(), "words": self.vocabulary.words(),
+                            "load_ms": self.load_ms },
+            "keyframes": self.closer.as_ref().map_or(0, LoopCloser::keyframes),
+            "loops": loops,
+            "false_loops": if self.ground_truth.is_empty() { None } else { Some(false_loops) },
+            "rejected_candidates": self.closer.as_ref().map_or(0, LoopCloser::rejected),
+            "detection_ms": stats(&self.insert_ms),
+            "loop_correction_ms": stats(&self.loop_ms),
+            "refused": self.refused,
+        }));
+        Ok(())
+    }
+}
