@@ -159,6 +159,16 @@ pub struct RunArgs {
     /// Add per-port content digests to the summary (for comparing runs).
     #[arg(long)]
     pub digest: bool,
+    /// Save the whole map at the end (key frames, keypoints, points and the vocabulary's id):
+    /// the `save_map` param of the graph's `pnp_track` node.
+    #[arg(long, value_name = "FILE")]
+    pub save_map: Option<PathBuf>,
+    /// Start in a saved map (made with the same vocabulary): the first frames relocalise in it.
+    #[arg(long, value_name = "FILE")]
+    pub load_map: Option<PathBuf>,
+    /// With `--load-map`: ORB-SLAM2's localisation mode (no new key frames, mapping off).
+    #[arg(long, requires = "load_map")]
+    pub localise: bool,
     /// No progress bar.
     #[arg(long)]
     pub no_progress: bool,

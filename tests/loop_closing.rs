@@ -1,7 +1,8 @@
-//! Loop closing (issue 34): on a synthetic walk around the static room that comes back to its
-//! start, `loop_close` finds the revisit where the ground truth says the views overlap, never
+//! Loop closing and relocalisation (issue 34): on a synthetic walk around the static room that
+//! comes back to its start, `loop_close` finds the revisit where the ground truth says the views overlap, never
 //! elsewhere, the final trajectory's ATE drops to at most half of the run without it, and the
-//! run stays deterministic with the correction fed back. A damaged vocabulary is refused.
+//! run stays deterministic with the correction fed back; a kidnapped camera relocalises in the
+//! map it had. A damaged vocabulary is refused.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 mod common;
@@ -12,9 +13,21 @@ use std::path::Path;
 const FRAMES: &str = "1000";
 
 fn run(graph: &str, variant: Option<&str>, people: u32, seed: u64, out: &Path) -> dynaflow::summary::Summary {
+    run_with(graph, variant, people, seed, out, &["--set", &format!("camera.frames={FRAMES}")])
+}
+
+fn run_with(
+    graph: &str,
+    variant: Option<&str>,
+    people: u32,
+    seed: u64,
+    out: &Path,
+    extra: &[&str],
+) -> dynaflow::summary::Summary {
     let mut c = common::bin();
     c.args(["run", "--no-progress", "--digest", "--record", "none", "--seed", &seed.to_string()])
-        .args(["--set", "camera.motion=loop", "--set", &format!("camera.frames={FRAMES}")])
+        .args(["--set", "camera.motion=loop"])
+        .args(extra)
         .args(["--set", &format!("camera.people={people}"), "--out"])
         .arg(out);
     if let Some(v) = variant {
@@ -95,6 +108,100 @@ fn a_loop_around_the_static_room_is_closed_where_it_revisits_and_halves_the_erro
     // Deterministic with the correction fed back: a second run gives the same digests.
     let again = run("orb_baseline", None, 0, 0, &dir.path().join("c"));
     assert_eq!(with.digests, again.digests, "loop closing is not deterministic");
+}
+
+#[test]
+fn after_a_kidnap_tracking_relocalises_in_the_same_map() {
+    // Kidnapped at frame 600 (20 s into the round): 30 black frames, then the camera is set
+    // down where it was 10 s earlier.
+    let dir = common::TempDir::new("kidnap");
+    let s =
+        run_with("orb_baseline", None, 0, 0, dir.path(), &["--set", "camera.frames=800", "--set", "camera.kidnap=600"]);
+    let track = s.node_report("track").unwrap();
+    assert_eq!(track["maps"], 1, "one map throughout: {track}");
+    assert!(track["map_relocalisations"].as_u64().unwrap() >= 1, "{track}");
+    let lost = track["frames"]["lost"].as_u64().unwrap();
+    assert!((30..=33).contains(&lost), "lost only while blacked out (30 frames) and at most 3 after: {lost}");
+    // The first frames after the kidnap, against the ground truth (the whole run SE(3)-aligned).
+    let read = |name: &str| -> Vec<(f64, nalgebra::Isometry3<f64>)> { ground_truth(&dir.path().join(name)) };
+    let gt = read("orb_baseline.track.groundtruth.txt");
+    let est = read("orb_baseline.track.trajectory.txt");
+    let e = dynaflow_slam::eval::evaluate(&gt, &est, 0.01, dynaflow_slam::eval::Align::Se3, 1).unwrap();
+    let back = gt[630].0;
+    let after: Vec<f64> = e.series.iter().filter(|p| p.0 >= back - 1e-6).take(10).map(|p| p.3).collect();
+    let worst = after.iter().copied().fold(0.0, f64::max);
+    assert!(after.len() == 10 && worst <= 0.02, "error of the 10 frames after the kidnap: {after:?}");
+    println!(
+        "kidnap: relocalised with {lost} frames lost, the 10 frames after within {:.2} cm; ATE {:.2} cm",
+        worst * 100.0,
+        track["ate"]["rmse"].as_f64().unwrap() * 100.0
+    );
+}
+
+#[test]
+fn a_saved_map_is_reused_in_localisation_mode_and_a_bad_file_is_refused() {
+    let dir = common::TempDir::new("map_reuse");
+    let map = dir.path().join("room.map");
+    let map_s = map.display().to_string();
+    let frames = ["--set", "camera.frames=300"];
+    let a =
+        run_with("orb_baseline", None, 0, 0, &dir.path().join("a"), &[&frames[..], &["--save-map", &map_s]].concat());
+    let saved = &a.node_report("track").unwrap()["map_saved"];
+    assert!(saved["keyframes"].as_u64().unwrap() >= 5 && saved["points"].as_u64().unwrap() >= 500, "{saved}");
+    // The same sequence in the saved map, mapping off: every frame localised, no key frame.
+    let b = run_with(
+        "orb_baseline",
+        None,
+        0,
+        0,
+        &dir.path().join("b"),
+        &[&frames[..], &["--load-map", &map_s, "--localise"]].concat(),
+    );
+    let track = b.node_report("track").unwrap();
+    let f = &track["frames"];
+    assert_eq!(track["first_pose_frame"], 0, "{track}");
+    assert_eq!((f["lost"].as_u64(), f["new_map"].as_u64()), (Some(0), Some(0)), "{track}");
+    assert_eq!(f["tracked"].as_u64().unwrap() + f["relocalised"].as_u64().unwrap(), 300, "{track}");
+    assert_eq!(b.node_report("mapping").unwrap()["keyframes"], 0, "mapping is off");
+    let (ate_a, ate_b) = (a.ate.as_ref().unwrap().rmse, b.ate.as_ref().unwrap().rmse);
+    assert!(ate_b <= 0.02, "localised in the saved map: ATE {ate_b} (mapping run {ate_a})");
+    println!("map reuse: {saved}; localisation-mode ATE {:.2} cm (mapping run {:.2} cm)", ate_b * 100.0, ate_a * 100.0);
+
+    // Damaged files and another vocabulary are refused before the run starts, naming the file.
+    let bytes = std::fs::read(&map).unwrap();
+    let mut flipped = bytes.clone();
+    let mid = flipped.len() / 2;
+    flipped[mid] ^= 0x40;
+    let cases: Vec<(std::path::PathBuf, Vec<u8>, &str)> = vec![
+        (dir.path().join("flipped.map"), flipped, "damaged"),
+        (dir.path().join("cut.map"), bytes[..bytes.len() / 3].to_vec(), "truncated"),
+        (dir.path().join("text.map"), b"hello".to_vec(), "not a dynaflow map"),
+    ];
+    let small = dir.path().join("small.voc");
+    let img = common::repo().join("tests/fixtures/slambook2_lk_pair/LK1.png");
+    let o = common::bin().args(["vocab", "train", "--levels", "2", "--out"]).arg(&small).arg(&img).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let attempt = |file: &Path, extra: &[&str]| {
+        let o = common::bin()
+            .args(["run", "--no-progress", "--record", "none", "--frames", "2", "--load-map"])
+            .arg(file)
+            .args(extra)
+            .arg("--out")
+            .arg(dir.path().join("c"))
+            .arg(common::repo().join("graphs/orb_baseline.yaml"))
+            .output()
+            .unwrap();
+        (o.status.code(), String::from_utf8_lossy(&o.stderr).into_owned())
+    };
+    for (file, content, says) in &cases {
+        std::fs::write(file, content).unwrap();
+        let (code, err) = attempt(file, &[]);
+        assert_ne!(code, Some(0), "{says}");
+        assert!(err.contains(&file.display().to_string()) && err.contains(says), "{says}: {err}");
+    }
+    let (code, err) = attempt(&map, &["--set", &format!("track.vocabulary={}", small.display())]);
+    assert_ne!(code, Some(0));
+    assert!(err.contains(&map_s) && err.contains("vocabulary"), "{err}");
 }
 
 #[test]

@@ -47,6 +47,8 @@ params! {
         image_noise: f64 [0.0, 50.0] = 2.0,
         /// 3×3 image blur
         blur: bool = true,
+        /// kidnap the camera at this frame: 30 frames black with no depth, then the motion resumes 10 s earlier (a place already seen: relocalisation); 0: never
+        kidnap: u64 [0, 1_000_000] = 0,
         /// a rectified right camera this many metres to the right (`right`, `stereo`); 0: none (a zero baseline has no disparity)
         stereo_baseline: f64 [0.0, 10.0] = 0.0,
     }
@@ -88,6 +90,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         depth_noise: c.depth_noise,
         image_noise: c.image_noise as f32,
         blur: c.blur,
+        kidnap: (c.kidnap > 0).then_some(c.kidnap),
     };
     Ok(Instance::Source(Box::new(SynthSource {
         generator: Generator::new(config),

@@ -15,8 +15,11 @@
 //!   words and tf-idf vectors, the L1 score, a versioned file format.
 //! - `keyframe_db`: ORB-SLAM2's key-frame database (inverted index, loop and relocalisation
 //!   candidates) and its loop-consistency check.
+//! - `keyframe_map`: the whole key-frame map as place recognition sees it (keypoints, words,
+//!   covisibility), kept by loop closing and by tracking for relocalisation.
 //! - `loop_closing`: ORB-SLAM2's loop closing for rigid maps: detection with the key-frame
 //!   database, SE(3) RANSAC and guided matching, fusion, the essential graph.
+//! - `map_file`: a saved map (key frames, keypoints, points, vocabulary id), for map reuse.
 //! - `pose_graph`: SE(3) pose-graph optimisation (the essential graph).
 //! - `eval`: trajectory evaluation (association, Umeyama alignment, ATE and RPE) as evo does it.
 
@@ -24,9 +27,11 @@ pub mod ba;
 pub mod bow;
 pub mod eval;
 pub mod keyframe_db;
+pub mod keyframe_map;
 pub mod local_map;
 pub mod loop_closing;
 pub mod map;
+pub mod map_file;
 pub mod pose_graph;
 pub mod tracker;
 

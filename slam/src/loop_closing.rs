@@ -32,13 +32,13 @@ use std::sync::Arc;
 
 use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{PoseObservation, SplitMix64, optimize_pose};
-use dynaflow_vision::matching::{GridIndex, hamming, nearest_two};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
-use crate::bow::{BowVector, Descriptor, FeatureVector, Vocabulary, score};
+use crate::bow::{BowVector, Vocabulary, score};
 use crate::eval::umeyama;
-use crate::keyframe_db::{KeyFrameDatabase, LoopConsistency};
-use crate::map::{KeyFrameInfo, KeyFrameKeypoint, MapPoint, Observation, SparseMap, sigma};
+use crate::keyframe_db::LoopConsistency;
+use crate::keyframe_map::KeyFrameMap;
+use crate::map::{KeyFrameInfo, KeyFrameKeypoint, Observation, SparseMap, sigma};
 use crate::pose_graph::{PoseEdge, optimise};
 
 /// Loop-closing settings (ORB-SLAM2's values).
@@ -47,8 +47,6 @@ pub struct LoopConfig {
     /// No loop is looked for within this many key frames of the map's start or the last loop
     /// (ORB-SLAM2: 10).
     pub min_keyframes_between: usize,
-    /// Shared points that make two key frames covisible (ORB-SLAM2's connections: 15).
-    pub covisibility_min: usize,
     /// Shared points of a covisibility edge in the essential graph (ORB-SLAM2: 100).
     pub essential_min: usize,
     /// BoW matches a candidate needs for RANSAC (ORB-SLAM2: 20), and RANSAC inliers (20).
@@ -74,7 +72,6 @@ impl LoopConfig {
     pub fn new(bf: f64, width: f64, height: f64) -> Self {
         Self {
             min_keyframes_between: 10,
-            covisibility_min: 15,
             essential_min: 100,
             min_bow_matches: 20,
             min_inliers: 20,
@@ -89,29 +86,11 @@ impl LoopConfig {
     }
 }
 
-/// Hamming distance of a loop match (ORB-SLAM2 `TH_LOW`) and the BoW search's ratio.
-const MAX_DISTANCE: u32 = 50;
-const BOW_RATIO: f32 = 0.75;
 /// ORB-SLAM2's `Sim3Solver` inlier bound (chi2, 2 DOF, 99 %).
 const CHI2_RANSAC: f64 = 9.21;
 /// Projection search radii, pixels at level 0 (ORB-SLAM2: 10 for the loop's points, 4 for fusion).
 const PROJECTION_RADIUS: f64 = 10.0;
 const FUSION_RADIUS: f64 = 4.0;
-
-#[derive(Clone, Debug)]
-struct Kf {
-    info: KeyFrameInfo,
-    keypoints: Vec<KeyFrameKeypoint>,
-    bow: BowVector,
-    features: FeatureVector,
-    parent: Option<u64>,
-    loops: BTreeSet<u64>,
-}
-
-#[derive(Clone, Copy, Debug)]
-struct Pt {
-    point: MapPoint,
-}
 
 /// A closed loop.
 #[derive(Clone, Debug, PartialEq)]
@@ -140,19 +119,11 @@ pub struct LoopClosure {
     pub cost_after: f64,
 }
 
-/// Loop-closing state: the whole map.
+/// Loop-closing state: the whole map and the loops found.
 #[derive(Debug)]
 pub struct LoopCloser {
     config: LoopConfig,
-    cam: Pinhole,
-    vocabulary: Arc<Vocabulary>,
-    levels_up: usize,
-    map_id: u32,
-    kfs: BTreeMap<u64, Kf>,
-    points: BTreeMap<u64, Pt>,
-    /// Point id -> key frames observing it.
-    observers: BTreeMap<u64, BTreeSet<u64>>,
-    db: KeyFrameDatabase,
+    map: KeyFrameMap,
     consistency: LoopConsistency,
     /// Key frames since the map's start or the last loop.
     since_loop: usize,
@@ -161,8 +132,26 @@ pub struct LoopCloser {
     fused_observations: Vec<Observation>,
     fused_removed: Vec<u64>,
     loops: Vec<LoopClosure>,
-    /// Candidates accepted by the consistency check whose geometry failed.
-    rejected: usize,
+    /// Candidates accepted by the consistency check whose geometry failed, by [`Rejection`].
+    rejected: [usize; 4],
+}
+
+/// Why a consistent candidate's geometry was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rejection {
+    /// Fewer than 20 BoW matches with points in both key frames.
+    BowMatches,
+    /// Fewer than 20 RANSAC inliers.
+    RansacInliers,
+    /// Fewer than 40 matches after projecting the loop side's points.
+    ProjectionMatches,
+    /// Fewer than 40 inliers after refining the pose on them.
+    RefinedMatches,
+}
+
+impl Rejection {
+    /// Names, in order, for reports.
+    pub const NAMES: [&'static str; 4] = ["bow_matches", "ransac_inliers", "projection_matches", "refined_matches"];
 }
 
 /// Why a key frame was not taken.
@@ -178,37 +167,27 @@ pub enum LoopError {
 impl LoopCloser {
     /// An empty map; `seed` drives RANSAC.
     pub fn new(config: LoopConfig, cam: Pinhole, vocabulary: Arc<Vocabulary>, seed: u64) -> Self {
-        // ORB-SLAM2 groups features by the node 4 levels above the words of its 6-level
-        // vocabulary: the second level from the root. The same level of any vocabulary.
-        let levels_up = vocabulary.levels().saturating_sub(2);
         Self {
+            map: KeyFrameMap::new(cam, config.width, config.height, config.scale_factor, vocabulary),
             config,
-            cam,
-            vocabulary,
-            levels_up,
-            map_id: 0,
-            kfs: BTreeMap::new(),
-            points: BTreeMap::new(),
-            observers: BTreeMap::new(),
-            db: KeyFrameDatabase::new(),
             consistency: LoopConsistency::new(),
             since_loop: 0,
             rng: SplitMix64::new(seed),
             fused_observations: Vec::new(),
             fused_removed: Vec::new(),
             loops: Vec::new(),
-            rejected: 0,
+            rejected: [0; 4],
         }
     }
 
     /// Key frames held.
     pub fn keyframes(&self) -> usize {
-        self.kfs.len()
+        self.map.kfs.len()
     }
 
     /// Points held.
     pub fn points(&self) -> usize {
-        self.points.len()
+        self.map.points.len()
     }
 
     /// Every loop closed so far.
@@ -216,206 +195,94 @@ impl LoopCloser {
         &self.loops
     }
 
-    /// Consistent candidates whose geometric check failed.
-    pub fn rejected(&self) -> usize {
+    /// Consistent candidates whose geometric check failed, by [`Rejection`] (in its order).
+    pub fn rejected(&self) -> [usize; 4] {
         self.rejected
     }
 
     /// Every key frame's pose.
     pub fn keyframe_poses(&self) -> impl Iterator<Item = &KeyFrameInfo> {
-        self.kfs.values().map(|k| &k.info)
+        self.map.kfs.values().map(|k| &k.info)
     }
 
     /// Take local mapping's update: the refined window (poses, points, removed points) and the
     /// new key frame's keypoints (`update.keypoints`). Returns the loop it closed, if any.
     pub fn insert(&mut self, update: &SparseMap) -> Result<Option<LoopClosure>, LoopError> {
-        if update.map_id != self.map_id {
+        if self.map.switch_map(update.map_id) {
             // A new map (tracking was lost for good): start over.
-            self.kfs.clear();
-            self.points.clear();
-            self.observers.clear();
-            self.db = KeyFrameDatabase::new();
             self.consistency = LoopConsistency::new();
             self.since_loop = 0;
-            self.map_id = update.map_id;
         }
-        for p in &update.points {
-            self.points.insert(p.id, Pt { point: *p });
+        self.map.apply_refinements(update);
+        if let Some(k) = update.keypoints.first()
+            && !update.keypoints.iter().any(|k| k.depth.is_some())
+        {
+            return Err(LoopError::Monocular(k.keyframe));
         }
-        for k in &update.keyframes {
-            if let Some(kf) = self.kfs.get_mut(&k.id) {
-                kf.info.world_from_cam = k.world_from_cam;
-            }
-        }
-        for id in &update.removed {
-            self.remove_point(*id);
-        }
-        let Some(id) = update.keypoints.first().map(|k| k.keyframe) else { return Ok(None) };
-        let Some(info) = update.keyframes.iter().find(|k| k.id == id).copied() else { return Ok(None) };
-        let keypoints: Vec<KeyFrameKeypoint> = update.keypoints.iter().filter(|k| k.keyframe == id).copied().collect();
-        if self.kfs.contains_key(&info.id) {
-            return Ok(None);
-        }
-        if !keypoints.iter().any(|k| k.depth.is_some()) {
-            return Err(LoopError::Monocular(info.id));
-        }
-        let descriptors: Vec<Descriptor> = keypoints.iter().map(|k| k.descriptor).collect();
-        let (bow, features) = self.vocabulary.transform(&descriptors, self.levels_up);
-        for k in &keypoints {
-            if let Some(p) = k.point
-                && self.points.contains_key(&p)
-            {
-                self.observers.entry(p).or_default().insert(info.id);
-            }
-        }
-        let keypoints = keypoints
-            .into_iter()
-            .map(|k| KeyFrameKeypoint { point: k.point.filter(|p| self.points.contains_key(p)), ..k });
-        let kf = Kf {
-            info,
-            keypoints: keypoints.collect(),
-            bow: bow.clone(),
-            features,
-            parent: None,
-            loops: BTreeSet::new(),
-        };
-        self.kfs.insert(info.id, kf);
-        let parent =
-            self.covisibility(info.id).into_iter().max_by_key(|&(k, w)| (w, std::cmp::Reverse(k))).map(|c| c.0);
-        if let Some(kf) = self.kfs.get_mut(&info.id) {
-            kf.parent = parent;
-        }
+        let Some((id, bow)) = self.map.add_keyframe(update) else { return Ok(None) };
         self.since_loop += 1;
-        let closed = self.detect(info.id, &bow);
-        self.db.add(info.id, bow);
+        let closed = self.detect(id, &bow);
+        self.map.db.add(id, bow);
         Ok(closed)
-    }
-
-    fn remove_point(&mut self, id: u64) {
-        self.points.remove(&id);
-        if let Some(kfs) = self.observers.remove(&id) {
-            for k in kfs {
-                if let Some(kf) = self.kfs.get_mut(&k) {
-                    for kp in &mut kf.keypoints {
-                        if kp.point == Some(id) {
-                            kp.point = None;
-                        }
-                    }
-                }
-            }
-        }
-    }
-
-    /// Key frames sharing points with `kf`, with the number shared.
-    fn covisibility(&self, kf: u64) -> Vec<(u64, usize)> {
-        let mut count: BTreeMap<u64, usize> = BTreeMap::new();
-        if let Some(k) = self.kfs.get(&kf) {
-            for p in k.keypoints.iter().filter_map(|k| k.point) {
-                for &o in self.observers.get(&p).into_iter().flatten() {
-                    if o != kf {
-                        *count.entry(o).or_default() += 1;
-                    }
-                }
-            }
-        }
-        count.into_iter().collect()
-    }
-
-    /// ORB-SLAM2's covisible key frames (at least 15 shared points), most shared first.
-    fn covisible(&self, kf: u64) -> Vec<u64> {
-        let mut c: Vec<(u64, usize)> =
-            self.covisibility(kf).into_iter().filter(|&(_, w)| w >= self.config.covisibility_min).collect();
-        c.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
-        c.into_iter().map(|c| c.0).collect()
     }
 
     fn detect(&mut self, kf: u64, bow: &BowVector) -> Option<LoopClosure> {
         if self.since_loop <= self.config.min_keyframes_between {
             return None;
         }
-        let connected_list = self.covisible(kf);
+        let connected_list = self.map.covisible(kf);
         let min_score = connected_list
             .iter()
-            .filter_map(|c| self.kfs.get(c).map(|k| score(bow, &k.bow)))
+            .filter_map(|c| self.map.kfs.get(c).map(|k| score(bow, &k.bow)))
             .fold(f64::INFINITY, f64::min);
         let min_score = if min_score.is_finite() { min_score } else { 0.0 };
         let connected: BTreeSet<u64> = connected_list.into_iter().collect();
-        let covis = |k: u64| self.covisible(k);
-        let candidates = self.db.loop_candidates(kf, bow, &connected, min_score, &covis);
+        let covis = |k: u64| self.map.covisible(k);
+        let candidates = self.map.db.loop_candidates(kf, bow, &connected, min_score, &covis);
         let groups: Vec<(u64, BTreeSet<u64>)> = candidates
             .iter()
             .map(|&(c, _)| {
-                let mut g: BTreeSet<u64> = self.covisible(c).into_iter().collect();
+                let mut g: BTreeSet<u64> = self.map.covisible(c).into_iter().collect();
                 g.insert(c);
                 (c, g)
             })
             .collect();
         let accepted = self.consistency.update(&groups);
+
         for candidate in accepted {
             match self.compute_se3(kf, candidate) {
-                Some(found) => return Some(self.correct(kf, candidate, &found)),
-                None => self.rejected += 1,
+                Ok(found) => return Some(self.correct(kf, candidate, &found)),
+                Err(why) => self.rejected[why as usize] += 1,
             }
         }
         None
     }
 
-    /// Keypoint pairs (current index, candidate index) of the same vocabulary node, both with a
-    /// point (ORB-SLAM2's `SearchByBoW` between two key frames).
-    fn search_by_bow(&self, a: &Kf, b: &Kf) -> Vec<(usize, usize)> {
-        let mut used = BTreeSet::new();
-        let mut out = Vec::new();
-        for (node, ia) in &a.features {
-            let Some(ib) = b.features.get(node) else { continue };
-            for &i in ia {
-                let ka = &a.keypoints[i as usize];
-                if ka.point.is_none() {
-                    continue;
-                }
-                let cands = ib
-                    .iter()
-                    .map(|&j| j as usize)
-                    .filter(|&j| b.keypoints[j].point.is_some() && !used.contains(&j))
-                    .map(|j| (j, &b.keypoints[j].descriptor));
-                if let Some((j, best, second)) = nearest_two(&ka.descriptor, cands)
-                    && best <= MAX_DISTANCE
-                    && (best as f32) < BOW_RATIO * second as f32
-                {
-                    used.insert(j);
-                    out.push((i as usize, j));
-                }
-            }
-        }
-        out.sort_unstable();
-        out
-    }
-
-    fn point_in(&self, kf: &Kf, kp: &KeyFrameKeypoint) -> Option<Point3<f64>> {
-        let p = self.points.get(&kp.point?)?;
-        Some(kf.info.world_from_cam.inverse() * p.point.position)
-    }
-
     fn reprojects(&self, pose: &Isometry3<f64>, x: &Point3<f64>, kp: &KeyFrameKeypoint) -> bool {
-        let Some(uv) = self.cam.project(&(pose * x)) else { return false };
+        let Some(uv) = self.map.cam.project(&(pose * x)) else { return false };
         let s = sigma(self.config.scale_factor, kp.octave);
         let (du, dv) = (uv[0] - kp.uv[0], uv[1] - kp.uv[1]);
         du * du + dv * dv <= CHI2_RANSAC * s * s
     }
 
     /// `candidate_from_current` with the matches that support it, or `None`.
-    fn compute_se3(&mut self, current: u64, candidate: u64) -> Option<Found> {
-        let (a, b) = (self.kfs.get(&current)?, self.kfs.get(&candidate)?);
-        let matches = self.search_by_bow(a, b);
+    fn compute_se3(&mut self, current: u64, candidate: u64) -> Result<Found, Rejection> {
+        let (Some(a), Some(b)) = (self.map.kfs.get(&current), self.map.kfs.get(&candidate)) else {
+            return Err(Rejection::BowMatches);
+        };
+        let matches = self.map.search_by_bow(a, b);
         if matches.len() < self.config.min_bow_matches {
-            return None;
+            return Err(Rejection::BowMatches);
         }
         // 3-D points in each camera.
         let pairs: Vec<(Point3<f64>, Point3<f64>, usize, usize)> = matches
             .iter()
-            .filter_map(|&(i, j)| Some((self.point_in(a, &a.keypoints[i])?, self.point_in(b, &b.keypoints[j])?, i, j)))
+            .filter_map(|&(i, j)| {
+                Some((self.map.point_in(a, &a.keypoints[i])?, self.map.point_in(b, &b.keypoints[j])?, i, j))
+            })
             .collect();
         if pairs.len() < self.config.min_bow_matches {
-            return None;
+            return Err(Rejection::BowMatches);
         }
         let n = pairs.len();
         let samples: Vec<[usize; 3]> = (0..self.config.ransac_iterations)
@@ -449,41 +316,41 @@ impl LoopCloser {
                 best = Some((c, inl));
             }
         }
-        let (count, inl) = best?;
+        let Some((count, inl)) = best else { return Err(Rejection::RansacInliers) };
         if count < self.config.min_inliers {
-            return None;
+            return Err(Rejection::RansacInliers);
         }
         let idx: Vec<usize> = (0..n).filter(|&k| inl[k]).collect();
-        let cand_from_cur = fit(&idx)?;
+        let Some(cand_from_cur) = fit(&idx) else { return Err(Rejection::RansacInliers) };
         // The loop side's points (the candidate and its covisible key frames) projected into
         // the current key frame at the estimated pose; the pose refined on every match.
         let world_from_cur = b.info.world_from_cam * cand_from_cur;
         let mut group: Vec<u64> = vec![candidate];
-        group.extend(self.covisible(candidate));
-        let loop_points = self.points_of(&group);
-        let found = self.search_by_projection(a, &world_from_cur, &loop_points, PROJECTION_RADIUS);
+        group.extend(self.map.covisible(candidate));
+        let loop_points = self.map.points_of(&group);
+        let found = self.map.search_by_projection(&a.keypoints, &world_from_cur, &loop_points, PROJECTION_RADIUS);
         if found.len() < self.config.min_total_matches {
-            return None;
+            return Err(Rejection::ProjectionMatches);
         }
         let obs: Vec<PoseObservation> = found
             .iter()
             .filter_map(|&(i, p)| {
                 let kp = &a.keypoints[i];
                 Some(PoseObservation {
-                    point: self.points.get(&p)?.point.position,
+                    point: self.map.points.get(&p)?.position,
                     uv: kp.uv,
                     sigma: sigma(self.config.scale_factor, kp.octave),
                     depth: kp.depth,
                 })
             })
             .collect();
-        let refined = optimize_pose(&obs, &self.cam, self.config.bf, &world_from_cur.inverse(), None);
+        let refined = optimize_pose(&obs, &self.map.cam, self.config.bf, &world_from_cur.inverse(), None);
         let good: Vec<(usize, u64)> =
             found.iter().zip(&refined.inliers).filter(|(_, ok)| **ok).map(|(m, _)| *m).collect();
         if good.len() < self.config.min_total_matches {
-            return None;
+            return Err(Rejection::RefinedMatches);
         }
-        Some(Found {
+        Ok(Found {
             world_from_cur: refined.pose.inverse(),
             bow_matches: matches.len(),
             inliers: count,
@@ -492,83 +359,33 @@ impl LoopCloser {
         })
     }
 
-    /// Every point seen by the key frames `kfs`, once.
-    fn points_of(&self, kfs: &[u64]) -> Vec<u64> {
-        let mut set = BTreeSet::new();
-        for k in kfs {
-            if let Some(kf) = self.kfs.get(k) {
-                set.extend(kf.keypoints.iter().filter_map(|k| k.point));
-            }
-        }
-        set.into_iter().filter(|p| self.points.contains_key(p)).collect()
-    }
-
-    /// Points projected into key frame `kf` at pose `world_from_cam`, each matched to the
-    /// nearest-in-descriptor keypoint within `radius x scale^octave` pixels (Hamming <= 50),
-    /// one point per keypoint (the closest descriptor wins).
-    fn search_by_projection(
-        &self,
-        kf: &Kf,
-        world_from_cam: &Isometry3<f64>,
-        points: &[u64],
-        radius: f64,
-    ) -> Vec<(usize, u64)> {
-        let uv: Vec<[f32; 2]> = kf.keypoints.iter().map(|k| [k.uv[0] as f32, k.uv[1] as f32]).collect();
-        let grid = GridIndex::new(&uv, self.config.width.ceil() as usize, self.config.height.ceil() as usize, 32.0);
-        let cam_from_world = world_from_cam.inverse();
-        let mut best: BTreeMap<usize, (u32, u64)> = BTreeMap::new();
-        for &id in points {
-            let Some(p) = self.points.get(&id) else { continue };
-            let Some(px) = self.cam.project(&(cam_from_world * p.point.position)) else { continue };
-            if !(px[0] >= 0.0 && px[0] < self.config.width && px[1] >= 0.0 && px[1] < self.config.height) {
-                continue;
-            }
-            let r = radius * self.config.scale_factor.powi(2);
-            let near = grid.within([px[0] as f32, px[1] as f32], r as f32);
-            let cands = near.iter().map(|&i| i as usize).filter(|&i| {
-                let k = &kf.keypoints[i];
-                let s = radius * sigma(self.config.scale_factor, k.octave);
-                (k.uv[0] - px[0]).powi(2) + (k.uv[1] - px[1]).powi(2) <= s * s
-            });
-            let Some((i, d)) = cands
-                .map(|i| (i, hamming(&p.point.descriptor, &kf.keypoints[i].descriptor)))
-                .min_by_key(|&(i, d)| (d, i))
-            else {
-                continue;
-            };
-            if d <= MAX_DISTANCE && best.get(&i).is_none_or(|b| d < b.0) {
-                best.insert(i, (d, id));
-            }
-        }
-        best.into_iter().map(|(i, (_, p))| (i, p)).collect()
-    }
-
     fn correct(&mut self, current: u64, candidate: u64, found: &Found) -> LoopClosure {
-        let old: BTreeMap<u64, Isometry3<f64>> = self.kfs.iter().map(|(&k, kf)| (k, kf.info.world_from_cam)).collect();
+        let old: BTreeMap<u64, Isometry3<f64>> =
+            self.map.kfs.iter().map(|(&k, kf)| (k, kf.info.world_from_cam)).collect();
         let old_cur = old[&current];
         let delta = found.world_from_cur * old_cur.inverse();
         let correction_m = delta.translation.vector.norm();
         let correction_deg = delta.rotation.angle().to_degrees();
         // The current key frame and its covisible ones move with the loop's correction.
         let mut connected = vec![current];
-        connected.extend(self.covisible(current));
+        connected.extend(self.map.covisible(current));
         let mut corrected: BTreeMap<u64, Isometry3<f64>> = BTreeMap::new();
         for k in &connected {
             corrected.insert(*k, delta * old[k]);
         }
         self.move_points(&corrected, &old);
         // Fusion: the loop side's points into the corrected key frames.
-        let loop_points = self.points_of(&found.group);
+        let loop_points = self.map.points_of(&found.group);
         self.fused_observations.clear();
         self.fused_removed.clear();
         let mut fused = 0;
         for k in &connected {
-            let Some(kf) = self.kfs.get(k) else { continue };
+            let Some(kf) = self.map.kfs.get(k) else { continue };
             let pose = corrected[k];
             let pairs = if *k == current {
                 found.matches.clone()
             } else {
-                self.search_by_projection(kf, &pose, &loop_points, FUSION_RADIUS)
+                self.map.search_by_projection(&kf.keypoints, &pose, &loop_points, FUSION_RADIUS)
             };
             for (i, p) in pairs {
                 fused += usize::from(self.fuse(*k, i, p));
@@ -576,13 +393,13 @@ impl LoopCloser {
         }
         // Spanning tree, strong covisibility and loop edges; relative poses from before the
         // correction, except between the corrected key frames and the loop side (after it).
-        if let Some(kf) = self.kfs.get_mut(&current) {
+        if let Some(kf) = self.map.kfs.get_mut(&current) {
             kf.loops.insert(candidate);
         }
-        if let Some(kf) = self.kfs.get_mut(&candidate) {
+        if let Some(kf) = self.map.kfs.get_mut(&candidate) {
             kf.loops.insert(current);
         }
-        let ids: Vec<u64> = self.kfs.keys().copied().collect();
+        let ids: Vec<u64> = self.map.kfs.keys().copied().collect();
         let index: BTreeMap<u64, usize> = ids.iter().enumerate().map(|(i, &k)| (k, i)).collect();
         let mut poses: Vec<Isometry3<f64>> = ids.iter().map(|k| corrected.get(k).copied().unwrap_or(old[k])).collect();
         let mut edges = Vec::new();
@@ -600,21 +417,21 @@ impl LoopCloser {
         };
         // The loop connections first (they are measured after the correction).
         for &k in &connected {
-            for (o, _) in self.covisibility(k) {
+            for (o, _) in self.map.covisibility(k) {
                 if group.contains(&o) && !connected_set.contains(&o) {
                     edge(k, o, true, &mut edges);
                 }
             }
         }
         edge(current, candidate, true, &mut edges);
-        for (&k, kf) in &self.kfs {
+        for (&k, kf) in &self.map.kfs {
             if let Some(p) = kf.parent {
                 edge(k, p, false, &mut edges);
             }
             for &l in &kf.loops {
                 edge(k, l, false, &mut edges);
             }
-            for (o, w) in self.covisibility(k) {
+            for (o, w) in self.map.covisibility(k) {
                 if w >= self.config.essential_min {
                     edge(k, o, false, &mut edges);
                 }
@@ -633,7 +450,7 @@ impl LoopCloser {
         }
         self.move_points(&final_poses, &start);
         for (k, p) in &final_poses {
-            if let Some(kf) = self.kfs.get_mut(k) {
+            if let Some(kf) = self.map.kfs.get_mut(k) {
                 kf.info.world_from_cam = *p;
             }
         }
@@ -642,8 +459,8 @@ impl LoopCloser {
         let closure = LoopClosure {
             current,
             loop_keyframe: candidate,
-            current_stamp: self.kfs.get(&current).map_or(0.0, |k| k.info.stamp),
-            loop_stamp: self.kfs.get(&candidate).map_or(0.0, |k| k.info.stamp),
+            current_stamp: self.map.kfs.get(&current).map_or(0.0, |k| k.info.stamp),
+            loop_stamp: self.map.kfs.get(&candidate).map_or(0.0, |k| k.info.stamp),
             bow_matches: found.bow_matches,
             inliers: found.inliers,
             matches: found.matches.len(),
@@ -663,16 +480,16 @@ impl LoopCloser {
     /// Move every point with its reference key frame (the one that created it, or the first
     /// observer) from pose `from` to pose `to`, for key frames in `to`.
     fn move_points(&mut self, to: &BTreeMap<u64, Isometry3<f64>>, from: &BTreeMap<u64, Isometry3<f64>>) {
-        for (id, p) in &mut self.points {
-            let first = p.point.first_keyframe;
-            let reference = if self.kfs.contains_key(&first) {
+        for (id, p) in &mut self.map.points {
+            let first = p.first_keyframe;
+            let reference = if self.map.kfs.contains_key(&first) {
                 Some(first)
             } else {
-                self.observers.get(id).and_then(|o| o.iter().next().copied())
+                self.map.observers.get(id).and_then(|o| o.iter().next().copied())
             };
             let Some(r) = reference else { continue };
             if let (Some(t), Some(f)) = (to.get(&r), from.get(&r)) {
-                p.point.position = t * (f.inverse() * p.point.position);
+                p.position = t * (f.inverse() * p.position);
             }
         }
     }
@@ -680,21 +497,21 @@ impl LoopCloser {
     /// Key frame `kf`'s keypoint `i` observes point `p`: a different point there is replaced by
     /// `p` everywhere. True when something changed.
     fn fuse(&mut self, kf: u64, i: usize, p: u64) -> bool {
-        let Some(k) = self.kfs.get(&kf) else { return false };
+        let Some(k) = self.map.kfs.get(&kf) else { return false };
         let Some(kp) = k.keypoints.get(i).copied() else { return false };
         if kp.point == Some(p) {
             return false;
         }
-        if self.observers.get(&p).is_some_and(|o| o.contains(&kf)) {
+        if self.map.observers.get(&p).is_some_and(|o| o.contains(&kf)) {
             // The key frame already sees `p` through another keypoint.
             return false;
         }
         if let Some(q) = kp.point {
             // Replace `q` by `p` in every key frame that sees `q`.
-            let holders = self.observers.remove(&q).unwrap_or_default();
+            let holders = self.map.observers.remove(&q).unwrap_or_default();
             for h in holders {
-                let sees_p = self.observers.get(&p).is_some_and(|o| o.contains(&h));
-                let Some(hk) = self.kfs.get_mut(&h) else { continue };
+                let sees_p = self.map.observers.get(&p).is_some_and(|o| o.contains(&h));
+                let Some(hk) = self.map.kfs.get_mut(&h) else { continue };
                 for kpj in &mut hk.keypoints {
                     if kpj.point == Some(q) {
                         kpj.point = if sees_p { None } else { Some(p) };
@@ -710,16 +527,16 @@ impl LoopCloser {
                     }
                 }
                 if !sees_p {
-                    self.observers.entry(p).or_default().insert(h);
+                    self.map.observers.entry(p).or_default().insert(h);
                 }
             }
-            self.points.remove(&q);
+            self.map.points.remove(&q);
             self.fused_removed.push(q);
         } else {
-            if let Some(hk) = self.kfs.get_mut(&kf) {
+            if let Some(hk) = self.map.kfs.get_mut(&kf) {
                 hk.keypoints[i].point = Some(p);
             }
-            self.observers.entry(p).or_default().insert(kf);
+            self.map.observers.entry(p).or_default().insert(kf);
             self.fused_observations.push(Observation {
                 keyframe: kf,
                 point: p,
@@ -728,8 +545,8 @@ impl LoopCloser {
                 octave: kp.octave,
             });
         }
-        if let Some(pt) = self.points.get_mut(&p) {
-            pt.point.observations = self.observers.get(&p).map_or(0, |o| o.len() as u32);
+        if let Some(pt) = self.map.points.get_mut(&p) {
+            pt.observations = self.map.observers.get(&p).map_or(0, |o| o.len() as u32);
         }
         true
     }
@@ -738,9 +555,9 @@ impl LoopCloser {
     /// fusion added and the points it removed.
     pub fn correction(&self) -> SparseMap {
         SparseMap {
-            map_id: self.map_id,
-            keyframes: self.kfs.values().map(|k| k.info).collect(),
-            points: self.points.values().map(|p| p.point).collect(),
+            map_id: self.map.map_id,
+            keyframes: self.map.kfs.values().map(|k| k.info).collect(),
+            points: self.map.points.values().copied().collect(),
             observations: self.fused_observations.clone(),
             removed: self.fused_removed.clone(),
             features: Vec::new(),

@@ -19,6 +19,7 @@
 //! RGB-D observation in BA (pixel plus virtual right coordinate), as in ORB-SLAM2.
 
 use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
 
 use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{
@@ -27,6 +28,8 @@ use dynaflow_vision::geometry::{
 use dynaflow_vision::matching::{GridIndex, MatchConfig, match_brute_force, nearest_two};
 use nalgebra::{Isometry3, Point3};
 
+use crate::bow::Vocabulary;
+use crate::keyframe_map::KeyFrameMap;
 use crate::map::{Feature, KeyFrameFeature, KeyFrameInfo, KeyFrameKeypoint, MapPoint, Observation, SparseMap, sigma};
 
 /// Tracking settings (defaults: ORB-SLAM2's for an RGB-D camera, see [`TrackerConfig::rgbd`]).
@@ -217,9 +220,22 @@ pub struct Tracker {
     /// Per posed frame: its stamp, reference key frame and `ref_from_frame` (ORB-SLAM2's
     /// relative frame poses, from which the final trajectory is rebuilt).
     anchors: Vec<(f64, u64, Isometry3<f64>)>,
-    /// The newest key frame.
+    /// The newest key frame (or the one relocalisation found).
     reference: Option<u64>,
+    /// With a vocabulary: every key frame and point, for relocalisation in the whole map.
+    places: Option<KeyFrameMap>,
+    relocalisations: usize,
+    /// False: ORB-SLAM2's localisation mode (a loaded map, no key frames).
+    mapping: bool,
+    /// A loaded map the tracker has not yet found itself in.
+    unlocated: bool,
 }
+
+/// ORB-SLAM2's relocalisation: BoW matches to try a candidate, inliers after the first BA, and
+/// inliers to accept (`Tracking::Relocalization`: 15, 10, 50).
+const RELOCALISATION_BOW_MATCHES: usize = 15;
+const RELOCALISATION_MIN_BA_INLIERS: usize = 10;
+const RELOCALISATION_INLIERS: usize = 50;
 
 impl Tracker {
     /// A tracker for images `width` x `height` from camera `cam`; `seed` drives RANSAC.
@@ -246,7 +262,71 @@ impl Tracker {
             keyframe_poses: BTreeMap::new(),
             anchors: Vec::new(),
             reference: None,
+            places: None,
+            relocalisations: 0,
+            mapping: true,
+            unlocated: false,
         }
+    }
+
+    /// The whole map kept for relocalisation (with a vocabulary), e.g. to save it.
+    pub fn places(&self) -> Option<&KeyFrameMap> {
+        self.places.as_ref()
+    }
+
+    /// Work in a loaded map: the first frames relocalise in it (no pose until one does). With
+    /// `mapping` false this is ORB-SLAM2's localisation mode: no key frames are made, the local
+    /// map follows the camera through the loaded key frames, and a lost camera relocalises
+    /// again (no new map). With `mapping` true new key frames extend the loaded map.
+    pub fn use_map(&mut self, map: KeyFrameMap, mapping: bool) {
+        self.map_id = map.map_id;
+        self.next_keyframe = map.kfs.keys().next_back().map_or(0, |k| k + 1);
+        // Tracking's point ids are below local mapping's (1 << 48).
+        self.next_point = map.points.keys().rfind(|&&id| id < 1 << 48).map_or(0, |p| p + 1);
+        for (id, k) in &map.kfs {
+            self.keyframe_poses.insert(*id, k.info.world_from_cam);
+        }
+        self.first_keyframe = map.kfs.keys().next().copied().unwrap_or(0);
+        self.places = Some(map);
+        self.initialised = true;
+        self.unlocated = true;
+        self.mapping = mapping;
+        self.last = None;
+        self.points.clear();
+    }
+
+    /// ORB-SLAM2's `UpdateLocalMap` in localisation mode: the key frames that see the
+    /// matched points (the one seeing most is the reference) and their covisible key frames
+    /// give the points to track next.
+    fn follow_loaded_map(&mut self, matched: &[Option<u64>]) {
+        let Some(places) = &self.places else { return };
+        let mut votes: BTreeMap<u64, usize> = BTreeMap::new();
+        for id in matched.iter().flatten() {
+            for k in places.observers.get(id).into_iter().flatten() {
+                *votes.entry(*k).or_default() += 1;
+            }
+        }
+        let Some((&reference, _)) = votes.iter().max_by_key(|(k, n)| (**n, std::cmp::Reverse(**k))) else { return };
+        let mut group: Vec<u64> = votes.keys().copied().collect();
+        group.extend(places.covisible(reference).into_iter().take(10));
+        group.sort_unstable();
+        group.dedup();
+        self.points = places
+            .points_of(&group)
+            .into_iter()
+            .filter_map(|id| {
+                let p = places.points.get(&id)?;
+                Some((id, TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe }))
+            })
+            .collect();
+        self.reference = Some(reference);
+    }
+
+    /// Keep every key frame and point with their words, and relocalise in the whole map when
+    /// tracking is lost (ORB-SLAM2's key-frame database), with this vocabulary.
+    pub fn with_vocabulary(mut self, vocabulary: Arc<Vocabulary>) -> Self {
+        self.places = Some(KeyFrameMap::new(self.cam, self.width, self.height, self.config.scale_factor, vocabulary));
+        self
     }
 
     /// The trajectory as ORB-SLAM2 saves it at the end (`SaveTrajectoryTUM`): each frame's pose
@@ -289,6 +369,9 @@ impl Tracker {
         for id in &correction.removed {
             self.points.remove(id);
         }
+        if let Some(places) = &mut self.places {
+            places.apply_correction(correction);
+        }
     }
 
     /// Monocular: why the last attempt to initialise failed (`None` after a success).
@@ -314,6 +397,11 @@ impl Tracker {
         let newest = update.keyframes.iter().map(|k| k.id).max().unwrap_or(0);
         for k in &update.keyframes {
             self.keyframe_poses.insert(k.id, k.world_from_cam);
+        }
+        if let Some(places) = &mut self.places
+            && places.map_id == update.map_id
+        {
+            places.apply_refinements(update);
         }
         let incoming: BTreeSet<u64> = update.points.iter().map(|p| p.id).collect();
         for p in &update.points {
@@ -352,6 +440,29 @@ impl Tracker {
     }
 
     fn track_frame(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
+        if self.unlocated {
+            // A loaded map: no pose until the camera is found in it.
+            let Some(f) = self.relocalise_in_map(features).filter(|f| f.inliers >= self.config.min_inliers) else {
+                return self.untracked(None, TrackState::Lost, features.len());
+            };
+            self.unlocated = false;
+            self.lost_run = 0;
+            self.velocity = Isometry3::identity();
+            self.last = Some(f.world_from_cam);
+            if !self.mapping {
+                self.follow_loaded_map(&f.matched);
+            }
+            return TrackingResult {
+                pose: Some(f.world_from_cam),
+                state: TrackState::Relocalised,
+                matches: f.matches,
+                inliers: f.inliers,
+                map_points: self.points.len(),
+                map_id: self.map_id,
+                keyframe: None,
+                matched: f.matched,
+            };
+        }
         let predicted = self.last.map(|l| renormalised(&(l * self.velocity)));
         if !self.initialised {
             let origin = predicted.unwrap_or_else(Isometry3::identity);
@@ -370,6 +481,12 @@ impl Tracker {
             fit = self.relocalise(features);
             state = TrackState::Relocalised;
         }
+        if fit.as_ref().is_none_or(|f| f.inliers < self.config.min_inliers) {
+            // ORB-SLAM2's relocalisation: the whole map's key frames by bag of words.
+            if let Some(f) = self.relocalise_in_map(features) {
+                fit = Some(f);
+            }
+        }
         let finite = |f: &Fit| {
             let (t, q) = (f.world_from_cam.translation.vector, f.world_from_cam.rotation.coords);
             t.iter().chain(q.iter()).all(|v| v.is_finite())
@@ -385,7 +502,11 @@ impl Tracker {
                 };
                 self.last = Some(f.world_from_cam);
                 self.frames_since_kf += 1;
-                let keyframe = self.need_keyframe(features, &f).then(|| self.make_keyframe(stamp, features, &f));
+                if !self.mapping {
+                    self.follow_loaded_map(&f.matched);
+                }
+                let keyframe =
+                    (self.mapping && self.need_keyframe(features, &f)).then(|| self.make_keyframe(stamp, features, &f));
                 TrackingResult {
                     pose: Some(f.world_from_cam),
                     state,
@@ -398,9 +519,15 @@ impl Tracker {
                 }
             }
             None => {
-                self.lost_run += 1;
+                // Only frames that show something count towards a new map: a blacked-out or
+                // covered camera keeps trying to relocalise in the map it has.
+                if features.iter().filter(|f| !f.dynamic).count() >= self.config.min_init_points {
+                    self.lost_run += 1;
+                }
                 self.last = Some(predicted);
-                if self.lost_run > self.config.reset_after && self.config.sensor == Sensor::Monocular {
+                if !self.mapping {
+                    // Localisation mode: keep looking for the camera in the loaded map.
+                } else if self.lost_run > self.config.reset_after && self.config.sensor == Sensor::Monocular {
                     // A single view cannot start a map: initialise again from two views (the
                     // new map at the dead-reckoned pose, in a scale of its own).
                     self.initialised = false;
@@ -415,6 +542,81 @@ impl Tracker {
                 self.untracked(Some(predicted), TrackState::Lost, features.len())
             }
         }
+    }
+
+    /// ORB-SLAM2's `Relocalization` against every key frame of the map: candidates from the
+    /// key-frame database by the frame's bag of words; for each, `SearchByBoW` (15 matches
+    /// needed), P3P RANSAC and motion-only BA (10 inliers), then the candidate's and its
+    /// covisible key frames' points projected for more matches and BA again; accepted with 50
+    /// inliers. The tracker's local map becomes those key frames' points, and the candidate
+    /// its reference key frame.
+    fn relocalise_in_map(&mut self, features: &[Feature]) -> Option<Fit> {
+        let places = self.places.take()?;
+        let found = self.relocalise_with(&places, features);
+        self.places = Some(places);
+        found
+    }
+
+    fn relocalise_with(&mut self, places: &KeyFrameMap, features: &[Feature]) -> Option<Fit> {
+        if places.map_id != self.map_id || places.kfs.is_empty() {
+            return None;
+        }
+        let static_idx: Vec<usize> = (0..features.len()).filter(|&i| !features[i].dynamic).collect();
+        let descriptors: Vec<[u8; 32]> = static_idx.iter().map(|&i| features[i].descriptor).collect();
+        let (bow, index) = places.transform(&descriptors);
+        let candidates = places.db.relocalisation_candidates(&bow, &|k| places.covisible(k));
+        for (candidate, _) in candidates {
+            let Some(kf) = places.kfs.get(&candidate) else { continue };
+            let pairs = places.search_frame_by_bow(kf, features, &index, &static_idx);
+            if pairs.len() < RELOCALISATION_BOW_MATCHES {
+                continue;
+            }
+            let world: Vec<Point3<f64>> =
+                pairs.iter().filter_map(|(_, id)| places.points.get(id).map(|p| p.position)).collect();
+            if world.len() != pairs.len() {
+                continue;
+            }
+            let pixels: Vec<[f64; 2]> = pairs.iter().map(|&(i, _)| features[i].uv).collect();
+            let Some((pose, mask)) =
+                p3p_ransac(&world, &pixels, &self.cam, self.config.ransac_threshold, 300, &mut self.rng)
+            else {
+                continue;
+            };
+            let mut group = vec![candidate];
+            group.extend(places.covisible(candidate));
+            let local: BTreeMap<u64, TPoint> = places
+                .points_of(&group)
+                .into_iter()
+                .filter_map(|id| {
+                    let p = places.points.get(&id)?;
+                    Some((
+                        id,
+                        TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe },
+                    ))
+                })
+                .collect();
+            let saved = std::mem::replace(&mut self.points, local);
+            let fit = self.optimise(features, &pairs, &pose, Some(mask));
+            if fit.inliers >= RELOCALISATION_MIN_BA_INLIERS {
+                let guided = self.track_projection(features, &fit.world_from_cam, 0.5 * self.config.search_radius);
+                let best = match guided {
+                    Some(g) if g.inliers > fit.inliers => g,
+                    _ => fit,
+                };
+                if best.inliers >= RELOCALISATION_INLIERS {
+                    self.reference = Some(candidate);
+                    self.relocalisations += 1;
+                    return Some(best);
+                }
+            }
+            self.points = saved;
+        }
+        None
+    }
+
+    /// Relocalisations against the whole map so far.
+    pub fn map_relocalisations(&self) -> usize {
+        self.relocalisations
     }
 
     /// The result of a frame that was not tracked.
@@ -657,7 +859,20 @@ impl Tracker {
         } else {
             Vec::new()
         };
-        SparseMap {
+        // The points it matched go along too: local mapping may have forgotten an old one that
+        // relocalisation brought back (it keeps the ones it holds).
+        for pid in fit.matched.iter().flatten() {
+            if let Some(p) = self.points.get(pid) {
+                points.push(MapPoint {
+                    id: *pid,
+                    position: p.position,
+                    descriptor: p.descriptor,
+                    observations: 0,
+                    first_keyframe: p.first_keyframe,
+                });
+            }
+        }
+        let batch = SparseMap {
             map_id: self.map_id,
             keyframes: vec![info],
             points,
@@ -665,7 +880,15 @@ impl Tracker {
             removed: Vec::new(),
             features,
             keypoints,
+        };
+        if let Some(places) = &mut self.places {
+            places.switch_map(self.map_id);
+            places.apply_refinements(&batch);
+            if let Some((kf, bow)) = places.add_keyframe(&batch) {
+                places.db.add(kf, bow);
+            }
         }
+        batch
     }
 
     /// A monocular key frame's keypoints for triangulation: static and unmatched.

@@ -62,10 +62,53 @@ pub fn run(args: &RunArgs) -> u8 {
             }
         },
     };
-    let req = LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source };
+    let mut req =
+        LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source };
     let Some(mut loaded) = super::load_and_report(&args.graph, &req) else {
         return EXIT_BAD_INPUT;
     };
+    // `--save-map`, `--load-map`, `--localise`: parameters of the graph's tracker.
+    if args.save_map.is_some() || args.load_map.is_some() || args.localise {
+        let trackers: Vec<String> = loaded
+            .graph
+            .iter()
+            .flat_map(|g| &g.nodes)
+            .filter(|n| !n.disabled && n.op.name == "pnp_track")
+            .map(|n| n.id.to_string())
+            .collect();
+        let [tracker] = trackers.as_slice() else {
+            eprintln!(
+                "error: --save-map, --load-map and --localise need one `pnp_track` node in the graph, it has {} ({}); set its `save_map`, `load_map` and `mapping` params with --set",
+                trackers.len(),
+                trackers.join(", ")
+            );
+            return EXIT_BAD_INPUT;
+        };
+        let abs = |p: &std::path::Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+        let mut sets = Vec::new();
+        if let Some(p) = &args.save_map {
+            sets.push(format!("{tracker}.save_map={}", abs(p).display()));
+        }
+        if let Some(p) = &args.load_map {
+            sets.push(format!("{tracker}.load_map={}", abs(p).display()));
+        }
+        if args.localise {
+            sets.push(format!("{tracker}.mapping=false"));
+        }
+        for s in sets {
+            match Override::parse(&s) {
+                Ok(o) => req.overrides.push(o),
+                Err(e) => {
+                    eprintln!("error: {e}");
+                    return EXIT_BAD_INPUT;
+                }
+            }
+        }
+        let Some(again) = super::load_and_report(&args.graph, &req) else {
+            return EXIT_BAD_INPUT;
+        };
+        loaded = again;
+    }
     // The graph runs; the rest of the load stays for locating a build error.
     let Some(graph) = loaded.graph.take() else {
         return EXIT_BAD_INPUT;

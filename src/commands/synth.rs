@@ -37,6 +37,10 @@ pub struct SynthArgs {
     /// Also write ground-truth optical flow (`flow/*.flo`).
     #[arg(long)]
     pub flow: bool,
+    /// Kidnap the camera at this frame: 30 black frames without depth, then the motion resumes
+    /// 10 s earlier (a place already seen; relocalisation)
+    #[arg(long)]
+    pub kidnap: Option<u64>,
     /// No depth noise, image noise or blur (exact rendering).
     #[arg(long)]
     pub clean: bool,
@@ -68,6 +72,7 @@ pub fn synth(args: &SynthArgs) -> u8 {
         depth_noise: !args.clean,
         image_noise: if args.clean { 0.0 } else { 2.0 },
         blur: !args.clean,
+        kidnap: args.kidnap,
         ..SynthConfig::default()
     };
     let t = Instant::now();

@@ -53,7 +53,16 @@ pub struct SynthConfig {
     pub image_noise: f32,
     /// 3×3 blur of the image.
     pub blur: bool,
+    /// "Kidnap" the camera at this frame: [`KIDNAP_BLACKOUT`] frames are black with no depth
+    /// (the camera covered and carried away), then the motion resumes [`KIDNAP_REWIND`]
+    /// seconds earlier (the camera set down where it was then: a place already seen).
+    pub kidnap: Option<u64>,
 }
+
+/// Frames a kidnapped camera sees nothing (one second at 30 Hz).
+pub const KIDNAP_BLACKOUT: u64 = 30;
+/// How far back in its motion a kidnapped camera is set down, seconds.
+pub const KIDNAP_REWIND: f64 = 10.0;
 
 impl Default for SynthConfig {
     fn default() -> Self {
@@ -67,6 +76,7 @@ impl Default for SynthConfig {
             depth_noise: true,
             image_noise: 2.0,
             blur: true,
+            kidnap: None,
         }
     }
 }
@@ -134,7 +144,16 @@ impl Generator {
 
     /// Ground-truth pose of frame `k`.
     pub fn pose(&self, k: u64) -> Isometry3<f64> {
-        self.config.motion.pose(self.time(k))
+        let t = self.time(k);
+        match self.config.kidnap {
+            Some(at) if k >= at + KIDNAP_BLACKOUT => self.config.motion.pose(t - KIDNAP_REWIND),
+            _ => self.config.motion.pose(t),
+        }
+    }
+
+    /// Is frame `k` blacked out by a kidnap?
+    pub fn blacked_out(&self, k: u64) -> bool {
+        self.config.kidnap.is_some_and(|at| (at..at + KIDNAP_BLACKOUT).contains(&k))
     }
 
     /// The people's body parts at frame `k` as oriented boxes (world from box centre, half
@@ -159,6 +178,9 @@ impl Generator {
         }
         let c = &self.config;
         let k = left.index;
+        if self.blacked_out(k) {
+            return Some(vec![0; left.rgb.len()]);
+        }
         let world_from_right = left.world_from_cam * nalgebra::Translation3::new(baseline, 0.0, 0.0);
         let parts = self.scene.people_parts(self.time(k));
         let r = render::render(&self.scene, &parts, &world_from_right, &c.intrinsics, false);
@@ -185,8 +207,13 @@ impl Generator {
         let (w, h) = (c.intrinsics.width as usize, c.intrinsics.height as usize);
         let seed32 = (c.seed ^ (c.seed >> 32)) as u32;
         let frame32 = k as u32;
-        let depth = if c.depth_noise { sensor::kinect_depth(&r.depth, w, seed32, frame32) } else { r.depth.clone() };
-        let rgb = sensor::camera_image(&r.rgb, w, h, c.image_noise, c.blur, seed32, frame32);
+        let mut depth =
+            if c.depth_noise { sensor::kinect_depth(&r.depth, w, seed32, frame32) } else { r.depth.clone() };
+        let mut rgb = sensor::camera_image(&r.rgb, w, h, c.image_noise, c.blur, seed32, frame32);
+        if self.blacked_out(k) {
+            rgb.fill(0);
+            depth.fill(0.0);
+        }
         let flow = flow.then(|| {
             let t1 = self.time(k + 1);
             let next_parts = self.scene.people_parts(t1);

@@ -10,15 +10,11 @@ use dynaflow_engine::op::{
 };
 use dynaflow_engine::params;
 use dynaflow_slam::bow::Vocabulary;
-use dynaflow_slam::loop_closing::{LoopCloser, LoopConfig, LoopError};
+use dynaflow_slam::loop_closing::{LoopCloser, LoopConfig, LoopError, Rejection};
 use dynaflow_vision::camera::Pinhole;
 use rand_core::Rng;
 
 use super::convert;
-
-/// The default vocabulary (k 10, L 5), trained by `scripts/train_vocabulary.sh`: see
-/// `slam/vocabulary/SOURCE.md` for what it was trained on.
-pub const DEFAULT_VOCABULARY: &[u8] = include_bytes!("../../../slam/vocabulary/default.voc");
 
 params! {
     struct Config {
@@ -66,19 +62,10 @@ pub const LOOP_CLOSE: OpSpec = OpSpec {
     ground_truth_outputs: None,
     build: |p: &Params| {
         let config = Config::from_params(p)?;
-        let t0 = Instant::now();
-        let (vocabulary, name) = if config.vocabulary.as_os_str().is_empty() {
-            let v = Vocabulary::from_bytes(DEFAULT_VOCABULARY, "the embedded default vocabulary")
-                .map_err(|e| OpError::Input(e.to_string()))?;
-            (v, "default".to_owned())
-        } else {
-            let v = Vocabulary::load(&config.vocabulary).map_err(|e| OpError::Input(e.to_string()))?;
-            (v, config.vocabulary.display().to_string())
-        };
-        let load_ms = t0.elapsed().as_secs_f64() * 1e3;
+        let (vocabulary, name, load_ms) = super::load_vocabulary(&config.vocabulary)?;
         Ok(Instance::Transform(Box::new(LoopClose {
             config,
-            vocabulary: Arc::new(vocabulary),
+            vocabulary,
             vocabulary_name: name,
             load_ms,
             closer: None,
@@ -236,7 +223,9 @@ impl Operator for LoopClose {
             "keyframes": self.closer.as_ref().map_or(0, LoopCloser::keyframes),
             "loops": loops,
             "false_loops": if self.ground_truth.is_empty() { None } else { Some(false_loops) },
-            "rejected_candidates": self.closer.as_ref().map_or(0, LoopCloser::rejected),
+            "rejected_candidates": self.closer.as_ref().map(|c| {
+                Rejection::NAMES.iter().zip(c.rejected()).map(|(n, v)| ((*n).to_owned(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>()
+            }),
             "detection_ms": stats(&self.insert_ms),
             "loop_correction_ms": stats(&self.loop_ms),
             "refused": self.refused,

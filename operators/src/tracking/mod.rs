@@ -19,3 +19,27 @@ mod pnp;
 pub use local_map::LOCAL_MAP;
 pub use loop_close::LOOP_CLOSE;
 pub use pnp::PNP_TRACK;
+
+use std::path::Path;
+use std::sync::Arc;
+
+use dynaflow_engine::op::OpError;
+use dynaflow_slam::bow::Vocabulary;
+
+/// The default vocabulary (k 10, L 5), trained by `scripts/train_vocabulary.sh`: see
+/// `slam/vocabulary/SOURCE.md` for what it was trained on.
+pub const DEFAULT_VOCABULARY: &[u8] = include_bytes!("../../../slam/vocabulary/default.voc");
+
+/// A vocabulary file, or the embedded default for an empty path; with its name for reports and
+/// the milliseconds loading took. A damaged file is an error naming it.
+fn load_vocabulary(path: &Path) -> Result<(Arc<Vocabulary>, String, f64), OpError> {
+    let t0 = std::time::Instant::now();
+    let (v, name) = if path.as_os_str().is_empty() {
+        let v = Vocabulary::from_bytes(DEFAULT_VOCABULARY, "the embedded default vocabulary")
+            .map_err(|e| OpError::Input(e.to_string()))?;
+        (v, "default".to_owned())
+    } else {
+        (Vocabulary::load(path).map_err(|e| OpError::Input(e.to_string()))?, path.display().to_string())
+    };
+    Ok((Arc::new(v), name, t0.elapsed().as_secs_f64() * 1e3))
+}

@@ -1,6 +1,7 @@
 //! `pnp_track`.
 
 use std::io::Write;
+use std::path::PathBuf;
 use std::sync::Arc;
 
 use dynaflow_engine::msg::{
@@ -41,6 +42,14 @@ params! {
         ransac_threshold: f64 [0.1, 100.0] = 3.0,
         /// lost frames in a row before a new map starts
         reset_after: u64 [0, 100_000] = 5,
+        /// vocabulary file (`dynaflow vocab train`) for relocalisation in the whole map when tracking is lost (ORB-SLAM2's key-frame database); empty: the embedded default (as `loop_close`'s; use the same file for both)
+        vocabulary: PathBuf = PathBuf::new(),
+        /// write the whole map here at the end of the run (key frames, keypoints, points, the vocabulary's id; `dynaflow run --save-map`)
+        save_map: PathBuf = PathBuf::new(),
+        /// start in this saved map (made with the same vocabulary): the first frames relocalise in it (`dynaflow run --load-map`)
+        load_map: PathBuf = PathBuf::new(),
+        /// false: ORB-SLAM2's localisation mode, with `load_map`: no key frames, the local map follows the camera through the loaded one, a lost camera relocalises again
+        mapping: bool = true,
         /// a keypoint takes the culling label of the nearest labelled track within this many pixels (dynamic: left out); 10 = `lk_flow`'s `min_distance`, the spacing of the tracked corners, so a label speaks for its neighbourhood as a segment would; 0: only keypoints on a track
         label_radius: f64 [0.0, 100.0] = 10.0,
     }
@@ -94,8 +103,29 @@ pub const PNP_TRACK: OpSpec = OpSpec {
     cpu_heavy: true,
     ground_truth_outputs: None,
     build: |p: &Params| {
+        let config = Config::from_params(p)?;
+        let (vocabulary, _, _) = super::load_vocabulary(&config.vocabulary)?;
+        if !config.mapping && config.load_map.as_os_str().is_empty() {
+            return Err(OpError::Config {
+                key: "mapping".into(),
+                message: "`mapping: false` (localisation mode) needs a map to localise in: set `load_map` (or `dynaflow run --load-map FILE`)".into(),
+            });
+        }
+        // Read the map now, so that a bad file stops the run before it starts; the camera is
+        // set on the first frame.
+        let loaded = if config.load_map.as_os_str().is_empty() {
+            None
+        } else {
+            let cam = Pinhole { fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 };
+            Some(
+                dynaflow_slam::map_file::load(&config.load_map, cam, 0.0, 0.0, 1.2, vocabulary.clone())
+                    .map_err(|e| OpError::Input(e.to_string()))?,
+            )
+        };
         Ok(Instance::Transform(Box::new(PnpTrack {
-            config: Config::from_params(p)?,
+            config,
+            vocabulary,
+            loaded,
             tracker: None,
             trajectory: Vec::new(),
             ground_truth: Vec::new(),
@@ -111,6 +141,10 @@ pub const PNP_TRACK: OpSpec = OpSpec {
 
 struct PnpTrack {
     config: Config,
+    /// For relocalisation in the whole map.
+    vocabulary: Arc<dynaflow_slam::bow::Vocabulary>,
+    /// A map to start in (`load_map`), until the first frame gives the camera.
+    loaded: Option<dynaflow_slam::keyframe_map::KeyFrameMap>,
     tracker: Option<Tracker>,
     trajectory: Vec<(f64, Isometry3<f64>)>,
     ground_truth: Vec<(f64, Isometry3<f64>)>,
@@ -243,7 +277,16 @@ impl Operator for PnpTrack {
             tc.ransac_threshold = self.config.ransac_threshold;
             tc.reset_after = self.config.reset_after as u32;
             let cam = Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
-            self.tracker = Some(Tracker::new(tc, cam, k.width as usize, k.height as usize, ctx.rng.next_u64()));
+            let mut tracker = Tracker::new(tc, cam, k.width as usize, k.height as usize, ctx.rng.next_u64())
+                .with_vocabulary(self.vocabulary.clone());
+            if let Some(mut map) = self.loaded.take() {
+                map.cam = cam;
+                map.width = f64::from(k.width);
+                map.height = f64::from(k.height);
+                map.scale_factor = tc.scale_factor;
+                tracker.use_map(map, self.config.mapping);
+            }
+            self.tracker = Some(tracker);
         }
         let Some(tracker) = self.tracker.as_mut() else { return Ok(Outputs::new()) };
         if let Some((m, update)) = MAP.find(inputs)?
@@ -314,15 +357,17 @@ impl Operator for PnpTrack {
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
         // The trajectory file first: whatever happens next, the estimate is on disk.
         let written = self.write_trajectory(ctx);
+        let saved = self.save_map();
         let [not_initialised, new_map, tracked, relocalised, lost] = self.counts;
         let mut report = serde_json::json!({
             "frames": { "not_initialised": not_initialised, "new_map": new_map, "tracked": tracked,
                         "relocalised": relocalised, "lost": lost },
             "maps": self.tracker.as_ref().map_or(0, Tracker::map_id),
+            "map_relocalisations": self.tracker.as_ref().map_or(0, Tracker::map_relocalisations),
             "sensor": self.config.sensor.as_str(),
             "first_pose_frame": self.first_pose_frame,
         });
-        if new_map == 0 && self.config.sensor == Sensor::Mono {
+        if self.first_pose_frame.is_none() && self.config.sensor == Sensor::Mono {
             let last = self.tracker.as_ref().and_then(Tracker::init_failure).unwrap_or("no frame");
             let why = format!(
                 "the monocular tracker never initialised in {not_initialised} frames (it needs two views with enough parallax); the last attempt: {last}"
@@ -330,7 +375,7 @@ impl Operator for PnpTrack {
             tracing::warn!("`{}`: {why}", ctx.node);
             report["initialised"] = serde_json::json!(false);
             report["not_initialised_because"] = serde_json::json!(why);
-        } else if new_map == 0 {
+        } else if self.first_pose_frame.is_none() {
             // No map ever started: no pose, no ATE. Said here, in the summary and by `run`.
             let why = format!(
                 "the tracker never initialised in {not_initialised} frames: at most {} keypoints of a frame had a depth up to max_depth {} m and no mask or dynamic label; a map needs {}",
@@ -371,12 +416,37 @@ impl Operator for PnpTrack {
                 Err(e) => report[error] = serde_json::json!(e.to_string()),
             }
         }
+        match &saved {
+            Ok(Some((k, p))) => {
+                report["map_saved"] = serde_json::json!({ "file": self.config.save_map.display().to_string(), "keyframes": k, "points": p });
+            }
+            Ok(None) => {}
+            Err(e) => report["map_saved_error"] = serde_json::json!(e.to_string()),
+        }
+        if !self.config.load_map.as_os_str().is_empty() {
+            report["map_loaded"] = serde_json::json!(self.config.load_map.display().to_string());
+        }
         ctx.report = Some(report);
-        written
+        written.and(saved.map(|_| ()))
     }
 }
 
 impl PnpTrack {
+    /// Write the whole map to `save_map` (if set): its key frames and points.
+    fn save_map(&self) -> Result<Option<(usize, usize)>, OpError> {
+        if self.config.save_map.as_os_str().is_empty() {
+            return Ok(None);
+        }
+        let Some(map) = self.tracker.as_ref().and_then(Tracker::places) else {
+            return Err(OpError::Failed(format!(
+                "no map to save to {}: the tracker never started one",
+                self.config.save_map.display()
+            )));
+        };
+        dynaflow_slam::map_file::save(map, &self.config.save_map).map_err(|e| OpError::Failed(e.to_string()))?;
+        Ok(Some((map.kfs.len(), map.points.len())))
+    }
+
     fn final_trajectory(&self) -> Vec<(f64, Isometry3<f64>)> {
         self.tracker.as_ref().map(Tracker::keyframe_trajectory).unwrap_or_default()
     }

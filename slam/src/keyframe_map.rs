@@ -1,0 +1,316 @@
+//! The whole key-frame map as place recognition sees it: every key frame with all its
+//! keypoints (descriptor, depth, map point), its bag of words and the key-frame database, every
+//! point, and the covisibility graph derived from the observations. Loop closing keeps one
+//! ([`crate::loop_closing`]) and tracking keeps one for relocalisation ([`crate::tracker`]);
+//! both are fed the same batches (tracking's key frames, local mapping's refinements, loop
+//! closing's corrections), so they agree.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
+
+use dynaflow_vision::camera::Pinhole;
+use dynaflow_vision::matching::{GridIndex, hamming, nearest_two};
+use nalgebra::{Isometry3, Point3};
+
+use crate::bow::{BowVector, Descriptor, FeatureVector, Vocabulary};
+use crate::keyframe_db::KeyFrameDatabase;
+use crate::map::{Feature, KeyFrameInfo, KeyFrameKeypoint, MapPoint, SparseMap, sigma};
+
+/// Hamming distance of a BoW or projection match (ORB-SLAM2 `TH_LOW`) and the BoW ratio.
+pub const MAX_DISTANCE: u32 = 50;
+pub const BOW_RATIO: f32 = 0.75;
+/// Shared points that make two key frames covisible (ORB-SLAM2's connections: 15).
+pub const COVISIBILITY_MIN: usize = 15;
+
+/// A key frame with everything place recognition needs.
+#[derive(Clone, Debug)]
+pub struct PlaceKeyFrame {
+    pub info: KeyFrameInfo,
+    pub keypoints: Vec<KeyFrameKeypoint>,
+    pub bow: BowVector,
+    /// Keypoint indices by vocabulary node (the direct index).
+    pub features: FeatureVector,
+    /// Spanning-tree parent (the key frame it shared most points with when it came).
+    pub parent: Option<u64>,
+    /// Key frames it closed a loop with.
+    pub loops: BTreeSet<u64>,
+}
+
+/// The map.
+#[derive(Debug)]
+pub struct KeyFrameMap {
+    pub cam: Pinhole,
+    pub width: f64,
+    pub height: f64,
+    pub scale_factor: f64,
+    vocabulary: Arc<Vocabulary>,
+    levels_up: usize,
+    pub map_id: u32,
+    pub kfs: BTreeMap<u64, PlaceKeyFrame>,
+    pub points: BTreeMap<u64, MapPoint>,
+    /// Point id -> key frames observing it.
+    pub observers: BTreeMap<u64, BTreeSet<u64>>,
+    pub db: KeyFrameDatabase,
+}
+
+impl KeyFrameMap {
+    /// An empty map for a camera of `width` x `height` pixels.
+    pub fn new(cam: Pinhole, width: f64, height: f64, scale_factor: f64, vocabulary: Arc<Vocabulary>) -> Self {
+        // ORB-SLAM2 groups features by the node 4 levels above the words of its 6-level
+        // vocabulary: the second level from the root. The same level of any vocabulary.
+        let levels_up = vocabulary.levels().saturating_sub(2);
+        Self {
+            cam,
+            width,
+            height,
+            scale_factor,
+            vocabulary,
+            levels_up,
+            map_id: 0,
+            kfs: BTreeMap::new(),
+            points: BTreeMap::new(),
+            observers: BTreeMap::new(),
+            db: KeyFrameDatabase::new(),
+        }
+    }
+
+    /// The vocabulary.
+    pub fn vocabulary(&self) -> &Arc<Vocabulary> {
+        &self.vocabulary
+    }
+
+    /// Bag of words and direct index of a set of descriptors.
+    pub fn transform(&self, descriptors: &[Descriptor]) -> (BowVector, FeatureVector) {
+        self.vocabulary.transform(descriptors, self.levels_up)
+    }
+
+    /// Forget everything (a new map starts) when `map_id` is not the current one; true then.
+    pub fn switch_map(&mut self, map_id: u32) -> bool {
+        if map_id == self.map_id {
+            return false;
+        }
+        self.kfs.clear();
+        self.points.clear();
+        self.observers.clear();
+        self.db = KeyFrameDatabase::new();
+        self.map_id = map_id;
+        true
+    }
+
+    /// Take a batch's points (new or refined), key-frame poses and removed points.
+    pub fn apply_refinements(&mut self, batch: &SparseMap) {
+        for p in &batch.points {
+            self.points.insert(p.id, *p);
+        }
+        for k in &batch.keyframes {
+            if let Some(kf) = self.kfs.get_mut(&k.id) {
+                kf.info.world_from_cam = k.world_from_cam;
+            }
+        }
+        for id in &batch.removed {
+            self.remove_point(*id);
+        }
+    }
+
+    /// Take a loop correction: poses, positions, removed points and fusion's observations.
+    pub fn apply_correction(&mut self, c: &SparseMap) {
+        if c.map_id != self.map_id {
+            return;
+        }
+        self.apply_refinements(c);
+        for o in &c.observations {
+            if !self.points.contains_key(&o.point) {
+                continue;
+            }
+            let Some(kf) = self.kfs.get_mut(&o.keyframe) else { continue };
+            if let Some(kp) = kf.keypoints.iter_mut().find(|k| k.uv == o.uv && k.octave == o.octave) {
+                kp.point = Some(o.point);
+                self.observers.entry(o.point).or_default().insert(o.keyframe);
+            }
+        }
+    }
+
+    /// Add the new key frame of `batch` (its `keypoints`); returns its bag of words, or `None`
+    /// when the batch carries no key frame's keypoints or the key frame is known. The key frame
+    /// is not yet in the database (loop closing queries first, then adds it).
+    pub fn add_keyframe(&mut self, batch: &SparseMap) -> Option<(u64, BowVector)> {
+        let id = batch.keypoints.first().map(|k| k.keyframe)?;
+        let info = batch.keyframes.iter().find(|k| k.id == id).copied()?;
+        if self.kfs.contains_key(&id) {
+            return None;
+        }
+        let keypoints: Vec<KeyFrameKeypoint> = batch
+            .keypoints
+            .iter()
+            .filter(|k| k.keyframe == id)
+            .map(|k| KeyFrameKeypoint { point: k.point.filter(|p| self.points.contains_key(p)), ..*k })
+            .collect();
+        for p in keypoints.iter().filter_map(|k| k.point) {
+            self.observers.entry(p).or_default().insert(id);
+        }
+        let descriptors: Vec<Descriptor> = keypoints.iter().map(|k| k.descriptor).collect();
+        let (bow, features) = self.transform(&descriptors);
+        self.kfs.insert(
+            id,
+            PlaceKeyFrame { info, keypoints, bow: bow.clone(), features, parent: None, loops: BTreeSet::new() },
+        );
+        let parent = self.covisibility(id).into_iter().max_by_key(|&(k, w)| (w, std::cmp::Reverse(k))).map(|c| c.0);
+        if let Some(kf) = self.kfs.get_mut(&id) {
+            kf.parent = parent;
+        }
+        Some((id, bow))
+    }
+
+    /// Drop a point and every keypoint's reference to it.
+    pub fn remove_point(&mut self, id: u64) {
+        self.points.remove(&id);
+        if let Some(kfs) = self.observers.remove(&id) {
+            for k in kfs {
+                if let Some(kf) = self.kfs.get_mut(&k) {
+                    for kp in &mut kf.keypoints {
+                        if kp.point == Some(id) {
+                            kp.point = None;
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    /// Key frames sharing points with `kf`, with the number shared.
+    pub fn covisibility(&self, kf: u64) -> Vec<(u64, usize)> {
+        let mut count: BTreeMap<u64, usize> = BTreeMap::new();
+        if let Some(k) = self.kfs.get(&kf) {
+            for p in k.keypoints.iter().filter_map(|k| k.point) {
+                for &o in self.observers.get(&p).into_iter().flatten() {
+                    if o != kf {
+                        *count.entry(o).or_default() += 1;
+                    }
+                }
+            }
+        }
+        count.into_iter().collect()
+    }
+
+    /// ORB-SLAM2's covisible key frames (at least 15 shared points), most shared first.
+    pub fn covisible(&self, kf: u64) -> Vec<u64> {
+        let mut c: Vec<(u64, usize)> =
+            self.covisibility(kf).into_iter().filter(|&(_, w)| w >= COVISIBILITY_MIN).collect();
+        c.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(&b.0)));
+        c.into_iter().map(|c| c.0).collect()
+    }
+
+    /// Every point seen by the key frames `kfs`, once.
+    pub fn points_of(&self, kfs: &[u64]) -> Vec<u64> {
+        let mut set = BTreeSet::new();
+        for k in kfs {
+            if let Some(kf) = self.kfs.get(k) {
+                set.extend(kf.keypoints.iter().filter_map(|k| k.point));
+            }
+        }
+        set.into_iter().filter(|p| self.points.contains_key(p)).collect()
+    }
+
+    /// ORB-SLAM2's `SearchByBoW` between key frames `a` and `b`: keypoint pairs (index in `a`,
+    /// index in `b`) of the same vocabulary node, both with a point, Hamming <= 50, ratio 0.75,
+    /// one-to-one.
+    pub fn search_by_bow(&self, a: &PlaceKeyFrame, b: &PlaceKeyFrame) -> Vec<(usize, usize)> {
+        let query: Vec<Option<(usize, &Descriptor)>> =
+            a.keypoints.iter().enumerate().map(|(i, k)| k.point.map(|_| (i, &k.descriptor))).collect();
+        let mut pairs = bow_pairs(&a.features, &query, b);
+        pairs.sort_unstable();
+        pairs
+    }
+
+    /// ORB-SLAM2's `SearchByBoW` between key frame `kf` and a frame (`features`, grouped by
+    /// `frame_index`): (feature index, point id) pairs.
+    pub fn search_frame_by_bow(
+        &self,
+        kf: &PlaceKeyFrame,
+        features: &[Feature],
+        frame_index: &FeatureVector,
+        static_idx: &[usize],
+    ) -> Vec<(usize, u64)> {
+        // The frame's direct index holds positions in `static_idx`.
+        let query: Vec<Option<(usize, &Descriptor)>> =
+            static_idx.iter().map(|&i| Some((i, &features[i].descriptor))).collect();
+        let mut pairs: Vec<(usize, u64)> = bow_pairs(frame_index, &query, kf)
+            .into_iter()
+            .filter_map(|(q, j)| kf.keypoints[j].point.map(|p| (q, p)))
+            .collect();
+        pairs.sort_unstable();
+        pairs
+    }
+
+    /// Points projected into an image with keypoints `keypoints` at pose `world_from_cam`, each
+    /// matched to the nearest-in-descriptor keypoint within `radius x scale^octave` pixels
+    /// (Hamming <= 50), one point per keypoint (the closest descriptor wins).
+    pub fn search_by_projection(
+        &self,
+        keypoints: &[KeyFrameKeypoint],
+        world_from_cam: &Isometry3<f64>,
+        points: &[u64],
+        radius: f64,
+    ) -> Vec<(usize, u64)> {
+        let uv: Vec<[f32; 2]> = keypoints.iter().map(|k| [k.uv[0] as f32, k.uv[1] as f32]).collect();
+        let grid = GridIndex::new(&uv, self.width.ceil() as usize, self.height.ceil() as usize, 32.0);
+        let cam_from_world = world_from_cam.inverse();
+        let mut best: BTreeMap<usize, (u32, u64)> = BTreeMap::new();
+        for &id in points {
+            let Some(p) = self.points.get(&id) else { continue };
+            let Some(px) = self.cam.project(&(cam_from_world * p.position)) else { continue };
+            if !(px[0] >= 0.0 && px[0] < self.width && px[1] >= 0.0 && px[1] < self.height) {
+                continue;
+            }
+            let r = radius * self.scale_factor.powi(2);
+            let near = grid.within([px[0] as f32, px[1] as f32], r as f32);
+            let cands = near.iter().map(|&i| i as usize).filter(|&i| {
+                let k = &keypoints[i];
+                let s = radius * sigma(self.scale_factor, k.octave);
+                (k.uv[0] - px[0]).powi(2) + (k.uv[1] - px[1]).powi(2) <= s * s
+            });
+            let Some((i, d)) =
+                cands.map(|i| (i, hamming(&p.descriptor, &keypoints[i].descriptor))).min_by_key(|&(i, d)| (d, i))
+            else {
+                continue;
+            };
+            if d <= MAX_DISTANCE && best.get(&i).is_none_or(|b| d < b.0) {
+                best.insert(i, (d, id));
+            }
+        }
+        best.into_iter().map(|(i, (_, p))| (i, p)).collect()
+    }
+
+    /// A point's position in key frame `kf`'s camera.
+    pub fn point_in(&self, kf: &PlaceKeyFrame, kp: &KeyFrameKeypoint) -> Option<Point3<f64>> {
+        let p = self.points.get(&kp.point?)?;
+        Some(kf.info.world_from_cam.inverse() * p.position)
+    }
+}
+
+/// Pairs (query id, keypoint index in `b`) of descriptors in the same vocabulary node, with
+/// Hamming <= 50 and ratio 0.75, one-to-one in `b`: `index` groups positions in `query` by
+/// node; `query[pos]` is the (id, descriptor) there, `None` to skip it.
+fn bow_pairs(index: &FeatureVector, query: &[Option<(usize, &Descriptor)>], b: &PlaceKeyFrame) -> Vec<(usize, usize)> {
+    let mut used = BTreeSet::new();
+    let mut out = Vec::new();
+    for (node, members) in index {
+        let Some(ib) = b.features.get(node) else { continue };
+        for &m in members {
+            let Some(&Some((qid, qd))) = query.get(m as usize) else { continue };
+            let cands = ib
+                .iter()
+                .map(|&j| j as usize)
+                .filter(|&j| b.keypoints[j].point.is_some() && !used.contains(&j))
+                .map(|j| (j, &b.keypoints[j].descriptor));
+            if let Some((j, best, second)) = nearest_two(qd, cands)
+                && best <= MAX_DISTANCE
+                && (best as f32) < BOW_RATIO * second as f32
+            {
+                used.insert(j);
+                out.push((qid, j));
+            }
+        }
+    }
+    out
+}
