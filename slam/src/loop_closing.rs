@@ -21,6 +21,9 @@
 //!    graph (spanning tree, covisibility edges of weight >= 100, loop edges) optimised with the
 //!    loop key frame fixed ([`crate::pose_graph`]); every point moved with its reference key
 //!    frame.
+//! 4. **Global bundle adjustment** (`RunGlobalBundleAdjustment`): every key frame and every
+//!    point seen twice, 10 iterations, the first key frame fixed; run in place (ORB-SLAM2 runs
+//!    it in a thread and drops it for a new loop; in lockstep the next key frame waits).
 //!
 //! The result is the whole corrected map ([`LoopCloser::correction`]), which tracking and local
 //! mapping apply (the `loop_close` node sends it over the graph's feedback edges). A monocular
@@ -34,6 +37,7 @@ use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{PoseObservation, SplitMix64, optimize_pose};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
+use crate::ba::{BaObservation, BaPose, BaReport, bundle_adjust};
 use crate::bow::{BowVector, Vocabulary, score};
 use crate::eval::umeyama;
 use crate::keyframe_db::LoopConsistency;
@@ -62,6 +66,8 @@ pub struct LoopConfig {
     pub scale_factor: f64,
     /// Essential-graph iterations (ORB-SLAM2: 20).
     pub pose_graph_iterations: usize,
+    /// Global bundle adjustment iterations after a loop (ORB-SLAM2: 10; 0: none).
+    pub global_ba_iterations: usize,
     /// Image size, pixels.
     pub width: f64,
     pub height: f64,
@@ -80,6 +86,7 @@ impl LoopConfig {
             bf,
             scale_factor: 1.2,
             pose_graph_iterations: 20,
+            global_ba_iterations: 10,
             width,
             height,
         }
@@ -117,6 +124,10 @@ pub struct LoopClosure {
     pub edges: usize,
     pub cost_before: f64,
     pub cost_after: f64,
+    /// The global bundle adjustment after the loop (costs, iterations), and its wall time in
+    /// milliseconds (for reports only: never in a message).
+    pub global_ba: BaReport,
+    pub global_ba_ms: f64,
 }
 
 /// Loop-closing state: the whole map and the loops found.
@@ -454,6 +465,9 @@ impl LoopCloser {
                 kf.info.world_from_cam = *p;
             }
         }
+        let t0 = std::time::Instant::now();
+        let global = self.global_ba();
+        let global_ba_ms = t0.elapsed().as_secs_f64() * 1e3;
         self.since_loop = 0;
         self.consistency = LoopConsistency::new();
         let closure = LoopClosure {
@@ -472,9 +486,71 @@ impl LoopCloser {
             edges: edges.len(),
             cost_before: report.initial_cost,
             cost_after: report.final_cost,
+            global_ba: global,
+            global_ba_ms,
         };
         self.loops.push(closure.clone());
         closure
+    }
+
+    /// ORB-SLAM2's global bundle adjustment after a loop (`RunGlobalBundleAdjustment`, 10
+    /// iterations, the map's first key frame fixed, Huber): every key frame and every point
+    /// seen twice, then the map takes the result. Run in place here (ORB-SLAM2 runs it in a
+    /// thread and drops it when a new loop comes; in lockstep the next key frame waits for it).
+    fn global_ba(&mut self) -> BaReport {
+        let ids: Vec<u64> = self.map.kfs.keys().copied().collect();
+        let first = ids.first().copied();
+        let mut poses: Vec<BaPose> = ids
+            .iter()
+            .map(|k| BaPose { cam_from_world: self.map.kfs[k].info.world_from_cam.inverse(), fixed: Some(*k) == first })
+            .collect();
+        let point_ids: Vec<u64> = self
+            .map
+            .points
+            .keys()
+            .copied()
+            .filter(|p| self.map.observers.get(p).is_some_and(|o| o.len() >= 2))
+            .collect();
+        let index: BTreeMap<u64, usize> = point_ids.iter().enumerate().map(|(i, &p)| (p, i)).collect();
+        let mut points: Vec<Point3<f64>> = point_ids.iter().map(|p| self.map.points[p].position).collect();
+        let mut obs = Vec::new();
+        for (pi, k) in ids.iter().enumerate() {
+            for kp in &self.map.kfs[k].keypoints {
+                if let Some(&j) = kp.point.and_then(|p| index.get(&p)) {
+                    obs.push(BaObservation {
+                        pose: pi,
+                        point: j,
+                        uv: kp.uv,
+                        depth: kp.depth,
+                        sigma: sigma(self.config.scale_factor, kp.octave),
+                    });
+                }
+            }
+        }
+        if obs.is_empty() {
+            return BaReport::default();
+        }
+        let active = vec![true; obs.len()];
+        let report = bundle_adjust(
+            &self.map.cam,
+            self.config.bf,
+            &mut poses,
+            &mut points,
+            &obs,
+            &active,
+            self.config.global_ba_iterations,
+        );
+        for (k, p) in ids.iter().zip(&poses) {
+            if let Some(kf) = self.map.kfs.get_mut(k) {
+                kf.info.world_from_cam = p.cam_from_world.inverse();
+            }
+        }
+        for (id, x) in point_ids.iter().zip(points) {
+            if let Some(p) = self.map.points.get_mut(id) {
+                p.position = x;
+            }
+        }
+        report
     }
 
     /// Move every point with its reference key frame (the one that created it, or the first

@@ -212,6 +212,8 @@ impl Operator for LoopClose {
                             "inliers": l.inliers, "matches": l.matches, "correction_m": l.correction_m,
                             "correction_deg": l.correction_deg, "fused": l.fused, "keyframes": l.keyframes,
                             "edges": l.edges, "graph_cost_before": l.cost_before, "graph_cost_after": l.cost_after,
+                            "global_ba": { "iterations": l.global_ba.iterations, "cost_before": l.global_ba.initial_cost,
+                                           "cost_after": l.global_ba.final_cost, "ms": l.global_ba_ms },
                         })
                     })
                     .collect()
