@@ -123,14 +123,10 @@ impl Operator for LocalMap {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
-        let mut t = self.ba_ms.clone();
-        t.sort_by(f64::total_cmp);
-        let q = |p: f64| t.get(((t.len() as f64 - 1.0) * p).round() as usize).copied().unwrap_or(0.0);
-        let mean = if t.is_empty() { 0.0 } else { t.iter().sum::<f64>() / t.len() as f64 };
         ctx.report = Some(serde_json::json!({
             "keyframes": self.mapper.as_ref().map_or(0, LocalMapper::keyframes),
             "points": self.mapper.as_ref().map_or(0, LocalMapper::points),
-            "local_ba_ms": { "count": t.len(), "mean": mean, "median": q(0.5), "p95": q(0.95), "max": q(1.0) },
+            "local_ba_ms": super::timing_report(&self.ba_ms),
         }));
         Ok(())
     }

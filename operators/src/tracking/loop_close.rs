@@ -186,13 +186,6 @@ impl Operator for LoopClose {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
-        let stats = |v: &[f64]| {
-            let mut t = v.to_vec();
-            t.sort_by(f64::total_cmp);
-            let q = |p: f64| t.get(((t.len() as f64 - 1.0) * p).round() as usize).copied().unwrap_or(0.0);
-            let mean = if t.is_empty() { 0.0 } else { t.iter().sum::<f64>() / t.len() as f64 };
-            serde_json::json!({ "count": t.len(), "mean": mean, "median": q(0.5), "p95": q(0.95), "max": q(1.0) })
-        };
         let gt_at = |t: f64| self.ground_truth.iter().find(|g| (g.0 - t).abs() < 1e-6).map(|g| g.1);
         let mut false_loops = 0;
         let loops: Vec<serde_json::Value> = self
@@ -228,8 +221,8 @@ impl Operator for LoopClose {
             "rejected_candidates": self.closer.as_ref().map(|c| {
                 Rejection::NAMES.iter().zip(c.rejected()).map(|(n, v)| ((*n).to_owned(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>()
             }),
-            "detection_ms": stats(&self.insert_ms),
-            "loop_correction_ms": stats(&self.loop_ms),
+            "detection_ms": super::timing_report(&self.insert_ms),
+            "loop_correction_ms": super::timing_report(&self.loop_ms),
             "refused": self.refused,
         }));
         Ok(())

@@ -26,6 +26,15 @@ use std::sync::Arc;
 use dynaflow_engine::op::OpError;
 use dynaflow_slam::bow::Vocabulary;
 
+/// Wall times (milliseconds) for a summary: count, mean, median, p95, max (nearest rank).
+fn timing_report(ms: &[f64]) -> serde_json::Value {
+    let mut t = ms.to_vec();
+    t.sort_by(f64::total_cmp);
+    let q = |p: f64| t.get(((t.len() as f64 - 1.0) * p).round() as usize).copied().unwrap_or(0.0);
+    let mean = if t.is_empty() { 0.0 } else { t.iter().sum::<f64>() / t.len() as f64 };
+    serde_json::json!({ "count": t.len(), "mean": mean, "median": q(0.5), "p95": q(0.95), "max": q(1.0) })
+}
+
 /// The default vocabulary (k 10, L 5), trained by `scripts/train_vocabulary.sh`: see
 /// `slam/vocabulary/SOURCE.md` for what it was trained on.
 pub const DEFAULT_VOCABULARY: &[u8] = include_bytes!("../../../slam/vocabulary/default.voc");
