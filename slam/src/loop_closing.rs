@@ -259,7 +259,6 @@ impl LoopCloser {
             })
             .collect();
         let accepted = self.consistency.update(&groups);
-
         for candidate in accepted {
             match self.compute_se3(kf, candidate) {
                 Ok(found) => return Some(self.correct(kf, candidate, &found)),
@@ -276,7 +275,8 @@ impl LoopCloser {
         du * du + dv * dv <= CHI2_RANSAC * s * s
     }
 
-    /// `candidate_from_current` with the matches that support it, or `None`.
+    /// The current key frame's corrected pose with the matches that support it, or why the
+    /// candidate was refused.
     fn compute_se3(&mut self, current: u64, candidate: u64) -> Result<Found, Rejection> {
         let (Some(a), Some(b)) = (self.map.kfs.get(&current), self.map.kfs.get(&candidate)) else {
             return Err(Rejection::BowMatches);

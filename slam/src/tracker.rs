@@ -5,10 +5,13 @@
 //! ORB-SLAM's `SearchByProjection`), widening the radius once when too few survive; refine by
 //! motion-only BA (pixels plus depth as ORB-SLAM2's virtual right coordinate, Huber, four
 //! re-classification rounds). When that still fails, match descriptors against the whole
-//! local map and solve P3P inside RANSAC (relocalisation against the recent key frames). A
-//! frame with too few inliers is *lost*: its pose follows the motion model; after
-//! `reset_after` lost frames in a row a new map starts at the dead-reckoned pose (so the
-//! trajectory stays in one frame, and the jump is reported).
+//! local map and solve P3P inside RANSAC (relocalisation against the recent key frames), and
+//! with a vocabulary then against every key frame of the map by bag of words (ORB-SLAM2's
+//! `Relocalization`). A frame with too few inliers is *lost*: its pose follows the motion
+//! model; after `reset_after` lost frames in a row that show something (at least
+//! `min_init_points` static keypoints) a new map starts at the dead-reckoned pose (so the
+//! trajectory stays in one frame, and the jump is reported). A loaded map ([`Tracker::use_map`])
+//! is localised in first; with mapping off no key frames are made.
 //!
 //! Key frames follow ORB-SLAM2's rules for RGB-D (tracked points fall below 75 % of the
 //! reference key frame's, or too few close points are tracked while many are not, or
@@ -231,6 +234,18 @@ pub struct Tracker {
     unlocated: bool,
 }
 
+/// The points the key frames `kfs` of the whole map see, as tracking holds its local map.
+fn local_points(places: &KeyFrameMap, kfs: &[u64]) -> BTreeMap<u64, TPoint> {
+    places
+        .points_of(kfs)
+        .into_iter()
+        .filter_map(|id| {
+            let p = places.points.get(&id)?;
+            Some((id, TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe }))
+        })
+        .collect()
+}
+
 /// ORB-SLAM2's relocalisation: BoW matches to try a candidate, inliers after the first BA, and
 /// inliers to accept (`Tracking::Relocalization`: 15, 10, 50).
 const RELOCALISATION_BOW_MATCHES: usize = 15;
@@ -277,8 +292,13 @@ impl Tracker {
     /// Work in a loaded map: the first frames relocalise in it (no pose until one does). With
     /// `mapping` false this is ORB-SLAM2's localisation mode: no key frames are made, the local
     /// map follows the camera through the loaded key frames, and a lost camera relocalises
-    /// again (no new map). With `mapping` true new key frames extend the loaded map.
-    pub fn use_map(&mut self, map: KeyFrameMap, mapping: bool) {
+    /// again (no new map). With `mapping` true new key frames extend the loaded map. The map
+    /// takes this tracker's camera (a saved map does not hold one).
+    pub fn use_map(&mut self, mut map: KeyFrameMap, mapping: bool) {
+        map.cam = self.cam;
+        map.width = self.width;
+        map.height = self.height;
+        map.scale_factor = self.config.scale_factor;
         self.map_id = map.map_id;
         self.next_keyframe = map.kfs.keys().next_back().map_or(0, |k| k + 1);
         // Tracking's point ids are below local mapping's (1 << 48).
@@ -311,14 +331,7 @@ impl Tracker {
         group.extend(places.covisible(reference).into_iter().take(10));
         group.sort_unstable();
         group.dedup();
-        self.points = places
-            .points_of(&group)
-            .into_iter()
-            .filter_map(|id| {
-                let p = places.points.get(&id)?;
-                Some((id, TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe }))
-            })
-            .collect();
+        self.points = local_points(places, &group);
         self.reference = Some(reference);
     }
 
@@ -584,18 +597,7 @@ impl Tracker {
             };
             let mut group = vec![candidate];
             group.extend(places.covisible(candidate));
-            let local: BTreeMap<u64, TPoint> = places
-                .points_of(&group)
-                .into_iter()
-                .filter_map(|id| {
-                    let p = places.points.get(&id)?;
-                    Some((
-                        id,
-                        TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe },
-                    ))
-                })
-                .collect();
-            let saved = std::mem::replace(&mut self.points, local);
+            let saved = std::mem::replace(&mut self.points, local_points(places, &group));
             let fit = self.optimise(features, &pairs, &pose, Some(mask));
             if fit.inliers >= RELOCALISATION_MIN_BA_INLIERS {
                 let guided = self.track_projection(features, &fit.world_from_cam, 0.5 * self.config.search_radius);

@@ -24,10 +24,7 @@ params! {
 
 const KEYFRAME: In<SparseMap> = In::required("keyframe", "a key frame from `pnp_track`");
 const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
-const STEREO: In<Scalars> = In::optional(
-    "stereo",
-    "the stereo rig (`baseline_m`): with a stereo `pnp_track`, its baseline replaces `baseline`",
-);
+use super::STEREO_RIG as STEREO;
 const LOOP: In<SparseMap> = In::optional(
     "loop",
     "`loop_close`'s corrected map (`delay: 1`, `join: latest`): applied before the next key frame",
@@ -85,11 +82,8 @@ impl Operator for LocalMap {
             }
             LocalMapper::new(c, Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy })
         });
-        if let Some((m, correction)) = LOOP.find(inputs)?
-            && self.last_loop.as_ref().is_none_or(|last| !Arc::ptr_eq(last, m))
-        {
+        if let Some(correction) = super::fresh(LOOP.find(inputs)?, &mut self.last_loop) {
             mapper.apply_correction(&convert::from_msg(correction));
-            self.last_loop = Some(m.clone());
         }
         let t0 = Instant::now();
         let update = mapper.insert(&convert::from_msg(batch));

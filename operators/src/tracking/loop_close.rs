@@ -28,10 +28,7 @@ params! {
 const MAP: In<SparseMap> =
     In::required("map", "`local_map`'s output: the refined window and the new key frame's keypoints");
 const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
-const STEREO: In<Scalars> = In::optional(
-    "stereo",
-    "the stereo rig (`baseline_m`): with a stereo `pnp_track`, its baseline replaces `baseline`",
-);
+use super::STEREO_RIG as STEREO;
 const GT_POSE: In<Pose> = In::optional(
     "gt_pose",
     "ground truth: each loop is checked against it (do the two key frames' views overlap?) for the summary's `false_loops`; never used to decide",

@@ -23,8 +23,27 @@ pub use pnp::PNP_TRACK;
 use std::path::Path;
 use std::sync::Arc;
 
-use dynaflow_engine::op::OpError;
+use dynaflow_engine::msg::{Message, Scalars};
+use dynaflow_engine::op::{In, OpError};
 use dynaflow_slam::bow::Vocabulary;
+
+/// The stereo rig, as `local_map` and `loop_close` read it (its baseline weighs their depth
+/// terms in place of their `baseline` param).
+const STEREO_RIG: In<Scalars> = In::optional(
+    "stereo",
+    "the stereo rig (`baseline_m`): with a stereo `pnp_track`, its baseline replaces `baseline`",
+);
+
+/// A map batch on a `latest`-joined feedback input, the first time it is seen: a `latest` join
+/// repeats the last message every frame, and a batch must be applied once. `last` remembers it.
+fn fresh<'a, T>(found: Option<(&'a Arc<Message>, &'a T)>, last: &mut Option<Arc<Message>>) -> Option<&'a T> {
+    let (m, t) = found?;
+    if last.as_ref().is_some_and(|l| Arc::ptr_eq(l, m)) {
+        return None;
+    }
+    *last = Some(m.clone());
+    Some(t)
+}
 
 /// Wall times (milliseconds) for a summary: count, mean, median, p95, max (nearest rank).
 fn timing_report(ms: &[f64]) -> serde_json::Value {

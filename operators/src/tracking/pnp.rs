@@ -111,8 +111,8 @@ pub const PNP_TRACK: OpSpec = OpSpec {
                 message: "`mapping: false` (localisation mode) needs a map to localise in: set `load_map` (or `dynaflow run --load-map FILE`)".into(),
             });
         }
-        // Read the map now, so that a bad file stops the run before it starts; the camera is
-        // set on the first frame.
+        // Read the map now, so that a bad file stops the run before it starts; the tracker
+        // gives it its camera (`Tracker::use_map`) on the first frame.
         let loaded = if config.load_map.as_os_str().is_empty() {
             None
         } else {
@@ -279,27 +279,17 @@ impl Operator for PnpTrack {
             let cam = Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
             let mut tracker = Tracker::new(tc, cam, k.width as usize, k.height as usize, ctx.rng.next_u64())
                 .with_vocabulary(self.vocabulary.clone());
-            if let Some(mut map) = self.loaded.take() {
-                map.cam = cam;
-                map.width = f64::from(k.width);
-                map.height = f64::from(k.height);
-                map.scale_factor = tc.scale_factor;
+            if let Some(map) = self.loaded.take() {
                 tracker.use_map(map, self.config.mapping);
             }
             self.tracker = Some(tracker);
         }
         let Some(tracker) = self.tracker.as_mut() else { return Ok(Outputs::new()) };
-        if let Some((m, update)) = MAP.find(inputs)?
-            && self.last_map.as_ref().is_none_or(|last| !Arc::ptr_eq(last, m))
-        {
+        if let Some(update) = super::fresh(MAP.find(inputs)?, &mut self.last_map) {
             tracker.apply_map_update(&convert::from_msg(update));
-            self.last_map = Some(m.clone());
         }
-        if let Some((m, correction)) = LOOP.find(inputs)?
-            && self.last_loop.as_ref().is_none_or(|last| !Arc::ptr_eq(last, m))
-        {
+        if let Some(correction) = super::fresh(LOOP.find(inputs)?, &mut self.last_loop) {
             tracker.apply_correction(&convert::from_msg(correction));
-            self.last_loop = Some(m.clone());
         }
         let uv: Vec<[f32; 2]> = kp.points.iter().map(|p| [p.x, p.y]).collect();
         let dynamic = dynamic_keypoints(inputs, &uv, self.config.label_radius as f32)?;
