@@ -128,7 +128,7 @@ pub struct Generator {
 impl Generator {
     /// A generator for `config`.
     pub fn new(config: SynthConfig) -> Self {
-        let scene = scene::Scene::new(config.seed, config.people, config.mode);
+        let scene = scene::Scene::new(config.seed, config.people, config.mode, config.motion.walkway());
         Self { config, scene }
     }
 

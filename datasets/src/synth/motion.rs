@@ -20,12 +20,18 @@ pub enum Motion {
     Halfsphere,
     /// The camera walks a circle of 0.6 m radius in the middle of the room, looking outwards
     /// (it sees every wall in turn), and is back where it started after [`LOOP_PERIOD`]
-    /// seconds: frames after that revisit the first ones.
+    /// seconds: frames after that revisit the first ones. People walk their lanes a metre
+    /// clear of its circle ([`Motion::walkway`]), in front of it and behind it.
     Loop,
 }
 
 /// Seconds of one round of [`Motion::Loop`] (900 frames at 30 Hz).
 pub const LOOP_PERIOD: f64 = 30.0;
+
+/// Centre of [`Motion::Loop`]'s circle (world, metres).
+const LOOP_CENTRE: [f64; 3] = [0.0, -0.4, 1.4];
+/// Radius of [`Motion::Loop`]'s circle, metres.
+const LOOP_RADIUS: f64 = 0.6;
 
 impl Motion {
     /// Names used in graphs and on the command line.
@@ -39,6 +45,16 @@ impl Motion {
             "rpy" => Some(Self::Rpy),
             "halfsphere" => Some(Self::Halfsphere),
             "loop" => Some(Self::Loop),
+            _ => None,
+        }
+    }
+
+    /// The band of world `y` the camera walks through when it moves through the middle of the
+    /// room (the scene keeps people's lanes clear of it), or `None` when it stays at the back of
+    /// the room, where people walk in front of it.
+    pub fn walkway(self) -> Option<(f64, f64)> {
+        match self {
+            Motion::Loop => Some((LOOP_CENTRE[1] - LOOP_RADIUS, LOOP_CENTRE[1] + LOOP_RADIUS)),
             _ => None,
         }
     }
@@ -82,9 +98,9 @@ impl Motion {
                 // turn left (counter-clockwise seen from above) once per period. A slow bob in
                 // height keeps the views of one round from being a pure rotation.
                 let a = w(LOOP_PERIOD);
-                let centre = Vector3::new(0.0, -0.4, 1.4);
+                let centre = Vector3::from(LOOP_CENTRE);
                 let radial = Vector3::new(-a.sin(), a.cos(), 0.0);
-                let p = centre + 0.6 * radial + Vector3::new(0.0, 0.0, 0.1 * (2.0 * a).sin());
+                let p = centre + LOOP_RADIUS * radial + Vector3::new(0.0, 0.0, 0.1 * (2.0 * a).sin());
                 let forward = radial - Vector3::new(0.0, 0.0, 0.08);
                 Isometry3::from_parts(Translation3::from(p), look_rotation(&forward, &up))
             }

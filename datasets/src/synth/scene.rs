@@ -12,6 +12,14 @@ pub const ROOM_HALF_DEPTH: f64 = 3.2;
 /// See [`ROOM_HALF_WIDTH`].
 pub const ROOM_HEIGHT: f64 = 2.7;
 
+/// How far people's lanes keep from the band a camera walks in ([`Scene::new`]'s `walkway`),
+/// metres, centre of the lane's sway to the band's edge. Chosen from the geometry, not from
+/// results: people pass 1-2 m from the camera, as in TUM fr3/walking_*, instead of through it.
+pub const WALKWAY_CLEARANCE: f64 = 1.0;
+
+/// Amplitude of a walking person's sideways sway about their lane, metres.
+const SWAY: f64 = 0.25;
+
 /// What a pixel sees.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
@@ -68,8 +76,12 @@ fn unit(h: u32) -> f64 {
 }
 
 impl Scene {
-    /// A room with `people` people, deterministic by `seed`.
-    pub fn new(seed: u64, people: usize, mode: PeopleMode) -> Self {
+    /// A room with `people` people, deterministic by `seed`. `walkway`, the band of `y` a
+    /// camera moves through (`Motion::walkway`), keeps people's lanes [`WALKWAY_CLEARANCE`]
+    /// away from it: they alternate between the room in front of it and behind it. Without a
+    /// walkway (the TUM-like motions, whose camera stands at the back of the room) lanes spread
+    /// from near the camera to the back of the room.
+    pub fn new(seed: u64, people: usize, mode: PeopleMode, walkway: Option<(f64, f64)>) -> Self {
         let s = hash((seed ^ (seed >> 32)) as u32 ^ 0x5eed);
         // Photographed surfaces, tinted: `tile` is the metres one photo edge covers (the brick
         // photo shows 13 courses of bricks, 1.6 m with 12 cm courses; gravel stones of 1-3 cm).
@@ -124,7 +136,18 @@ impl Scene {
                 let speed = 0.5 + 0.7 * unit(h);
                 // Walk roughly across the view (along x), at depths spread from near the camera
                 // (where one person covers 20-40 % of the image) to the back of the room.
-                let y = -1.5 + 3.4 * ((f64::from(i) + 0.6 * unit(h >> 5)) / n);
+                let y = match walkway {
+                    None => -1.5 + 3.4 * ((f64::from(i) + 0.6 * unit(h >> 5)) / n),
+                    Some((near, far)) => {
+                        // Lanes between the walkway's clearance and half a metre from the wall.
+                        let (lo, hi) = if i % 2 == 0 {
+                            (far + WALKWAY_CLEARANCE + SWAY, ROOM_HALF_DEPTH - 0.5 - SWAY)
+                        } else {
+                            (-ROOM_HALF_DEPTH + 0.5 + SWAY, near - WALKWAY_CLEARANCE - SWAY)
+                        };
+                        lo + (hi - lo).max(0.0) * unit(h >> 5)
+                    }
+                };
                 let x = -2.4 + 4.8 * unit(h >> 9);
                 let heading = if h & 1 == 0 { 0.0 } else { std::f64::consts::PI } + (unit(h >> 13) - 0.5) * 0.5;
                 let colour = [
@@ -182,7 +205,7 @@ impl Scene {
                 let (pos, forward) = if m < span { (m, 1.0) } else { (2.0 * span - m, -1.0) };
                 let x = -ROOM_HALF_WIDTH + 0.5 + pos;
                 let heading = if forward > 0.0 { 0.0 } else { std::f64::consts::PI } + (p.heading.sin() * 0.3);
-                let y = p.start.y + 0.25 * (t * 0.4 + p.phase).sin();
+                let y = p.start.y + SWAY * (t * 0.4 + p.phase).sin();
                 let gait = p.phase + t * p.speed * 5.0;
                 (Vector3::new(x, y, 0.0), heading, gait)
             }

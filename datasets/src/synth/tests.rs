@@ -209,3 +209,30 @@ fn the_right_image_sees_left_pixels_at_their_exact_disparity() {
     assert!((f64::from(disparity[i]) - expected).abs() < 1e-3);
     assert!(g.right(&left, 0.0).is_none() && g.right(&left, f64::NAN).is_none());
 }
+
+#[test]
+fn on_the_loop_people_pass_the_camera_at_a_distance_and_stay_in_view() {
+    // The loop's camera walks through the middle of the room; people keep their lanes
+    // `WALKWAY_CLEARANCE` from its band, so none walks through the camera, yet they are seen.
+    for seed in [0, 1, 2, 3] {
+        let g = Generator::new(SynthConfig {
+            motion: Motion::Loop,
+            seed,
+            intrinsics: scaled_fr3(160, 120),
+            ..SynthConfig::default()
+        });
+        let (mut nearest, mut seen) = (f64::INFINITY, 0);
+        for k in (0..900).step_by(10) {
+            let cam = g.pose(k).translation.vector;
+            for (part, _) in g.people_boxes(k) {
+                let d = part.translation.vector - cam;
+                nearest = nearest.min((d.x * d.x + d.y * d.y).sqrt());
+            }
+            let f = g.frame(k, false);
+            seen += usize::from(f.class.contains(&1));
+        }
+        assert!(nearest > 0.8, "seed {seed}: a person comes within {nearest:.2} m of the camera");
+        println!("seed {seed}: nearest {nearest:.2} m, people in view in {seen} of 90 frames");
+        assert!(seen >= 15, "seed {seed}: people in view in only {seen} of 90 frames");
+    }
+}
