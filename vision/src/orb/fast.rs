@@ -94,62 +94,131 @@ pub fn detect_in(
     }
     let t = threshold.max(1);
     let (rw, rh) = (x1 - x0, y1 - y0);
+    // Scores with a zero frame of one pixel (stride `pw`), so non-maximum suppression reads
+    // every neighbour without a bounds test.
+    let pw = rw + 2;
     scratch.scores.clear();
-    scratch.scores.resize(rw * rh, 0);
+    scratch.scores.resize(pw * (rh + 2), 0);
     scratch.candidates.resize(rw, 0);
     let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * width as isize + dx);
     for y in y0..y1 {
         let row = &data[y * width + x0 - 3..y * width + x1 + 3];
         let up = &data[(y - 3) * width + x0..(y - 3) * width + x1];
         let down = &data[(y + 3) * width + x0..(y + 3) * width + x1];
-        // Quick test, vectorisable: any 9-arc holds two of the four compass pixels, so a
-        // corner has two of them brighter than c + t or two darker than c - t.
+        // Quick test, vectorisable: any 9-arc holds two neighbouring compass pixels (top and
+        // right, right and bottom, ...), so a corner has such a pair both brighter than c + t
+        // or both darker than c - t.
         let cand = &mut scratch.candidates[..rw];
         let (left, centre, right) = (&row[..rw], &row[3..3 + rw], &row[6..6 + rw]);
         for (((((flag, &c), &u), &d), &l), &r) in cand.iter_mut().zip(centre).zip(up).zip(down).zip(left).zip(right) {
             let hi = c.saturating_add(t);
             let lo = c.saturating_sub(t);
-            let bright = u8::from(u > hi) + u8::from(d > hi) + u8::from(l > hi) + u8::from(r > hi);
-            let dark = u8::from(u < lo) + u8::from(d < lo) + u8::from(l < lo) + u8::from(r < lo);
-            *flag = u8::from(bright >= 2) | u8::from(dark >= 2);
+            let (ub, rb, db, lb) = (u > hi, r > hi, d > hi, l > hi);
+            let (ud, rd, dd, ld) = (u < lo, r < lo, d < lo, l < lo);
+            let bright = (ub & rb) | (rb & db) | (db & lb) | (lb & ub);
+            let dark = (ud & rd) | (rd & dd) | (dd & ld) | (ld & ud);
+            *flag = u8::from(bright | dark);
         }
-        for (i, _) in cand.iter().enumerate().filter(|(_, c)| **c != 0) {
-            let center = y * width + x0 + i;
-            let c = data[center];
-            let (hi, lo) = (c.saturating_add(t), c.saturating_sub(t));
-            let mut d = [0i16; 16];
-            let (mut bright, mut dark) = (0u32, 0u32);
-            for (k, o) in offsets.iter().enumerate() {
-                let v = data[(center as isize + o) as usize];
-                d[k] = i16::from(v) - i16::from(c);
-                bright |= u32::from(v > hi) << k;
-                dark |= u32::from(v < lo) << k;
-            }
-            if !(has_arc9(bright) || has_arc9(dark)) {
+        // Full segment test, 16 pixels at a time where the quick test left any candidate.
+        let mut i = 0;
+        while i < rw {
+            let n = (rw - i).min(LANES);
+            if cand[i..i + n].iter().all(|&f| f == 0) {
+                i += n;
                 continue;
             }
-            scratch.scores[(y - y0) * rw + i] = score(&d).clamp(1, 255) as u8;
+            let first = y * width + x0 + i;
+            let corners = if n == LANES {
+                segment_test_block(data, first, &offsets, t)
+            } else {
+                (0..n).fold(0u32, |m, j| m | (u32::from(segment_test(data, first + j, &offsets, t)) << j))
+            };
+            for j in (0..n).filter(|&j| corners & (1 << j) != 0) {
+                let center = first + j;
+                let c = i16::from(data[center]);
+                let d: [i16; 16] = offsets.map(|o| i16::from(data[(center as isize + o) as usize]) - c);
+                scratch.scores[(y - y0 + 1) * pw + i + j + 1] = score(&d).clamp(1, 255) as u8;
+            }
+            i += n;
         }
     }
     // 3x3 non-maximum suppression, strict as OpenCV's: equal neighbours suppress each other.
+    // Rows are scanned eight scores at a time; most words are all zero.
     let n = &scratch.scores;
-    for ry in 0..rh {
-        for rx in 0..rw {
-            let s = n[ry * rw + rx];
-            if s == 0 {
-                continue;
+    for ry in 1..=rh {
+        let (above, row, below) =
+            (&n[(ry - 1) * pw..ry * pw], &n[ry * pw..(ry + 1) * pw], &n[(ry + 1) * pw..(ry + 2) * pw]);
+        let mut rx = 1;
+        while rx <= rw {
+            if rx + 8 <= rw + 1 {
+                let mut word = [0u8; 8];
+                word.copy_from_slice(&row[rx..rx + 8]);
+                if u64::from_ne_bytes(word) == 0 {
+                    rx += 8;
+                    continue;
+                }
             }
-            let at = |dx: isize, dy: isize| {
-                let (x, y) = (rx as isize + dx, ry as isize + dy);
-                if x < 0 || y < 0 || x >= rw as isize || y >= rh as isize { 0 } else { n[y as usize * rw + x as usize] }
-            };
-            let before = at(-1, -1) < s && at(0, -1) < s && at(1, -1) < s && at(-1, 0) < s;
-            let after = at(1, 0) < s && at(-1, 1) < s && at(0, 1) < s && at(1, 1) < s;
-            if before && after {
-                out.push(Corner { x: (x0 + rx) as u16, y: (y0 + ry) as u16, score: s });
+            let s = row[rx];
+            if s != 0
+                && above[rx - 1] < s
+                && above[rx] < s
+                && above[rx + 1] < s
+                && row[rx - 1] < s
+                && row[rx + 1] < s
+                && below[rx - 1] < s
+                && below[rx] < s
+                && below[rx + 1] < s
+            {
+                out.push(Corner { x: (x0 + rx - 1) as u16, y: (y0 + ry - 1) as u16, score: s });
             }
+            rx += 1;
         }
     }
+}
+
+/// Pixels per step of the vectorised segment test ([`segment_test_block`]).
+const LANES: usize = 16;
+
+/// The FAST-9 segment test of the pixel at index `center`: 9 contiguous circle pixels all
+/// brighter than `c + t` or all darker than `c - t`.
+fn segment_test(data: &[u8], center: usize, offsets: &[isize; 16], t: u8) -> bool {
+    let c = data[center];
+    let (hi, lo) = (c.saturating_add(t), c.saturating_sub(t));
+    let (mut bright, mut dark) = (0u32, 0u32);
+    for (k, o) in offsets.iter().enumerate() {
+        let v = data[(center as isize + o) as usize];
+        bright |= u32::from(v > hi) << k;
+        dark |= u32::from(v < lo) << k;
+    }
+    has_arc9(bright) || has_arc9(dark)
+}
+
+/// [`segment_test`] of the 16 pixels from index `first` on, as a bit mask (bit `j`: pixel
+/// `first + j`). Run lengths of brighter and darker circle pixels are counted in 16 lanes
+/// over the circle and its first 8 pixels again (arcs that wrap), the way OpenCV's SIMD FAST
+/// does; fixed-size arrays let the compiler keep each step in one vector register.
+fn segment_test_block(data: &[u8], first: usize, offsets: &[isize; 16], t: u8) -> u32 {
+    let lanes = |start: usize| -> [u8; LANES] {
+        let mut v = [0u8; LANES];
+        v.copy_from_slice(&data[start..start + LANES]);
+        v
+    };
+    let c = lanes(first);
+    let hi = c.map(|v| v.saturating_add(t));
+    let lo = c.map(|v| v.saturating_sub(t));
+    let (mut run_b, mut run_d, mut max_b, mut max_d) = ([0u8; LANES], [0u8; LANES], [0u8; LANES], [0u8; LANES]);
+    for k in 0..24 {
+        let p = lanes((first as isize + offsets[k % 16]) as usize);
+        for j in 0..LANES {
+            let b = 0u8.wrapping_sub(u8::from(p[j] > hi[j]));
+            let d = 0u8.wrapping_sub(u8::from(p[j] < lo[j]));
+            run_b[j] = run_b[j].wrapping_add(1) & b;
+            run_d[j] = run_d[j].wrapping_add(1) & d;
+            max_b[j] = max_b[j].max(run_b[j]);
+            max_d[j] = max_d[j].max(run_d[j]);
+        }
+    }
+    (0..LANES).fold(0u32, |m, j| m | (u32::from(max_b[j] >= 9 || max_d[j] >= 9) << j))
 }
 
 /// Whether the 16-bit circle mask has 9 contiguous set bits (wrapping).
@@ -216,6 +285,46 @@ mod tests {
         // Too small for the circle: nothing, no panic.
         detect(&[1, 2, 3], 3, 1, 5, 3, &mut FastScratch::default(), &mut out);
         assert!(out.is_empty());
+    }
+
+    #[test]
+    fn the_vectorised_segment_test_agrees_with_the_scalar_one() {
+        // Random-ish texture with flat patches and saturated pixels, every threshold band.
+        let (w, h) = (64usize, 40usize);
+        let mut state = 0x9e37_79b9_7f4a_7c15u64;
+        let data: Vec<u8> = (0..w * h)
+            .map(|i| {
+                state ^= state << 13;
+                state ^= state >> 7;
+                state ^= state << 17;
+                match (i / 7) % 5 {
+                    0 => 128,
+                    1 => {
+                        if state & 1 == 0 {
+                            0
+                        } else {
+                            255
+                        }
+                    }
+                    _ => (state >> 24) as u8,
+                }
+            })
+            .collect();
+        let offsets: [isize; 16] = CIRCLE.map(|(dx, dy)| dy * w as isize + dx);
+        let mut corners = 0;
+        for t in [1u8, 7, 20, 60, 120, 250] {
+            for y in 3..h - 3 {
+                for x in 3..w - 3 - LANES {
+                    let block = segment_test_block(&data, y * w + x, &offsets, t);
+                    for j in 0..LANES {
+                        let one = segment_test(&data, y * w + x + j, &offsets, t);
+                        assert_eq!(block & (1 << j) != 0, one, "t {t} at ({}, {y})", x + j);
+                        corners += usize::from(one);
+                    }
+                }
+            }
+        }
+        assert!(corners > 1000, "too few corners to compare: {corners}");
     }
 
     #[test]
