@@ -126,6 +126,36 @@ fn sample(src: &[f32], w: usize, h: usize, win: Window, wts: Weights, out: &mut 
     }
 }
 
+/// [`sample`] of a level's intensities (weights `wimg`) and both gradients (weights `wg`) in
+/// one pass, for a window inside the level: the same products and sums per value.
+fn sample_three(
+    level: &Level,
+    win: Window,
+    wimg: Weights,
+    wg: Weights,
+    img: &mut [f32],
+    gx: &mut [f32],
+    gy: &mut [f32],
+) {
+    let w = level.width;
+    let (x0, y0) = (win.x0 as usize, win.y0 as usize);
+    let [i00, i01, i10, i11] = wimg.0;
+    let [g00, g01, g10, g11] = wg.0;
+    for r in 0..win.rows {
+        let (ra, rb) = ((y0 + r) * w + x0, (y0 + r + 1) * w + x0);
+        let n = win.cols + 1;
+        let (ia, ib) = (&level.img[ra..ra + n], &level.img[rb..rb + n]);
+        let (xa, xb) = (&level.dx[ra..ra + n], &level.dx[rb..rb + n]);
+        let (ya, yb) = (&level.dy[ra..ra + n], &level.dy[rb..rb + n]);
+        let o = r * win.stride..r * win.stride + win.cols;
+        for (c, ((oi, ox), oy)) in img[o.clone()].iter_mut().zip(&mut gx[o.clone()]).zip(&mut gy[o]).enumerate() {
+            *oi = i00 * ia[c] + i01 * ia[c + 1] + i10 * ib[c] + i11 * ib[c + 1];
+            *ox = g00 * xa[c] + g01 * xa[c + 1] + g10 * xb[c] + g11 * xb[c + 1];
+            *oy = g00 * ya[c] + g01 * ya[c + 1] + g10 * yb[c] + g11 * yb[c + 1];
+        }
+    }
+}
+
 /// `sum((J - I) * gx)` and `sum((J - I) * gy)` over the window, `J` the next image sampled at
 /// `win`/`wts` (fused: no intermediate patch when the window is inside the image).
 #[allow(clippy::too_many_arguments)]
@@ -269,10 +299,15 @@ impl LkTracker {
                 continue;
             }
             let window = Window { x0: ix as isize, y0: iy as isize, rows: win, cols: win, stride };
-            sample(&lp.img, w, h, window, Weights::new(ip[0] - ix, ip[1] - iy, INTENSITY_SCALE), &mut self.patch);
+            let wimg = Weights::new(ip[0] - ix, ip[1] - iy, INTENSITY_SCALE);
             let wi = Weights::new(ip[0] - ix, ip[1] - iy, 1.0);
-            sample(&lp.dx, w, h, window, wi, &mut self.patch_dx);
-            sample(&lp.dy, w, h, window, wi, &mut self.patch_dy);
+            if window.inside(w, h) {
+                sample_three(lp, window, wimg, wi, &mut self.patch, &mut self.patch_dx, &mut self.patch_dy);
+            } else {
+                sample(&lp.img, w, h, window, wimg, &mut self.patch);
+                sample(&lp.dx, w, h, window, wi, &mut self.patch_dx);
+                sample(&lp.dy, w, h, window, wi, &mut self.patch_dy);
+            }
             let (mut s11, mut s12, mut s22) = ([0.0f32; LANES], [0.0f32; LANES], [0.0f32; LANES]);
             for (gx, gy) in self.patch_dx.chunks_exact(LANES).zip(self.patch_dy.chunks_exact(LANES)) {
                 for l in 0..LANES {
