@@ -4,8 +4,8 @@
 #   benches/gpu/prepare.sh [PATH/TO/gpu_anchor.py]
 # then, on the device, with `.gpu` and `.gl` carried:
 #   bash benches/gpu/device.sh
-# It builds the release bench binary (benches/infer.rs), copies it and PyTorch's anchor script
-# into `.gpu/`, and downloads the Vulkan loader packages into `.gl/` (the device image has
+# It builds the release bench binary (benches/infer.rs) and the CLI, copies them and PyTorch's
+# anchor script into `.gpu/`, and downloads the Vulkan loader packages into `.gl/` (the device image has
 # the NVIDIA driver but no loader). Both folders are git-ignored.
 set -euo pipefail
 anchor=${1:-../shared/peers/gpu_anchor.py}
@@ -19,6 +19,12 @@ for l in sys.stdin:
         print(m["executable"])' | tail -1 | xargs -I{} cp {} .gpu/infer-bench
 # Debug info would take the binary over the 64 MiB the device tool carries.
 strip .gpu/infer-bench
+# The CLI too, for the whole `mg_slam` graph with the segmenter on `cpu` and on `wgpu`
+# (stripped and gzipped: about 20 MiB).
+cargo build --release --bin dynaflow
+install -m 755 target/release/dynaflow .gpu/dynaflow
+strip .gpu/dynaflow
+gzip -6 .gpu/dynaflow
 install -m 644 "$anchor" .gpu/gpu_anchor.py
 o='-oAPT::Architecture=amd64 -oAPT::Architectures=amd64 -oDir::State::Lists=/tmp/amd64'
 mkdir -p /tmp/amd64/partial
