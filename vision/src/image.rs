@@ -217,6 +217,46 @@ mod tests {
     }
 
     #[test]
+    fn blur_equals_the_separable_sums_pixel_by_pixel() {
+        // The definition: 8-bit taps summing to 256, horizontal sums, then vertical sums with
+        // rounding, both with BORDER_REFLECT_101; several widths and radii.
+        let mut state = 0x853c_49e6_748f_ea9bu64;
+        for (w, h, radius) in [(31usize, 9usize, 3usize), (64, 12, 3), (97, 20, 2), (70, 17, 5), (5, 4, 3)] {
+            let data: Vec<u8> = (0..w * h)
+                .map(|_| {
+                    state ^= state << 13;
+                    state ^= state >> 7;
+                    state ^= state << 17;
+                    (state >> 24) as u8
+                })
+                .collect();
+            let src = GrayImage::from_vec(w, h, data).unwrap();
+            let mut fast = GrayImage::default();
+            gaussian_blur(&src, radius, 2.0, &mut BlurScratch::default(), &mut fast);
+            let raw: Vec<f64> = (0..=2 * radius).map(|i| (-((i as f64 - radius as f64).powi(2)) / 8.0).exp()).collect();
+            let sum: f64 = raw.iter().sum();
+            let mut k: Vec<u32> = raw.iter().map(|v| (v / sum * 256.0).round() as u32).collect();
+            let total: u32 = k.iter().sum();
+            k[radius] = (k[radius] + 256).saturating_sub(total);
+            let r = radius as isize;
+            let horizontal = |x: usize, y: usize| -> u32 {
+                (0..=2 * radius)
+                    .map(|j| k[j] * u32::from(src.data[y * w + reflect101(x as isize + j as isize - r, w)]))
+                    .sum()
+            };
+            for y in 0..h {
+                for x in 0..w {
+                    let v: u32 = (0..=2 * radius)
+                        .map(|j| k[j] * horizontal(x, reflect101(y as isize + j as isize - r, h)))
+                        .sum::<u32>()
+                        + (1 << 15);
+                    assert_eq!(fast.data[y * w + x], (v >> 16).min(255) as u8, "{w}x{h} r {radius} at ({x}, {y})");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn resize_and_blur_keep_constant_images_constant() {
         let src = GrayImage::from_vec(37, 23, vec![91; 37 * 23]).unwrap();
         let mut dst = GrayImage::default();
