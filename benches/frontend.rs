@@ -286,5 +286,12 @@ fn main() {
         total_cv,
         ratio(total_ours, total_cv.is_finite().then_some(total_cv))
     );
+    // The colour-to-grey conversion each front-end operator does on its own (ours only).
+    let rgb = image::open(&ch7[0]).unwrap().to_rgb8();
+    let (w, h) = (rgb.width() as usize, rgb.height() as usize);
+    let grey_ms = median_ms(reps, || {
+        std::hint::black_box(dynaflow_vision::image::GrayImage::from_rgb8(w, h, rgb.as_raw()));
+    });
+    println!("{:<34} {:>8.2}ms", format!("RGB -> grey ({w}x{h})"), grey_ms);
     let _ = std::fs::remove_dir_all(&dir);
 }
