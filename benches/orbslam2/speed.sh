@@ -11,6 +11,8 @@
 #     .rrd + MCAP: frames/s (frames / wall time, both cores), ms per frame, the end-to-end age of
 #     a frame at `track` (mean, p50, p95: source to pose, queueing included), the per-node
 #     latency table, and the ATE.
+#   - ORB-SLAM2's CPU time per frame over all its threads (user + system, start-up subtracted)
+#     next to ours, on this folder and on the same motion without people.
 #   - with LONG=N (e.g. 3000): mg_slam on an N-frame folder of the same scene and its peak RSS next
 #     to the 300-frame run's, to show memory stays flat.
 # A benchmark script, not CI: ORB-SLAM2 is multi-threaded and not deterministic, so every run is
@@ -34,6 +36,23 @@ PEERS="${PEERS:-$REPO/target/peers}" bash "$ORB/run_peer.sh" "$SEQ" "$OUT/orbsla
 printf "%-28s %6s %14s %14s %10s\n" "system" "run" "median ms/fr" "mean ms/fr" "ATE cm"
 awk -F'\t' 'NR>1 { printf "%-28s %6s %14s %14s %10s\n", "ORB-SLAM2 (tracking thread)", $1, $8, $9, ($2=="NA"?"NA":sprintf("%.2f", $2*100)) }' \
   "$OUT/orbslam2/summary.tsv"
+
+# ORB-SLAM2's CPU time per frame, all its threads: one run on every frame and one on the first
+# 10 (vocabulary loading and start-up), the difference over the frames in between.
+cpu_run() {  # $1 sequence  $2 associations file -> "user+sys seconds"
+  local d; d=$(mktemp -d)
+  ( cd "$d" && /usr/bin/time -f "%U %S" -o "$d/time" "$ORB/src/Examples/RGB-D/rgbd_tum" "$ORB/ORBvoc_k10L5_trained.txt" \
+      "$ORB/TUM3.yaml" "$1" "$2" > /dev/null 2>&1 ) || true
+  awk '{print $1 + $2}' "$d/time"; rm -rf "$d"
+}
+orbslam_cpu() {  # $1 sequence folder  $2 label
+  python3 "$ORB/associate.py" "$1/rgb.txt" "$1/depth.txt" --max_difference 0.02 > "$OUT/assoc_all.txt"
+  head -10 "$OUT/assoc_all.txt" > "$OUT/assoc_10.txt"
+  local full start n
+  full=$(cpu_run "$1" "$OUT/assoc_all.txt"); start=$(cpu_run "$1" "$OUT/assoc_10.txt"); n=$(wc -l < "$OUT/assoc_all.txt")
+  python3 -c "import sys; f,s,n=float(sys.argv[1]),float(sys.argv[2]),int(sys.argv[3]); print(f'ORB-SLAM2 CPU, all threads, {sys.argv[4]}: {f:.1f} s on {n} frames, {s:.1f} s on 10 (start-up): {1000*(f-s)/(n-10):.1f} core-ms per frame')" "$full" "$start" "$n" "$2"
+}
+orbslam_cpu "$SEQ" "walking people"
 
 report() {  # $1 summary.json  $2 label  $3 "peak-RSS-KiB user-s sys-s" (GNU time)
   python3 - "$1" "$2" $3 <<'PY'
@@ -74,3 +93,12 @@ if [ -n "${LONG:-}" ]; then
   [ -s "$LSEQ/groundtruth.txt" ] || "$DF" synth --motion xyz --people 2 --frames "$LONG" --seed 7 --out "$LSEQ" > /dev/null
   run_graph mg_slam none "$LSEQ" "mg_slam, $LONG frames, recording off"
 fi
+
+# The same cost on the static scene (no people: ORB-SLAM2 does not fail there).
+SSEQ="$OUT/static_xyz"
+[ -s "$SSEQ/groundtruth.txt" ] || "$DF" synth --motion xyz --people 0 --frames 300 --seed 7 --out "$SSEQ" > /dev/null
+echo
+echo "== static scene (people 0)"
+orbslam_cpu "$SSEQ" "static scene"
+run_graph mg_slam none "$SSEQ" "mg_slam, static scene, recording off"
+run_graph orb_baseline none "$SSEQ" "orb_baseline, static scene, recording off"
