@@ -148,14 +148,9 @@ pub struct BlurScratch {
     acc: Vec<u32>,
 }
 
-/// Separable Gaussian blur with BORDER_REFLECT_101, kernel `2 * radius + 1`, into `dst`
-/// (reused). ORB smooths each level with a 7x7, sigma 2 kernel before BRIEF. 8-bit
-/// fixed-point taps (each pass sums to 256); the loops run over whole rows so they vectorise.
-pub fn gaussian_blur(src: &GrayImage, radius: usize, sigma: f64, scratch: &mut BlurScratch, dst: &mut GrayImage) {
-    dst.reshape(src.width, src.height);
-    if src.is_empty() {
-        return;
-    }
+/// The `2 * radius + 1` taps of [`gaussian_blur`]'s kernel in 8-bit fixed point: the sampled
+/// Gaussian normalised and rounded, the centre tap absorbing the rounding so they sum to 256.
+fn gaussian_taps(radius: usize, sigma: f64) -> Vec<u16> {
     let raw: Vec<f64> = (0..=2 * radius)
         .map(|i| {
             let d = i as f64 - radius as f64;
@@ -166,6 +161,18 @@ pub fn gaussian_blur(src: &GrayImage, radius: usize, sigma: f64, scratch: &mut B
     let mut k: Vec<u16> = raw.iter().map(|v| (v / sum * 256.0).round() as u16).collect();
     let total: u16 = k.iter().sum();
     k[radius] = (k[radius] + 256).saturating_sub(total);
+    k
+}
+
+/// Separable Gaussian blur with BORDER_REFLECT_101, kernel `2 * radius + 1`, into `dst`
+/// (reused). ORB smooths each level with a 7x7, sigma 2 kernel before BRIEF. 8-bit
+/// fixed-point taps (each pass sums to 256); the loops run over whole rows so they vectorise.
+pub fn gaussian_blur(src: &GrayImage, radius: usize, sigma: f64, scratch: &mut BlurScratch, dst: &mut GrayImage) {
+    dst.reshape(src.width, src.height);
+    if src.is_empty() {
+        return;
+    }
+    let k = gaussian_taps(radius, sigma);
     let (w, h) = (src.width, src.height);
     let taps = 2 * radius + 1;
     // Horizontal pass into u16 rows (at most 255 * 256).
@@ -218,8 +225,9 @@ mod tests {
 
     #[test]
     fn blur_equals_the_separable_sums_pixel_by_pixel() {
-        // The definition: 8-bit taps summing to 256, horizontal sums, then vertical sums with
-        // rounding, both with BORDER_REFLECT_101; several widths and radii.
+        // The definition, one pixel at a time: the kernel's 8-bit taps (summing to 256),
+        // horizontal sums, then vertical sums with rounding, both with BORDER_REFLECT_101;
+        // several widths and radii.
         let mut state = 0x853c_49e6_748f_ea9bu64;
         for (w, h, radius) in [(31usize, 9usize, 3usize), (64, 12, 3), (97, 20, 2), (70, 17, 5), (5, 4, 3)] {
             let data: Vec<u8> = (0..w * h)
@@ -233,11 +241,8 @@ mod tests {
             let src = GrayImage::from_vec(w, h, data).unwrap();
             let mut fast = GrayImage::default();
             gaussian_blur(&src, radius, 2.0, &mut BlurScratch::default(), &mut fast);
-            let raw: Vec<f64> = (0..=2 * radius).map(|i| (-((i as f64 - radius as f64).powi(2)) / 8.0).exp()).collect();
-            let sum: f64 = raw.iter().sum();
-            let mut k: Vec<u32> = raw.iter().map(|v| (v / sum * 256.0).round() as u32).collect();
-            let total: u32 = k.iter().sum();
-            k[radius] = (k[radius] + 256).saturating_sub(total);
+            let k: Vec<u32> = gaussian_taps(radius, 2.0).into_iter().map(u32::from).collect();
+            assert_eq!(k.iter().sum::<u32>(), 256, "taps of radius {radius}");
             let r = radius as isize;
             let horizontal = |x: usize, y: usize| -> u32 {
                 (0..=2 * radius)
