@@ -133,7 +133,10 @@ fn encodings(graph: &std::path::Path, rt: &tokio::runtime::Runtime) {
                 .expect("jpeg");
             out.len()
         }),
-        timed("colour: jpeg-encoder JPEG q90", "recorded (default)", n, |i| {
+        timed("colour: jpeg-encoder q90 4:4:4", "before issue 35", n, |i| {
+            encode::jpeg_with(&rgb[i], 90, false).map_or(0, |e| e.bytes.len())
+        }),
+        timed("colour: jpeg-encoder q90 4:2:0", "recorded (default)", n, |i| {
             encode::image(&rgb[i], ImageCodec::Jpeg(90)).map_or(0, |e| e.bytes.len())
         }),
         timed("colour: raw rgb8 + zstd-1", "--image-format raw", n, |i| zstd1(&rgb[i].data)),

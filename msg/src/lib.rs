@@ -46,12 +46,35 @@ pub struct Header {
 }
 
 /// A message: header plus typed payload.
-#[derive(Clone, Debug, PartialEq)]
+///
+/// Its [`digest`](Message::digest) is computed once and kept: a published message is shared
+/// read-only (`Arc<Message>`) by the consumers, the digest sink and every recorder, each of
+/// which asks for it. Change `header` or `body` only before the first call (a clone starts
+/// without the kept value; [`Message::touch`] drops it).
 pub struct Message {
     /// Provenance of the payload.
     pub header: Header,
     /// The payload.
     pub body: Body,
+    digest: std::sync::OnceLock<u64>,
+}
+
+impl Clone for Message {
+    fn clone(&self) -> Self {
+        Self::new(self.header.clone(), self.body.clone())
+    }
+}
+
+impl PartialEq for Message {
+    fn eq(&self, other: &Self) -> bool {
+        self.header == other.header && self.body == other.body
+    }
+}
+
+impl std::fmt::Debug for Message {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Message").field("header", &self.header).field("body", &self.body).finish()
+    }
 }
 
 /// The payload of a [`Message`]; one variant per [`PortType`].
@@ -243,12 +266,23 @@ impl Payload for Body {
 impl Message {
     /// A new message.
     pub fn new(header: Header, body: Body) -> Self {
-        Self { header, body }
+        Self { header, body, digest: std::sync::OnceLock::new() }
+    }
+
+    /// Drop the kept digest (after changing `header` or `body` of a message whose digest was
+    /// asked for).
+    pub fn touch(&mut self) {
+        self.digest = std::sync::OnceLock::new();
     }
 
     /// A deterministic 64-bit content hash of header and payload (bit-exact floats).
-    /// Two runs are identical on a port iff the sequences of digests are.
+    /// Two runs are identical on a port iff the sequences of digests are. Computed on the
+    /// first call and kept (see [`Message`]).
     pub fn digest(&self) -> u64 {
+        *self.digest.get_or_init(|| self.compute_digest())
+    }
+
+    fn compute_digest(&self) -> u64 {
         let mut d = Digest::new();
         d.u64(self.header.seq);
         d.f64(self.header.stamp);
@@ -304,5 +338,33 @@ impl Message {
                 serde_json::Value::Object(m.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect())
             }
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn message(v: f64) -> Message {
+        Message::new(Header { seq: 1, stamp: 0.5, frame_id: Arc::from("camera") }, Body::Scalars(Scalars::one("x", v)))
+    }
+
+    #[test]
+    fn the_kept_digest_follows_a_clone_or_a_touch_and_never_goes_stale() {
+        let mut m = message(1.0);
+        let first = m.digest();
+        assert_eq!(first, m.compute_digest());
+        assert_eq!(m.digest(), first, "asked twice: the same value");
+        // A clone starts afresh, so changing it cannot keep the original's digest.
+        let mut c = m.clone();
+        c.body = Body::Scalars(Scalars::one("x", 2.0));
+        assert_ne!(c.digest(), first);
+        assert_eq!(c.digest(), c.compute_digest());
+        // Changed in place after the first call: `touch` drops the kept value.
+        m.header.seq = 2;
+        m.touch();
+        assert_ne!(m.digest(), first);
+        assert_eq!(m.digest(), m.compute_digest());
+        assert_eq!(message(1.0), message(1.0), "equality ignores whether a digest was kept");
     }
 }

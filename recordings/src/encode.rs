@@ -54,16 +54,30 @@ pub fn png(data: &[u8], w: u32, h: u32, color: ExtendedColorType) -> Result<Enco
 
 /// JPEG through `jpeg-encoder` (AVX2 when the CPU has it; 2.1x faster than `image`'s encoder
 /// on 640×480 colour, docs/benchmarks.md), `image`'s encoder beyond 65535 pixels a side.
+///
+/// Chroma is subsampled 2×2 (4:2:0) at every quality: libjpeg's default, what OpenCV's
+/// `imwrite` and Pillow write (`jpeg-encoder` alone keeps full chroma from q90 up, which
+/// costs twice the blocks).
 fn jpeg(img: &Image, quality: u8) -> Result<Encoded, Error> {
+    jpeg_with(img, quality, true)
+}
+
+/// [`jpeg`] with chroma subsampled 2×2 (`true`) or kept whole (4:4:4; for the recording
+/// bench's comparison).
+pub fn jpeg_with(img: &Image, quality: u8, subsample_chroma: bool) -> Result<Encoded, Error> {
+    let sampling =
+        if subsample_chroma { jpeg_encoder::SamplingFactor::F_2_2 } else { jpeg_encoder::SamplingFactor::F_1_1 };
     let (color, fallback) = match img.format {
         PixelFormat::Rgb8 => (jpeg_encoder::ColorType::Rgb, ExtendedColorType::Rgb8),
         PixelFormat::Gray8 => (jpeg_encoder::ColorType::Luma, ExtendedColorType::L8),
     };
     let mut bytes = Vec::with_capacity(img.data.len() / 6);
     match (u16::try_from(img.width), u16::try_from(img.height)) {
-        (Ok(w), Ok(h)) => jpeg_encoder::Encoder::new(&mut bytes, quality.clamp(1, 100))
-            .encode(&img.data, w, h, color)
-            .map_err(|e| Error::Encode(e.to_string()))?,
+        (Ok(w), Ok(h)) => {
+            let mut encoder = jpeg_encoder::Encoder::new(&mut bytes, quality.clamp(1, 100));
+            encoder.set_sampling_factor(sampling);
+            encoder.encode(&img.data, w, h, color).map_err(|e| Error::Encode(e.to_string()))?
+        }
         _ => image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, quality)
             .write_image(&img.data, img.width, img.height, fallback)
             .map_err(|e| Error::Encode(e.to_string()))?,
@@ -115,15 +129,17 @@ pub fn depth_mm(depth: &DepthImage) -> Vec<u16> {
 
 /// [`depth_mm`] as little-endian bytes, built in one buffer (a frame's depth is 600 KB).
 pub fn depth_mm_le(depth: &DepthImage) -> Vec<u8> {
-    let mut out = Vec::with_capacity(depth.data.len() * 2);
-    for &d in &depth.data {
-        out.extend_from_slice(&metres_to_mm(d).to_le_bytes());
+    let mut out = vec![0u8; depth.data.len() * 2];
+    for (o, &d) in out.chunks_exact_mut(2).zip(&depth.data) {
+        o.copy_from_slice(&metres_to_mm(d).to_le_bytes());
     }
     out
 }
 
+/// Rounded half up from the exact product (`f32` times 1000 is exact in `f64`), without the
+/// library call `f32::round` is on baseline x86-64; saturating.
 fn metres_to_mm(d: f32) -> u16 {
-    if d.is_finite() && d > 0.0 { (d * 1000.0).round().clamp(0.0, 65535.0) as u16 } else { 0 }
+    if d.is_finite() && d > 0.0 { (f64::from(d) * 1000.0 + 0.5) as u16 } else { 0 }
 }
 
 /// A class mask's raw samples: `mono8` when every id fits a byte, else `16UC1` little-endian;

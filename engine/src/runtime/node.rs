@@ -346,6 +346,7 @@ impl NodeTask {
             }
             // The runtime owns frame numbering.
             msg.header.seq = seq;
+            msg.touch();
             *slot = Some(Arc::new(msg));
         }
         for ((port, _, record), (senders, msg)) in
