@@ -110,3 +110,107 @@ fn the_seed_graphs_run_unchanged_on_a_tum_folder() {
     assert_eq!(rows.len(), graphs.len());
     assert!(rows.iter().all(|r| r[3] == "ok" && r[4] == "2"), "{rows:?}");
 }
+
+/// The bench spread as a cluster's array job would spread it (issue 36): `--list` names the
+/// cells, each `--cell I` runs in its own process into its own folder (two "machines" here),
+/// and `--collect` merges them into the same tables as one `dynaflow bench` (every column but
+/// the wall time per frame, which no two runs share).
+#[test]
+fn cells_run_apart_and_collected_give_the_one_machine_tables() {
+    let dir = common::TempDir::new("bench-cells");
+    let graphs = ["orb_baseline", "mg_slam"].map(|g| common::repo().join(format!("graphs/{g}.yaml")));
+    let bench = |extra: &[&str], out: &std::path::Path| {
+        common::bin()
+            .arg("bench")
+            .args(&graphs)
+            .args(["--variants", "base,S", "--frames", "6", "--no-progress"])
+            .args(extra)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap()
+    };
+    let whole = bench(&["--jobs", "2"], &dir.path().join("whole"));
+    assert_eq!(whole.status.code(), Some(0), "{}", String::from_utf8_lossy(&whole.stderr));
+    let list = bench(&["--list"], &dir.path().join("unused"));
+    assert_eq!(list.status.code(), Some(0));
+    let list = String::from_utf8_lossy(&list.stdout).into_owned();
+    let cells: Vec<&str> = list.lines().filter(|l| !l.starts_with('#') && !l.starts_with("cell\t")).collect();
+    // orb_baseline has no variant `S`: its plain graph only; mg_slam as written and `S`.
+    assert_eq!(cells.len(), 3, "{list}");
+    assert!(cells[2].starts_with("2\tmg_slam\tS\tsynthetic\t"), "{list}");
+    assert!(!dir.path().join("unused").exists(), "--list runs nothing");
+    for i in 0..cells.len() {
+        let machine = dir.path().join(format!("machine{}", i % 2));
+        let out = bench(&["--cell", &i.to_string()], &machine);
+        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(String::from_utf8_lossy(&out.stdout).starts_with(&format!("cell {i} of 3: ")));
+        assert!(!machine.join("bench.csv").exists(), "a cell writes no tables");
+    }
+    let collected = dir.path().join("collected");
+    let out = common::bin()
+        .args(["bench", "--collect"])
+        .arg(dir.path().join("machine0"))
+        .arg(dir.path().join("machine1"))
+        .arg("--out")
+        .arg(&collected)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let without_time = |rows: Vec<Vec<String>>| -> Vec<Vec<String>> {
+        rows.into_iter()
+            .map(|mut r| {
+                r.remove(11);
+                r
+            })
+            .collect()
+    };
+    let want = without_time(csv_rows(&dir.path().join("whole/bench.csv")));
+    assert_eq!(want.len(), 3);
+    assert!(want.iter().all(|r| r[3] == "ok" && r[5].parse::<f64>().is_ok()), "{want:?}");
+    assert_eq!(without_time(csv_rows(&collected.join("bench.csv"))), want);
+    assert!(collected.join("ate.png").exists() && collected.join("time.png").exists());
+
+    // A missing cell is a failed row naming it, never a shorter table.
+    let out = common::bin()
+        .args(["bench", "--collect"])
+        .arg(dir.path().join("machine0"))
+        .arg("--out")
+        .arg(dir.path().join("half"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let rows = csv_rows(&dir.path().join("half/bench.csv"));
+    assert_eq!(rows.len(), 3);
+    assert_eq!(rows[1][3], "failed");
+    assert!(
+        rows[1][13].contains("cell 1 of 3") && rows[1][13].contains("none of the collected folders"),
+        "{:?}",
+        rows[1]
+    );
+    // Cells of another bench (other options) are refused, naming both.
+    let other = dir.path().join("other");
+    let out = common::bin()
+        .arg("bench")
+        .arg(&graphs[0])
+        .args(["--variants", "base", "--frames", "5", "--no-progress", "--cell", "0", "--out"])
+        .arg(&other)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = common::bin()
+        .args(["bench", "--collect"])
+        .arg(dir.path().join("machine0"))
+        .arg(&other)
+        .arg("--out")
+        .arg(dir.path().join("mixed"))
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("belongs to another bench"), "{err}");
+    // A cell out of range: bad input, saying how many there are.
+    let out = bench(&["--cell", "3"], &dir.path().join("unused"));
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("this bench has 3"));
+}

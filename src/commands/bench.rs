@@ -21,7 +21,7 @@ use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 #[derive(Debug, clap::Args)]
 pub struct BenchArgs {
     /// Graph files.
-    #[arg(required = true)]
+    #[arg(required_unless_present = "collect")]
     pub graphs: Vec<PathBuf>,
     /// Sequences to run each graph on (TUM RGB-D, KITTI or image folders, as `run --input`);
     /// none: each graph's own source (the embedded synthetic scene).
@@ -49,6 +49,18 @@ pub struct BenchArgs {
     /// No progress bar.
     #[arg(long)]
     pub no_progress: bool,
+    /// Print the bench's cells (graph x variant x sequence), one per line with its index, and
+    /// run nothing: what a cluster scheduler's array job spreads with `--cell`.
+    #[arg(long, conflicts_with_all = ["cell", "collect"])]
+    pub list: bool,
+    /// Run only cell I (0-based, as `--list` numbers them) into `--out`; no tables. Exit 0
+    /// when it completed, 1 when it failed (its `cell.json` says so).
+    #[arg(long, value_name = "I", conflicts_with = "collect")]
+    pub cell: Option<usize>,
+    /// Merge the cells run with `--cell` (each folder a `--out` of them, or one shared
+    /// `--out`) into the usual tables and plots in `--out`; no graph arguments needed.
+    #[arg(long, value_name = "DIR", num_args = 1..)]
+    pub collect: Vec<PathBuf>,
 }
 
 /// One run to do.
@@ -143,8 +155,62 @@ fn jobs(args: &BenchArgs) -> Result<Vec<Job>, String> {
     Ok(out)
 }
 
-fn run_one(exe: &Path, job: &Job, args: &BenchArgs) -> Row {
+/// What a cell's folder keeps of its job (`cell.json`), for `--collect`.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct CellRecord {
+    /// The bench's plan (a digest of every cell's graph, variant, sequence and the run
+    /// options): cells of different benches are not merged.
+    plan: String,
+    cell: usize,
+    cells: usize,
+    graph: PathBuf,
+    name: String,
+    variant: Option<String>,
+    input: Option<PathBuf>,
+    /// The `dynaflow run` process exited 0.
+    exit_ok: bool,
+}
+
+const CELL_FILE: &str = "cell.json";
+
+/// A digest of the plan: the cells in order and the options every run gets.
+fn plan_id(jobs: &[Job], args: &BenchArgs) -> String {
+    let mut d = dynaflow_engine::msg::Digest::new();
+    for j in jobs {
+        d.str(&j.graph.display().to_string());
+        d.str(j.variant_name());
+        d.str(&j.input.as_ref().map(|p| p.display().to_string()).unwrap_or_default());
+    }
+    d.str(&format!("{:?}|{:?}|{:?}", args.frames, args.set, args.intrinsics));
+    format!("{:016x}", d.finish())
+}
+
+/// Run a job's `dynaflow run` process, keep its stderr and `cell.json`, and read its row.
+fn run_one(exe: &Path, job: &Job, args: &BenchArgs, cell: (usize, usize, &str)) -> Row {
+    let ok = execute(exe, job, args);
+    let record = CellRecord {
+        plan: cell.2.to_owned(),
+        cell: cell.0,
+        cells: cell.1,
+        graph: job.graph.clone(),
+        name: job.name.clone(),
+        variant: job.variant.clone(),
+        input: job.input.clone(),
+        exit_ok: ok.as_ref().is_ok_and(|ok| *ok),
+    };
+    if let Ok(text) = serde_json::to_string_pretty(&record) {
+        let _ = std::fs::write(job.dir.join(CELL_FILE), text);
+    }
+    match ok {
+        Ok(ok) => read_row(job, ok),
+        Err(error) => Row { error, ..Row::default() },
+    }
+}
+
+/// Run the job; `Ok(exit status was 0)`, `Err` when the process could not start.
+fn execute(exe: &Path, job: &Job, args: &BenchArgs) -> Result<bool, String> {
     let _ = std::fs::remove_dir_all(&job.dir);
+    let _ = std::fs::create_dir_all(&job.dir);
     let mut cmd = Command::new(exe);
     cmd.arg("run").arg(&job.graph).args(["--no-progress", "--record", "none", "--out"]).arg(&job.dir);
     if let Some(v) = &job.variant {
@@ -162,20 +228,22 @@ fn run_one(exe: &Path, job: &Job, args: &BenchArgs) -> Row {
     for s in &args.set {
         cmd.args(["--set", s]);
     }
-    let out = match cmd.output() {
-        Ok(o) => o,
-        Err(e) => return Row { error: format!("cannot start {}: {e}", exe.display()), ..Row::default() },
-    };
+    let out = cmd.output().map_err(|e| format!("cannot start {}: {e}", exe.display()))?;
     let _ = std::fs::write(job.dir.join("stderr.txt"), &out.stderr);
+    Ok(out.status.success())
+}
+
+/// A finished job's row, from its folder (summary, stderr, trajectories) and exit status.
+fn read_row(job: &Job, exit_ok: bool) -> Row {
     let files = RunFiles::new(&job.dir, &job.name, job.variant.as_deref());
     let summary = Summary::read(&files.summary());
-    let mut row = Row { ok: out.status.success(), ..Row::default() };
+    let mut row = Row { ok: exit_ok, ..Row::default() };
     let s = match summary {
         Ok(s) => s,
         Err(e) => {
             // No summary: the run was refused before it started (the first error line says
             // why) or could not write one.
-            let err = String::from_utf8_lossy(&out.stderr);
+            let err = std::fs::read_to_string(job.dir.join("stderr.txt")).unwrap_or_default();
             let first = err.lines().find(|l| l.contains("error")).map(str::trim);
             row.ok = false;
             row.error = first.map_or(e, str::to_owned);
@@ -239,6 +307,15 @@ fn fmt_cm(v: Option<f64>) -> String {
 
 /// Exit 0 when every run completed, 1 when some failed (the table says which), 2 on bad input.
 pub fn bench(args: &BenchArgs) -> u8 {
+    if !args.collect.is_empty() {
+        return match collect(&args.collect) {
+            Ok((jobs, rows)) => report(&jobs, &rows, &args.out),
+            Err(e) => {
+                eprintln!("error: {e}");
+                EXIT_BAD_INPUT
+            }
+        };
+    }
     let jobs = match jobs(args) {
         Ok(j) => j,
         Err(e) => {
@@ -249,6 +326,15 @@ pub fn bench(args: &BenchArgs) -> u8 {
     if jobs.is_empty() {
         eprintln!("error: nothing to run (no matching variant)");
         return EXIT_BAD_INPUT;
+    }
+    let plan = plan_id(&jobs, args);
+    if args.list {
+        println!("# {} cells, plan {plan}: dynaflow bench ... --cell I runs cell I", jobs.len());
+        println!("cell\tgraph\tvariant\tsequence\tfolder");
+        for (i, j) in jobs.iter().enumerate() {
+            println!("{i}\t{}\t{}\t{}\t{}", j.name, j.variant_name(), j.sequence(), j.dir.display());
+        }
+        return EXIT_OK;
     }
     if let Err(e) = std::fs::create_dir_all(args.out.join("runs")) {
         eprintln!("error: cannot create {}: {e}", args.out.display());
@@ -261,6 +347,27 @@ pub fn bench(args: &BenchArgs) -> u8 {
             return EXIT_FAILED;
         }
     };
+    if let Some(i) = args.cell {
+        let Some(job) = jobs.get(i) else {
+            eprintln!(
+                "error: no cell {i}: this bench has {} (0..={}; `--list` prints them)",
+                jobs.len(),
+                jobs.len() - 1
+            );
+            return EXIT_BAD_INPUT;
+        };
+        let row = run_one(&exe, job, args, (i, jobs.len(), &plan));
+        let status = if row.ok { "ok".to_owned() } else { format!("failed: {}", row.error) };
+        println!(
+            "cell {i} of {}: {} {} {}: {status} ({})",
+            jobs.len(),
+            job.name,
+            job.variant_name(),
+            job.sequence(),
+            job.dir.display()
+        );
+        return if row.ok { EXIT_OK } else { EXIT_FAILED };
+    }
     let bar = if args.no_progress || !std::io::stderr().is_terminal() {
         indicatif::ProgressBar::hidden()
     } else {
@@ -283,7 +390,7 @@ pub fn bench(args: &BenchArgs) -> u8 {
                     };
                     let Some(job) = jobs.get(i) else { break };
                     bar.set_message(format!("{} {} {}", job.name, job.variant_name(), job.sequence()));
-                    let row = run_one(&exe, job, args);
+                    let row = run_one(&exe, job, args, (i, jobs.len(), &plan));
                     if !row.ok && bar.is_hidden() {
                         eprintln!("failed: {} {} {}: {}", job.name, job.variant_name(), job.sequence(), row.error);
                     }
@@ -300,19 +407,94 @@ pub fn bench(args: &BenchArgs) -> u8 {
         .iter()
         .map(|r| r.clone().unwrap_or_default())
         .collect();
-    let (md, csv) = tables(&jobs, &rows);
+    report(&jobs, &rows, &args.out)
+}
+
+/// Print and write the tables and plots; exit 0 when every row is ok, else 1.
+fn report(jobs: &[Job], rows: &[Row], out: &Path) -> u8 {
+    let (md, csv) = tables(jobs, rows);
     print!("{md}");
+    if let Err(e) = std::fs::create_dir_all(out) {
+        eprintln!("error: cannot create {}: {e}", out.display());
+        return EXIT_FAILED;
+    }
     let write = |name: &str, text: &str| {
-        let p = args.out.join(name);
+        let p = out.join(name);
         std::fs::write(&p, text).map_err(|e| eprintln!("error: {}: {e}", p.display())).is_ok()
     };
     if !(write("bench.md", &md) && write("bench.csv", &csv)) {
         return EXIT_FAILED;
     }
-    if let Err(e) = plots(&jobs, &rows, &args.out) {
+    if let Err(e) = plots(jobs, rows, out) {
         eprintln!("warning: plots: {e}");
     }
     if rows.iter().all(|r| r.ok) { EXIT_OK } else { EXIT_FAILED }
+}
+
+/// The cells under `dirs` (each a `--out` of `--cell` runs): their jobs and rows in cell
+/// order. Cells of two different plans are refused; a cell of the plan that no folder holds is
+/// a failed row naming it (never left out).
+fn collect(dirs: &[PathBuf]) -> Result<(Vec<Job>, Vec<Row>), String> {
+    let mut found: BTreeMap<usize, (CellRecord, PathBuf)> = BTreeMap::new();
+    let mut plan: Option<(String, usize, PathBuf)> = None;
+    for dir in dirs {
+        let runs = dir.join("runs");
+        let entries = std::fs::read_dir(&runs).map_err(|e| format!("cannot read {}: {e}", runs.display()))?;
+        let mut paths: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
+        paths.sort();
+        for path in paths {
+            let file = path.join(CELL_FILE);
+            if !file.exists() {
+                continue;
+            }
+            let text = std::fs::read_to_string(&file).map_err(|e| format!("cannot read {}: {e}", file.display()))?;
+            let rec: CellRecord =
+                serde_json::from_str(&text).map_err(|e| format!("{}: not a bench cell record: {e}", file.display()))?;
+            match &plan {
+                None => plan = Some((rec.plan.clone(), rec.cells, file.clone())),
+                Some((p, n, first)) if *p != rec.plan || *n != rec.cells => {
+                    return Err(format!(
+                        "{} belongs to another bench (plan {}, {} cells) than {} (plan {p}, {n} cells): collect the cells of one bench",
+                        file.display(),
+                        rec.plan,
+                        rec.cells,
+                        first.display()
+                    ));
+                }
+                Some(_) => {}
+            }
+            if let Some((_, other)) = found.get(&rec.cell) {
+                return Err(format!("cell {} is in both {} and {}", rec.cell, other.display(), path.display()));
+            }
+            found.insert(rec.cell, (rec, path));
+        }
+    }
+    let Some((plan, cells, _)) = plan else {
+        return Err(format!(
+            "no bench cells (runs/*/{CELL_FILE}) under {}",
+            dirs.iter().map(|d| d.display().to_string()).collect::<Vec<_>>().join(", ")
+        ));
+    };
+    let mut jobs = Vec::new();
+    let mut rows = Vec::new();
+    for i in 0..cells {
+        match found.remove(&i) {
+            Some((rec, dir)) => {
+                let job = Job { graph: rec.graph, name: rec.name, variant: rec.variant, input: rec.input, dir };
+                rows.push(read_row(&job, rec.exit_ok));
+                jobs.push(job);
+            }
+            None => {
+                let dir = PathBuf::from(format!("(cell {i})"));
+                jobs.push(Job { graph: PathBuf::new(), name: format!("cell {i}"), variant: None, input: None, dir });
+                rows.push(Row {
+                    error: format!("cell {i} of {cells} (plan {plan}) is in none of the collected folders"),
+                    ..Row::default()
+                });
+            }
+        }
+    }
+    Ok((jobs, rows))
 }
 
 /// The markdown and CSV tables.
