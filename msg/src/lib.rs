@@ -12,6 +12,7 @@
 //! (keypoints, tracks, per-point labels), `semantic` (detections, masks), `geometry`
 //! (poses, trajectories, clouds, octree updates) and `scalar` (metrics).
 
+pub mod codec;
 mod digest;
 mod features;
 mod geometry;
