@@ -642,7 +642,12 @@ mod tests {
                 tracks: vec![Track { id: u64::MAX, prev: [1.0, 2.0], cur: [f32::NAN, 4.0], error: 0.5 }],
             }),
             Body::Detections(Detections {
-                detections: vec![Detection { bbox: [1.0, 2.0, 30.0, 40.0], class_id: 0, label: "persön".into(), score: 0.9 }],
+                detections: vec![Detection {
+                    bbox: [1.0, 2.0, 30.0, 40.0],
+                    class_id: 0,
+                    label: "persön".into(),
+                    score: 0.9,
+                }],
             }),
             Body::Mask(SegmentationMask {
                 width: 2,
@@ -662,10 +667,10 @@ mod tests {
             }),
             Body::Pose(Pose { world_from_cam: iso(0.5) }),
             Body::Trajectory(Trajectory {
-                poses: vec![StampedPose { stamp: 1.0, world_from_cam: iso(0.1) }, StampedPose {
-                    stamp: 1.1,
-                    world_from_cam: iso(0.2),
-                }],
+                poses: vec![
+                    StampedPose { stamp: 1.0, world_from_cam: iso(0.1) },
+                    StampedPose { stamp: 1.1, world_from_cam: iso(0.2) },
+                ],
             }),
             Body::PointCloud(PointCloud { points: vec![[1.0, 2.0, 3.0]], colors: Some(vec![[1, 2, 3]]) }),
             Body::OctreeUpdate(OctreeUpdate {

@@ -20,6 +20,7 @@
 mod edge;
 mod metrics;
 mod node;
+pub mod remote;
 
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -55,6 +56,9 @@ pub struct RunOptions {
     /// After a stop request, how long nodes may take to finish their in-flight frames before
     /// they are cancelled (default [`DEFAULT_STOP_GRACE`]). Recordings are closed either way.
     pub stop_grace: Option<Duration>,
+    /// Run only this machine's share of a graph that spans machines (`None`: every node
+    /// here, `machines:` or not).
+    pub placement: Option<remote::Placement>,
 }
 
 /// How long a stopped run waits for in-flight frames before cancelling the nodes.
@@ -103,6 +107,9 @@ pub enum RunError {
     /// A sink could not open its output.
     #[error(transparent)]
     Sink(#[from] SinkError),
+    /// The machines of a split graph could not be joined up.
+    #[error("{0}")]
+    Remote(String),
 }
 
 /// Mix the graph seed and the node id into the node's RNG seed (SplitMix64 finaliser over an
@@ -118,6 +125,10 @@ pub fn node_seed(graph_seed: u64, node: &str) -> u64 {
     crate::msg::rng::SplitMix64::new(graph_seed ^ h).next_u64()
 }
 
+/// A local port read by other machines: the edge the wire drains, its counters, and the
+/// machines that consume it.
+type Outgoing = (edge::EdgeRx, edge::EdgeProbe, Vec<Arc<str>>);
+
 /// A recorded message on its way to the sink thread.
 pub(crate) struct Tap {
     node: Arc<str>,
@@ -128,10 +139,26 @@ pub(crate) struct Tap {
 /// Run `graph` to completion (or stop/failure). Sinks are opened first and always closed.
 pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn Sink>>) -> Result<RunReport, RunError> {
     let started = Instant::now();
+    // The nodes this process runs: all of them, or this machine's share.
+    let local: Vec<bool> = graph
+        .nodes
+        .iter()
+        .map(|n| options.placement.as_ref().is_none_or(|p| n.machine.as_deref() == Some(&*p.machine)))
+        .collect();
+    if let Some(p) = &options.placement
+        && !graph.machines.iter().any(|(m, _)| *m == p.machine)
+    {
+        let names: Vec<&str> = graph.machines.iter().map(|(m, _)| &**m).collect();
+        return Err(RunError::Remote(format!(
+            "the graph has no machine `{}` (its machines: {})",
+            p.machine,
+            if names.is_empty() { "none".to_owned() } else { names.join(", ") }
+        )));
+    }
     // Build every operator before anything runs: a missing file fails fast, naming the node.
     let mut instances: Vec<Option<Instance>> = Vec::new();
-    for node in &graph.nodes {
-        if node.disabled {
+    for (node, here) in graph.nodes.iter().zip(&local) {
+        if node.disabled || !here {
             instances.push(None);
             continue;
         }
@@ -158,20 +185,82 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     let mut receivers: Vec<Vec<Option<edge::EdgeRx>>> =
         graph.nodes.iter().map(|n| n.inputs.iter().map(|_| None).collect()).collect();
     let mut probes = Vec::new();
+    // Edges to and from other machines, by producer port: the local edges a subscription
+    // feeds, and the remote consumers of a local port with the local edge the wire drains.
+    let mut incoming: std::collections::BTreeMap<(usize, usize), Vec<edge::EdgeTx>> = Default::default();
+    let mut outgoing: std::collections::BTreeMap<(usize, usize), Outgoing> = Default::default();
     for e in &graph.edges {
-        let (tx, rx, probe) = edge::edge(e.effective_queue(options.realtime), e.delay);
-        if let Some(slot) = senders.get_mut(e.from_node).and_then(|s| s.get_mut(e.from_port)) {
-            slot.push(tx);
+        let (from_here, to_here) = (local[e.from_node], local[e.to_node]);
+        let policy = e.effective_queue(options.realtime);
+        if !from_here && to_here {
+            let (tx, rx, probe) = edge::edge(policy, e.delay);
+            if let Some(slot) = receivers.get_mut(e.to_node).and_then(|r| r.get_mut(e.to_port)) {
+                *slot = Some(rx);
+            }
+            incoming.entry((e.from_node, e.from_port)).or_default().push(tx);
+            probes.push(probe);
+            continue;
         }
-        if let Some(slot) = receivers.get_mut(e.to_node).and_then(|r| r.get_mut(e.to_port)) {
-            *slot = Some(rx);
+        if from_here && !to_here {
+            let machine: Arc<str> = graph.nodes[e.to_node].machine.clone().unwrap_or_else(|| Arc::from(""));
+            let entry = outgoing.entry((e.from_node, e.from_port)).or_insert_with(|| {
+                // Lockstep: nothing is lost before the wire; real time: the consumer's policy.
+                let queue = if options.realtime {
+                    policy
+                } else {
+                    crate::spec::QueuePolicy::Block { capacity: crate::spec::DEFAULT_CAPACITY }
+                };
+                let (tx, rx, probe) = edge::edge(queue, 0);
+                if let Some(slot) = senders.get_mut(e.from_node).and_then(|s| s.get_mut(e.from_port)) {
+                    slot.push(tx);
+                }
+                (rx, probe, Vec::new())
+            });
+            if !entry.2.contains(&machine) {
+                entry.2.push(machine);
+            }
+            probes.push(entry.1.clone());
+            continue;
+        }
+        let (tx, rx, probe) = edge::edge(policy, e.delay);
+        if from_here && to_here {
+            if let Some(slot) = senders.get_mut(e.from_node).and_then(|s| s.get_mut(e.from_port)) {
+                slot.push(tx);
+            }
+            if let Some(slot) = receivers.get_mut(e.to_node).and_then(|r| r.get_mut(e.to_port)) {
+                *slot = Some(rx);
+            }
         }
         probes.push(probe);
+    }
+    let mut bridges = Vec::new();
+    if let Some(p) = &options.placement {
+        let key = |(n, o): (usize, usize)| {
+            let node = &graph.nodes[n];
+            format!("{}/{}", node.id, node.outputs.get(o).map_or("?", |o| o.name))
+        };
+        let mut subscriptions = Vec::new();
+        for &port in incoming.keys() {
+            let from = graph.nodes[port.0].machine.clone().unwrap_or_else(|| Arc::from(""));
+            let rx = p.wire.subscriber(&key(port), &from).await.map_err(RunError::Remote)?;
+            subscriptions.push((key(port), rx));
+        }
+        p.wire.ready().await.map_err(RunError::Remote)?;
+        for ((k, rx), txs) in subscriptions.into_iter().zip(std::mem::take(&mut incoming).into_values()) {
+            bridges.push(tokio::spawn(bridge_in(k, rx, txs, failures.clone(), options.clone())));
+        }
+        for (port, (rx, _, to)) in std::mem::take(&mut outgoing) {
+            let tx = p.wire.publisher(&key(port), &to).await.map_err(RunError::Remote)?;
+            bridges.push(tokio::spawn(bridge_out(key(port), rx, tx, failures.clone(), options.stop.clone())));
+        }
     }
 
     let stem: Arc<str> = crate::files::RunFiles::stem_of(&graph.name, graph.variant.as_deref()).into();
     let mut tasks = Vec::new();
     for (i, (node, inst)) in graph.nodes.iter().zip(instances).enumerate() {
+        if !local[i] {
+            continue;
+        }
         let seed = node_seed(graph.seed, &node.id);
         let ctx = Context {
             node: node.id.clone(),
@@ -225,8 +314,14 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
             all.await
         }
     };
+    // The wire's tasks end once their streams have (or a peer is gone).
+    for b in bridges {
+        let _ = b.await;
+    }
+    let here: Vec<&crate::spec::ResolvedNode> =
+        graph.nodes.iter().zip(&local).filter(|(_, l)| **l).map(|(n, _)| n).collect();
     let mut node_metrics = Vec::new();
-    for (joined, node) in results.into_iter().zip(&graph.nodes) {
+    for (joined, node) in results.into_iter().zip(here.iter().copied()) {
         match joined {
             Ok(m) => node_metrics.push(m),
             Err(e) if e.is_cancelled() => {
@@ -257,19 +352,25 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
 
     let mut failures = std::mem::take(&mut *failures.lock().unwrap_or_else(PoisonError::into_inner));
     failures.extend(sink_failures);
+    // A machine reports the edges that touch it (one from another machine is counted on the
+    // consumer's side, where its queue is).
     let edge_reports: Vec<EdgeReport> = graph
         .edges
         .iter()
         .zip(&probes)
+        .filter(|(e, _)| local[e.to_node] || local[e.from_node])
         .map(|(e, p)| EdgeReport { edge: graph.edge_label(e), stats: p.stats() })
         .collect();
+    let consumed_here: Vec<&crate::spec::ResolvedEdge> =
+        graph.edges.iter().filter(|e| local[e.to_node] || local[e.from_node]).collect();
     let nodes = graph
         .nodes
         .iter()
         .enumerate()
+        .filter(|(i, _)| local[*i])
         .zip(node_metrics)
         .map(|((i, n), m)| {
-            let inputs = graph.edges.iter().zip(&edge_reports).filter(|(e, _)| e.to_node == i);
+            let inputs = consumed_here.iter().zip(&edge_reports).filter(|(e, _)| e.to_node == i);
             let (max_queue, dropped) =
                 inputs.fold((0, 0), |(q, d), (_, r)| (q.max(r.stats.max_depth), d + r.stats.dropped));
             NodeReport {
@@ -420,4 +521,64 @@ pub fn stop_on_signals(stop: StopHandle, abort: impl FnOnce() + Send + 'static) 
             }
         }
     });
+}
+
+/// Feed the local edges of one incoming stream until it ends; a broken stream (the producing
+/// machine gone, a frame that does not decode) fails the run and stops it.
+async fn bridge_in(
+    key: String,
+    mut rx: Box<dyn remote::WireRx>,
+    txs: Vec<edge::EdgeTx>,
+    failures: Arc<Mutex<Vec<Failure>>>,
+    options: RunOptions,
+) {
+    let fail = |error: String| {
+        tracing::error!("{error}");
+        failures.lock().unwrap_or_else(PoisonError::into_inner).push(Failure { node: format!("wire:{key}"), error });
+        options.stop.request();
+    };
+    loop {
+        let frame = match rx.recv().await {
+            Ok(f) => f,
+            Err(e) => return fail(format!("stream `{key}`: {e}")),
+        };
+        match remote::decode_frame(&frame) {
+            Ok(remote::Frame::End) => return,
+            Ok(remote::Frame::Envelope(seq, msg)) => {
+                let msg = msg.map(|m| Arc::new(*m));
+                // Age is measured from the arrival on this machine (clocks differ).
+                let born = Instant::now();
+                for tx in &txs {
+                    tx.send(edge::Envelope { seq, msg: msg.clone(), born }).await;
+                }
+                options.progress.fetch_max(seq + 1, Ordering::Relaxed);
+            }
+            Err(e) => return fail(format!("stream `{key}`: {e}")),
+        }
+    }
+}
+
+/// Send a local port's envelopes to the machines that consume it, then the end mark.
+async fn bridge_out(
+    key: String,
+    rx: edge::EdgeRx,
+    tx: Box<dyn remote::WireTx>,
+    failures: Arc<Mutex<Vec<Failure>>>,
+    stop: StopHandle,
+) {
+    while let Some(env) = rx.recv().await {
+        if let Err(e) = tx.send(remote::encode_frame(env.seq, env.msg.as_deref())).await {
+            let error = format!("stream `{key}`: {e}");
+            tracing::error!("{error}");
+            failures
+                .lock()
+                .unwrap_or_else(PoisonError::into_inner)
+                .push(Failure { node: format!("wire:{key}"), error });
+            stop.request();
+            return;
+        }
+    }
+    if let Err(e) = tx.send(remote::end_frame()).await {
+        tracing::warn!("stream `{key}`: end mark not delivered: {e}");
+    }
 }

@@ -30,6 +30,9 @@
 //!         queue: { drop_oldest: 4 }        # block (default) | latest | {drop_oldest: N}
 //!         capacity: 4                      # queue length for `block`
 //!     disabled: false
+//! machines:                # optional: the graph spans processes/machines (zenoh; issue 36)
+//!   robot:  { endpoint: "tcp/127.0.0.1:7447" }   # the first one is every node's default
+//!   server: { endpoint: "tcp/127.0.0.1:7448" }   # (a node says `machine: server`)
 //! variants:                # named patches for ablations
 //!   no_blur: { blur: { disabled: true } }
 //!   gt_masks: { oracle: true, cull: { in: { mask: camera.gt_mask } } }
@@ -68,6 +71,21 @@ pub struct GraphSpec {
     pub variants: Vec<VariantSpec>,
     /// Span of the `nodes:` key (or the document).
     pub nodes_span: Span,
+    /// `machines:` in file order (empty: the graph runs in one process).
+    pub machines: Vec<MachineSpec>,
+}
+
+/// One entry of `machines:`: a process of a graph that spans several.
+#[derive(Clone, Debug, PartialEq)]
+pub struct MachineSpec {
+    /// Machine name (what a node's `machine:` and `dynaflow run --machine` say).
+    pub name: String,
+    /// Where the name is written.
+    pub span: Span,
+    /// The zenoh endpoint this machine listens on (`tcp/HOST:PORT`).
+    pub endpoint: String,
+    /// Where the endpoint is written.
+    pub endpoint_span: Span,
 }
 
 /// One node.
@@ -89,6 +107,8 @@ pub struct NodeSpec {
     pub record: RecordSpec,
     /// `disabled:`.
     pub disabled: bool,
+    /// `machine:`: the machine of `machines:` that runs it (default: the first).
+    pub machine: Option<(String, Span)>,
 }
 
 /// Where an input comes from: `node.port`.
@@ -206,4 +226,6 @@ pub struct NodePatch {
     pub inputs: Vec<InputSpec>,
     /// New `record`.
     pub record: Option<RecordSpec>,
+    /// New `machine`.
+    pub machine: Option<(String, Span)>,
 }

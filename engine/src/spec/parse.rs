@@ -2,15 +2,16 @@
 //! diagnostic and parsing continues with the rest of the file.
 
 use super::{
-    DEFAULT_CAPACITY, GraphSpec, InputSpec, Join, NodePatch, NodeSpec, PortRef, QueuePolicy, RecordPolicy, RecordSpec,
-    VariantSpec,
+    DEFAULT_CAPACITY, GraphSpec, InputSpec, Join, MachineSpec, NodePatch, NodeSpec, PortRef, QueuePolicy, RecordPolicy,
+    RecordSpec, VariantSpec,
 };
 use crate::diag::{Diagnostic, did_you_mean};
 use crate::yaml::{Key, Span, Yaml, YamlKind};
 
-const TOP_KEYS: &[&str] = &["name", "description", "seed", "oracle", "nodes", "variants"];
-const NODE_KEYS: &[&str] = &["op", "params", "in", "record", "disabled"];
-const PATCH_KEYS: &[&str] = &["op", "params", "in", "record", "disabled"];
+const TOP_KEYS: &[&str] = &["name", "description", "seed", "oracle", "nodes", "variants", "machines"];
+const NODE_KEYS: &[&str] = &["op", "params", "in", "record", "disabled", "machine"];
+const PATCH_KEYS: &[&str] = &["op", "params", "in", "record", "disabled", "machine"];
+const MACHINE_KEYS: &[&str] = &["endpoint"];
 const INPUT_KEYS: &[&str] = &["from", "join", "delay", "queue", "capacity"];
 /// Longest allowed `delay:`; longer feedback needs a state operator, not a queue.
 const MAX_DELAY: u32 = 64;
@@ -156,6 +157,7 @@ pub fn parse_graph(doc: &Yaml) -> (GraphSpec, Vec<Diagnostic>) {
         nodes: Vec::new(),
         variants: Vec::new(),
         nodes_span: doc.span,
+        machines: Vec::new(),
     };
     if !matches!(doc.kind, YamlKind::Map(_)) {
         diags.push(
@@ -198,6 +200,20 @@ pub fn parse_graph(doc: &Yaml) -> (GraphSpec, Vec<Diagnostic>) {
                     if let Some(node) = parse_node(id, body, &mut diags) {
                         spec.nodes.push(node);
                     }
+                }
+            }
+            "machines" => {
+                for (name, body) in entries(value, "`machines`", None, &mut diags) {
+                    check_id("machine", &name.text, name.span, &mut diags);
+                    if let Some(m) = parse_machine(name, body, &mut diags) {
+                        spec.machines.push(m);
+                    }
+                }
+                if spec.machines.is_empty() {
+                    diags.push(
+                        Diagnostic::error("bad-value", value.span, "`machines` names no machine")
+                            .with_hint("write `machines: { robot: { endpoint: \"tcp/127.0.0.1:7447\" } }`, or leave `machines` out to run in one process"),
+                    );
                 }
             }
             "variants" => {
@@ -263,6 +279,7 @@ fn parse_node(id: &Key, body: &Yaml, diags: &mut Vec<Diagnostic>) -> Option<Node
         inputs: Vec::new(),
         record: RecordSpec::default(),
         disabled: false,
+        machine: None,
     };
     let mut has_op = false;
     for (key, value) in entries(body, &what, Some(NODE_KEYS), diags) {
@@ -276,6 +293,9 @@ fn parse_node(id: &Key, body: &Yaml, diags: &mut Vec<Diagnostic>) -> Option<Node
             "in" => node.inputs = parse_inputs(&id.text, value, diags),
             "record" => node.record = parse_record(&id.text, value, diags),
             "disabled" => node.disabled = boolean(value, &format!("`{}/disabled`", id.text), diags).unwrap_or(false),
+            "machine" => {
+                node.machine = string(value, &format!("`{}/machine`", id.text), diags).map(|m| (m, value.span));
+            }
             _ => {}
         }
     }
@@ -292,6 +312,56 @@ fn param_entries(node: &str, value: &Yaml, diags: &mut Vec<Diagnostic>) -> Vec<(
     entries(value, &format!("`{node}/params`"), None, diags).into_iter().cloned().collect()
 }
 
+fn parse_machine(name: &Key, body: &Yaml, diags: &mut Vec<Diagnostic>) -> Option<MachineSpec> {
+    let what = format!("machine `{}`", name.text);
+    let hint = "write `{ endpoint: \"tcp/HOST:PORT\" }`: where this machine's process listens";
+    if !matches!(body.kind, YamlKind::Map(_)) {
+        diags.push(
+            Diagnostic::error(
+                "expected-mapping",
+                body.span,
+                format!("{what} must be a mapping, found {}", body.type_name()),
+            )
+            .with_hint(hint),
+        );
+        return None;
+    }
+    let mut endpoint = None;
+    for (key, value) in entries(body, &what, Some(MACHINE_KEYS), diags) {
+        if key.text == "endpoint" {
+            endpoint = string(value, &format!("`{}/endpoint`", name.text), diags).map(|e| (e, value.span));
+        }
+    }
+    let Some((endpoint, endpoint_span)) = endpoint else {
+        diags.push(Diagnostic::error("missing-key", name.span, format!("{what} has no `endpoint`")).with_hint(hint));
+        return None;
+    };
+    if let Err(why) = check_endpoint(&endpoint) {
+        diags.push(
+            Diagnostic::error("bad-value", endpoint_span, format!("endpoint `{endpoint}` of {what}: {why}"))
+                .with_hint("a TCP endpoint such as `tcp/127.0.0.1:7447` or `tcp/robot.local:7447`"),
+        );
+    }
+    Some(MachineSpec { name: name.text.clone(), span: name.span, endpoint, endpoint_span })
+}
+
+/// A zenoh TCP endpoint: `tcp/HOST:PORT` (the only transport dynaflow builds zenoh with).
+pub fn check_endpoint(endpoint: &str) -> Result<(), String> {
+    let Some(addr) = endpoint.strip_prefix("tcp/") else {
+        return Err("not a `tcp/` endpoint (dynaflow builds zenoh with its TCP transport only)".into());
+    };
+    let Some((host, port)) = addr.rsplit_once(':') else {
+        return Err("no `:PORT`".into());
+    };
+    if host.is_empty() {
+        return Err("no host".into());
+    }
+    match port.parse::<u16>() {
+        Ok(p) if p > 0 => Ok(()),
+        _ => Err(format!("port `{port}` is not in 1..=65535")),
+    }
+}
+
 fn parse_patch(variant: &str, node: &Key, body: &Yaml, diags: &mut Vec<Diagnostic>) -> NodePatch {
     let mut patch = NodePatch {
         node: node.text.clone(),
@@ -301,6 +371,7 @@ fn parse_patch(variant: &str, node: &Key, body: &Yaml, diags: &mut Vec<Diagnosti
         params: Vec::new(),
         inputs: Vec::new(),
         record: None,
+        machine: None,
     };
     let what = format!("variant `{variant}` patch of `{}`", node.text);
     for (key, value) in entries(body, &what, Some(PATCH_KEYS), diags) {
@@ -312,6 +383,9 @@ fn parse_patch(variant: &str, node: &Key, body: &Yaml, diags: &mut Vec<Diagnosti
             "in" => patch.inputs = parse_inputs(&node.text, value, diags),
             "record" => patch.record = Some(parse_record(&node.text, value, diags)),
             "disabled" => patch.disabled = boolean(value, &format!("`{}/disabled`", node.text), diags),
+            "machine" => {
+                patch.machine = string(value, &format!("`{}/machine`", node.text), diags).map(|m| (m, value.span));
+            }
             _ => {}
         }
     }

@@ -28,6 +28,8 @@ pub struct ResolvedGraph {
     pub nodes: Vec<ResolvedNode>,
     /// Edges, one per wired input.
     pub edges: Vec<ResolvedEdge>,
+    /// `machines:` (name, zenoh endpoint) in file order; empty for a one-process graph.
+    pub machines: Vec<(Arc<str>, String)>,
 }
 
 /// A validated node.
@@ -45,6 +47,8 @@ pub struct ResolvedNode {
     pub outputs: Vec<ResolvedOutput>,
     /// Whether the node is disabled (emits nothing).
     pub disabled: bool,
+    /// The machine that runs it (`None` when the graph has no `machines:`).
+    pub machine: Option<Arc<str>>,
 }
 
 /// An input port of a node.
@@ -106,6 +110,33 @@ impl ResolvedEdge {
 }
 
 impl ResolvedGraph {
+    /// A digest of what every machine of a split run must agree on: the nodes (op, machine,
+    /// every parameter), the edges (ends, join, delay, queue), the seed and the variant. Two
+    /// processes of one run compare it at start-up, so mismatched graph files are refused.
+    pub fn digest(&self) -> u64 {
+        let mut d = crate::msg::Digest::new();
+        d.str(&self.name);
+        d.u64(self.seed);
+        d.str(self.variant.as_deref().unwrap_or(""));
+        for n in &self.nodes {
+            d.str(&n.id);
+            d.str(n.op.name);
+            d.str(n.machine.as_deref().unwrap_or(""));
+            d.str(&format!("{:?}|{}", n.params, n.disabled));
+        }
+        for e in &self.edges {
+            d.str(&format!(
+                "{}:{}>{}:{} {:?} {} {:?}",
+                e.from_node, e.from_port, e.to_node, e.to_port, e.join, e.delay, e.queue
+            ));
+        }
+        for (m, endpoint) in &self.machines {
+            d.str(m);
+            d.str(endpoint);
+        }
+        d.finish()
+    }
+
     /// Index of a node by id.
     pub fn node_index(&self, id: &str) -> Option<usize> {
         self.nodes.iter().position(|n| &*n.id == id)

@@ -146,9 +146,11 @@ pub fn validate(
             inputs,
             outputs,
             disabled: n.disabled,
+            machine: machine_of(spec, n),
         });
     }
     check_unused_outputs(spec, &nodes, &edges, &mut diags);
+    check_machines(spec, &nodes, &edges, &mut diags);
 
     let errors = diags.iter().any(Diagnostic::is_error);
     diags.sort_by_key(|d| (d.span.map_or(usize::MAX, |s| s.offset), d.severity));
@@ -164,8 +166,87 @@ pub fn validate(
         oracle,
         nodes,
         edges: edges.into_iter().map(|e| e.edge).collect(),
+        machines: spec.machines.iter().map(|m| (Arc::from(m.name.as_str()), m.endpoint.clone())).collect(),
     };
     (Some(graph), diags)
+}
+
+/// The machine a node runs on: its `machine:`, else the first of `machines:`, else none.
+fn machine_of(spec: &GraphSpec, n: &NodeSpec) -> Option<Arc<str>> {
+    let first = spec.machines.first()?;
+    Some(Arc::from(n.machine.as_ref().map_or(first.name.as_str(), |(m, _)| m.as_str())))
+}
+
+/// `machines:` and `machine:`: every machine named is defined, endpoints differ, and every
+/// edge between two machines carries a payload the wire encoding can carry.
+fn check_machines(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge], diags: &mut Vec<Diagnostic>) {
+    for (i, m) in spec.machines.iter().enumerate() {
+        if let Some(first) = spec.machines[..i].iter().find(|o| o.name == m.name) {
+            diags.push(
+                Diagnostic::error("duplicate-key", m.span, format!("machine `{}` is defined twice", m.name))
+                    .with_hint(format!("the first is at offset {}", first.span.offset)),
+            );
+        } else if let Some(other) = spec.machines[..i].iter().find(|o| o.endpoint == m.endpoint) {
+            diags.push(
+                Diagnostic::error(
+                    "bad-value",
+                    m.endpoint_span,
+                    format!("machines `{}` and `{}` both listen on `{}`", other.name, m.name, m.endpoint),
+                )
+                .with_hint("give each machine its own endpoint (another port on the same host)"),
+            );
+        }
+    }
+    let names: Vec<&str> = spec.machines.iter().map(|m| m.name.as_str()).collect();
+    for n in &spec.nodes {
+        let Some((m, span)) = &n.machine else { continue };
+        if names.is_empty() {
+            diags.push(
+                Diagnostic::error(
+                    "unknown-machine",
+                    *span,
+                    format!("node `{}` names machine `{m}`, but the graph has no `machines:`", n.id),
+                )
+                .with_hint(
+                    "add `machines: { NAME: { endpoint: \"tcp/HOST:PORT\" } }` at the top level, or remove `machine:`",
+                ),
+            );
+        } else if !names.contains(&m.as_str()) {
+            let hint = did_you_mean(m, names.iter().copied())
+                .unwrap_or_else(|| format!("the graph's machines: {}", names.join(", ")));
+            diags.push(
+                Diagnostic::error("unknown-machine", *span, format!("node `{}` names undefined machine `{m}`", n.id))
+                    .with_hint(hint),
+            );
+        }
+    }
+    if names.len() < 2 {
+        return;
+    }
+    let node_at = |i: usize| spec.nodes.get(i).and_then(|n| nodes.iter().find(|r| *r.id == *n.id));
+    for se in edges {
+        let (Some(from), Some(to)) = (node_at(se.edge.from_node), node_at(se.edge.to_node)) else { continue };
+        if from.machine == to.machine {
+            continue;
+        }
+        let ty = from.outputs.get(se.edge.from_port).map_or(PortType::Any, |o| o.ty);
+        if !crate::msg::codec::encodable(ty) {
+            diags.push(
+                Diagnostic::error(
+                    "not-serialisable",
+                    se.span,
+                    format!(
+                        "the edge from `{}` (machine `{}`) to `{}` (machine `{}`) carries `{ty}`, which cannot cross machines",
+                        from.id,
+                        from.machine.as_deref().unwrap_or("?"),
+                        to.id,
+                        to.machine.as_deref().unwrap_or("?"),
+                    ),
+                )
+                .with_hint("place both nodes on one machine, or feed the edge from a typed output"),
+            );
+        }
+    }
 }
 
 /// Follows ground truth through the graph and checks the graph's `oracle:` declaration

@@ -48,6 +48,9 @@ fn apply_patch(spec: &mut GraphSpec, patch: &NodePatch) -> bool {
     if let Some(d) = patch.disabled {
         node.disabled = d;
     }
+    if let Some(m) = &patch.machine {
+        node.machine = Some(m.clone());
+    }
     if let Some((op, span)) = &patch.op {
         node.op.clone_from(op);
         node.op_span = *span;
