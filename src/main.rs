@@ -74,6 +74,8 @@ enum Command {
     Bench(commands::bench::BenchArgs),
     /// Compare two recorded runs (MCAP): per topic, counts, first differing frame, deltas, ATE.
     Diff(commands::diff::DiffArgs),
+    /// Join the recordings of a run split over machines into one `.rrd` or MCAP file.
+    Merge(commands::merge::MergeArgs),
     /// Evaluate a trajectory against ground truth (TUM files): ATE and RPE, as evo computes them.
     Eval(commands::eval::EvalArgs),
     /// Run an ONNX detector on images: detections per image as JSON lines.
@@ -172,6 +174,14 @@ pub struct RunArgs {
     /// No progress bar.
     #[arg(long)]
     pub no_progress: bool,
+    /// Run this machine's share of a graph with `machines:` (its nodes, with edges to the
+    /// others over zenoh; needs the `zenoh` build feature). Without it the whole graph runs
+    /// here.
+    #[arg(long, value_name = "NAME")]
+    pub machine: Option<String>,
+    /// With `--machine`: how long to wait for the other machines at the start and at the end.
+    #[arg(long, value_name = "SECONDS", default_value_t = 20.0, requires = "machine")]
+    pub peer_timeout: f64,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]
@@ -239,6 +249,7 @@ fn main() -> ExitCode {
             })
         }
         Command::Diff(args) => commands::diff::diff(&args),
+        Command::Merge(args) => commands::merge::merge(&args),
         Command::Eval(args) => commands::eval::eval(&args),
         Command::Synth(args) => commands::synth::synth(&args),
         Command::Vocab(c) => commands::vocab::vocab(&c),

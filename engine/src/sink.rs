@@ -57,6 +57,12 @@ pub struct RunInfo {
     /// port, the node's own camera-info output (a source's ground truth) or what feeds its
     /// camera-info input (a tracker's estimate). Poses of a node with neither have none.
     pub cameras: BTreeMap<String, String>,
+    /// The machine this process ran, in a graph split over machines (`machines:`); its
+    /// recordings hold that machine's nodes only (`dynaflow merge` joins them).
+    pub machine: Option<String>,
+    /// The resolved graph's digest ([`ResolvedGraph::digest`]): recordings of one run's
+    /// machines share it.
+    pub graph_digest: String,
 }
 
 /// For each pose output of `graph`, the camera-info port it is seen through (see
@@ -106,6 +112,8 @@ impl RunInfo {
                 .flat_map(|n| n.outputs.iter().filter(|o| o.ground_truth).map(move |o| format!("{}/{}", n.id, o.name)))
                 .collect(),
             cameras: pose_cameras(graph),
+            machine: None,
+            graph_digest: format!("{:016x}", graph.digest()),
         }
     }
 }
@@ -128,6 +136,8 @@ impl RunInfo {
             ("git_commit".to_owned(), self.git_commit.clone()),
             ("realtime".to_owned(), self.realtime.to_string()),
             ("digest".to_owned(), crate::msg::DIGEST_SCHEME.to_owned()),
+            ("machine".to_owned(), self.machine.clone().unwrap_or_default()),
+            ("graph_digest".to_owned(), self.graph_digest.clone()),
             // Comma-separated `/node/port` topics that carry ground truth (`mcap_replay` keeps
             // the mark on them).
             (

@@ -13,6 +13,7 @@ mod error;
 mod jsonl;
 pub mod live;
 pub mod mcap;
+pub mod merge;
 mod payload;
 pub mod replay;
 pub mod rrd;

@@ -5,6 +5,7 @@ pub mod diff;
 pub mod eval;
 pub mod graph;
 pub mod infer;
+pub mod merge;
 pub mod octree;
 pub mod ops;
 pub mod run;

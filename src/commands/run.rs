@@ -117,7 +117,31 @@ pub fn run(args: &RunArgs) -> u8 {
         eprintln!("error: cannot create output folder {}: {e}", args.out.display());
         return EXIT_BAD_INPUT;
     }
-    let files = RunFiles::new(&args.out, &graph.name, graph.variant.as_deref());
+    let mut files = RunFiles::new(&args.out, &graph.name, graph.variant.as_deref());
+    if let Some(m) = &args.machine {
+        if graph.machines.is_empty() {
+            eprintln!(
+                "error: `--machine {m}`: the graph has no `machines:`, so it runs in one process (leave out --machine)"
+            );
+            return EXIT_BAD_INPUT;
+        }
+        if !graph.machines.iter().any(|(n, _)| &**n == m) {
+            let names: Vec<&str> = graph.machines.iter().map(|(n, _)| &**n).collect();
+            eprintln!("error: `--machine {m}`: the graph has no such machine (its machines: {})", names.join(", "));
+            return EXIT_BAD_INPUT;
+        }
+        if !(args.peer_timeout.is_finite() && args.peer_timeout > 0.0) {
+            eprintln!("error: `--peer-timeout {}`: give a positive number of seconds", args.peer_timeout);
+            return EXIT_BAD_INPUT;
+        }
+        // Each machine's own summary and recordings: `<stem>.<machine>.*`.
+        files.stem = format!("{}.{m}", files.stem);
+    } else if graph.machines.len() > 1 {
+        tracing::info!(
+            "the graph places its nodes on {} machines; all of them run in this process (`--machine NAME` runs one machine's share)",
+            graph.machines.len()
+        );
+    }
 
     // Each recorder once: two sinks on one file would interleave into a corrupt file.
     let mut recorders: Vec<&str> = Vec::new();
@@ -185,7 +209,16 @@ pub fn run(args: &RunArgs) -> u8 {
         // a SIGINT).
         runtime::stop_on_signals(options.stop.clone(), || std::process::exit(i32::from(EXIT_INTERRUPTED)));
         let progress = show_progress.then(|| spawn_progress(&options));
-        let result = runtime::run(&graph, options.clone(), sinks).await;
+        let mut options = options.clone();
+        let wire = match join_machines(&graph, args).await {
+            Ok(w) => w,
+            Err(e) => return Err(runtime::RunError::Remote(e)),
+        };
+        options.placement = wire.as_ref().map(|(p, _)| p.clone());
+        let result = runtime::run(&graph, options, sinks).await;
+        if let Some((_, finish)) = wire {
+            finish.await;
+        }
         if let Some((bar, task)) = progress {
             task.abort();
             bar.finish_and_clear();
@@ -257,6 +290,34 @@ pub fn run(args: &RunArgs) -> u8 {
         RunStatus::Completed => EXIT_OK,
         RunStatus::Interrupted => EXIT_INTERRUPTED,
         RunStatus::Failed => EXIT_FAILED,
+    }
+}
+
+/// What joins this process to the other machines of a split run: the placement the runtime
+/// uses and what to await once the run is over (the session's orderly end).
+type Joined = (runtime::remote::Placement, std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>);
+
+/// `--machine NAME`: open this machine's zenoh session (`None` without `--machine`).
+#[cfg(feature = "zenoh")]
+async fn join_machines(graph: &dynaflow_engine::spec::ResolvedGraph, args: &RunArgs) -> Result<Option<Joined>, String> {
+    let Some(m) = &args.machine else { return Ok(None) };
+    let timeout = Duration::from_secs_f64(args.peer_timeout);
+    let wire = std::sync::Arc::new(dynaflow_net::ZenohWire::open(graph, m, timeout).await?);
+    let placement = runtime::remote::Placement { machine: m.as_str().into(), wire: wire.clone() };
+    Ok(Some((placement, Box::pin(async move { wire.finish().await }))))
+}
+
+/// Without the `zenoh` feature `--machine` is refused, saying how to get it.
+#[cfg(not(feature = "zenoh"))]
+async fn join_machines(
+    _graph: &dynaflow_engine::spec::ResolvedGraph,
+    args: &RunArgs,
+) -> Result<Option<Joined>, String> {
+    match &args.machine {
+        None => Ok(None),
+        Some(m) => Err(format!(
+            "`--machine {m}`: this dynaflow is built without graphs across machines; build it with `cargo build --release --features zenoh`"
+        )),
     }
 }
 

@@ -173,7 +173,8 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
         instances.push(Some(inst));
     }
 
-    let info = RunInfo::new(graph, options.realtime);
+    let mut info = RunInfo::new(graph, options.realtime);
+    info.machine = options.placement.as_ref().map(|p| p.machine.to_string());
     // Without sinks nothing is tapped, so an unrecorded run pays nothing for recording.
     let recording = !sinks.is_empty();
     let (tap_tx, sink_handles) = sink_threads(sinks, &info)?;

@@ -636,6 +636,8 @@ mod tests {
             ports: BTreeMap::new(),
             ground_truth_ports: Default::default(),
             cameras: BTreeMap::new(),
+            machine: None,
+            graph_digest: String::new(),
         };
         let cache = EncodeCache::new(2);
         let mut rrd = RrdSink::new(dir.join("t.rrd")).with_cache(cache.clone());
