@@ -13,7 +13,9 @@ export DYNAFLOW_REQUIRE_PEERS=1
 skips="$target/peer-skips"
 rm -rf "$skips" && mkdir -p "$skips"
 export DYNAFLOW_SKIP_LOG="$skips"
-cargo test --workspace --release --no-fail-fast "$@"
+# `--features zenoh`: graphs across machines are built and tested too (the default build has
+# no zenoh crate; tests/dependencies.rs checks that).
+cargo test --workspace --release --no-fail-fast --features zenoh "$@"
 status=$?
 list="$(cat "$skips"/*.txt 2>/dev/null | sort -u)"
 if [ -z "$list" ]; then
