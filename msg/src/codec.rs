@@ -63,22 +63,9 @@ pub fn decode(bytes: &[u8]) -> Result<Message, CodecError> {
     Ok(Message::new(header, body))
 }
 
-const TYPES: [PortType; 14] = [
-    PortType::Image,
-    PortType::Depth,
-    PortType::CameraInfo,
-    PortType::Keypoints,
-    PortType::Tracks,
-    PortType::Detections,
-    PortType::Mask,
-    PortType::PointLabels,
-    PortType::Pose,
-    PortType::Trajectory,
-    PortType::PointCloud,
-    PortType::OctreeUpdate,
-    PortType::Map,
-    PortType::Scalars,
-];
+/// The body's tag is its type's index in [`PortType::ALL`] (a reordering there is a new
+/// [`VERSION`]).
+const TYPES: [PortType; 14] = PortType::ALL;
 
 fn tag(ty: PortType) -> u8 {
     TYPES.iter().position(|t| *t == ty).map_or(u8::MAX, |i| i as u8)
