@@ -5,7 +5,8 @@
 #     tests/peers/requirements.txt (every version pinned);
 #   Debian packages, when root (or with sudo): OctoMap 1.9 (liboctomap-dev, octomap-tools),
 #     g++ (builds the OctoMap peer), Mesa's lavapipe (a software Vulkan adapter for the GPU
-#     kernels on a machine without a GPU).
+#     kernels on a machine without a GPU), Chromium (the rerun web viewer, checked as a user
+#     sees it: tests/viewer.rs; software rendering).
 # DYNAFLOW_SKIP_PEERS=all installs nothing (the tests then name every skipped comparison).
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -14,7 +15,7 @@ venv="${DYNAFLOW_PEERS:-$target/peers}"
 req="tests/peers/requirements.txt"
 case ",${DYNAFLOW_SKIP_PEERS:-}," in *,all,*) echo "peers: none installed (DYNAFLOW_SKIP_PEERS=all)"; exit 0 ;; esac
 
-debs="liboctomap-dev octomap-tools g++ mesa-vulkan-drivers libvulkan1"
+debs="liboctomap-dev octomap-tools g++ mesa-vulkan-drivers libvulkan1 chromium"
 need=""
 for p in $debs; do dpkg -s "$p" >/dev/null 2>&1 || need="$need $p"; done
 if [ -n "$need" ]; then
@@ -27,7 +28,7 @@ if [ -n "$need" ]; then
   if [ "$(id -u)" -eq 0 ] || [ -n "$sudo" ]; then
     $sudo apt-get update -q >/dev/null
     # shellcheck disable=SC2086
-    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q $need >/dev/null
+    DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -q --no-install-recommends $need >/dev/null
   fi
 fi
 
@@ -45,9 +46,9 @@ timeout 120 "$venv/bin/rerun" analytics disable </dev/null >/dev/null 2>&1 || tr
 deb_version() { dpkg-query -W -f='${Version}' "$1" 2>/dev/null || echo "missing"; }
 py_versions="$("$venv/bin/python" - <<'PY'
 from importlib.metadata import version
-names = ["rerun-sdk", "mcap", "protobuf", "opencv-python-headless", "evo", "onnxruntime", "numpy"]
+names = ["rerun-sdk", "mcap", "protobuf", "opencv-python-headless", "evo", "onnxruntime", "numpy", "websocket-client"]
 print(", ".join(f"{n} {version(n)}" for n in names))
 PY
 )"
 echo "peers ($venv): $py_versions"
-echo "peers (Debian): OctoMap $(deb_version liboctomap-dev), octomap-tools $(deb_version octomap-tools), g++ $(deb_version g++), Mesa lavapipe $(deb_version mesa-vulkan-drivers)"
+echo "peers (Debian): OctoMap $(deb_version liboctomap-dev), octomap-tools $(deb_version octomap-tools), g++ $(deb_version g++), Mesa lavapipe $(deb_version mesa-vulkan-drivers), Chromium $(deb_version chromium)"

@@ -3,7 +3,7 @@
 # with every peer comparison required, and ends with one line naming every comparison that
 # was skipped. Extra arguments go to `cargo test` (e.g. `scripts/test.sh --test eval`).
 #   DYNAFLOW_SKIP_PEERS=evo,opencv,...  skips those peers' comparisons on purpose
-#   (peers: opencv, evo, onnxruntime, octomap, rerun, mcap, gpu; or all).
+#   (peers: opencv, evo, onnxruntime, octomap, rerun, mcap, gpu, chromium; or all).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 target="${CARGO_TARGET_DIR:-$PWD/target}"

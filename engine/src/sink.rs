@@ -63,6 +63,25 @@ pub struct RunInfo {
     /// The resolved graph's digest ([`ResolvedGraph::digest`]): recordings of one run's
     /// machines share it.
     pub graph_digest: String,
+    /// The point labels tracking decides with (`node/port` of each point-labels output that
+    /// feeds a node with a pose output): what a viewer draws on the camera image.
+    pub decisions: Vec<String>,
+}
+
+/// The point-labels outputs that feed a tracker (a node with a pose output).
+fn decisions(graph: &ResolvedGraph) -> Vec<String> {
+    let mut out = Vec::new();
+    for e in &graph.edges {
+        let (Some(from), Some(to)) = (graph.nodes.get(e.from_node), graph.nodes.get(e.to_node)) else { continue };
+        let Some(port) = from.outputs.get(e.from_port) else { continue };
+        if port.ty == PortType::PointLabels && !to.disabled && to.outputs.iter().any(|o| o.ty == PortType::Pose) {
+            let name = format!("{}/{}", from.id, port.name);
+            if !out.contains(&name) {
+                out.push(name);
+            }
+        }
+    }
+    out
 }
 
 /// For each pose output of `graph`, the camera-info port it is seen through (see
@@ -114,6 +133,7 @@ impl RunInfo {
             cameras: pose_cameras(graph),
             machine: None,
             graph_digest: format!("{:016x}", graph.digest()),
+            decisions: decisions(graph),
         }
     }
 }

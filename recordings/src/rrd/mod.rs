@@ -189,31 +189,40 @@ impl RrdSink {
     }
 }
 
-/// The default layout: 2-D camera views with overlays, the 3-D world, metrics over time.
+/// The default layout: the camera image with what tracking decides drawn on it (points in red
+/// where dynamic, green where static, the deciding rule and its measure on hover; estimated
+/// masks with a transparent background), each other image on its own, the 3-D world and the
+/// metrics over time. Overlays sit on one image only: every point set of a frame on every
+/// image hid which points were dynamic.
 fn blueprint(info: &RunInfo) -> Blueprint {
-    let overlays: Vec<String> = info
-        .ports
-        .iter()
-        .filter(|(_, ty)| {
-            matches!(
-                ty,
-                PortType::Keypoints | PortType::Tracks | PortType::Detections | PortType::Mask | PortType::PointLabels
-            )
-        })
-        .map(|(p, _)| format!("/{p}"))
-        .collect();
-    let mut views: Vec<ContainerLike> = info
-        .ports
-        .iter()
-        .filter(|(_, ty)| matches!(ty, PortType::Image | PortType::Depth))
-        .map(|(p, _)| {
-            let mut contents = vec![format!("/{p}")];
-            contents.extend(overlays.iter().cloned());
-            Spatial2DView::new(p.clone()).with_origin("/").with_contents(contents).into()
-        })
-        .collect();
-    if views.is_empty() && !overlays.is_empty() {
+    let of = |ty: PortType| info.ports.iter().filter(move |(_, t)| **t == ty).map(|(p, _)| p.clone());
+    let labels: Vec<String> =
+        if info.decisions.is_empty() { of(PortType::PointLabels).collect() } else { info.decisions.clone() };
+    let masks: Vec<String> = of(PortType::Mask).filter(|p| !info.ground_truth_ports.contains(p)).collect();
+    let overlays: Vec<String> = masks.iter().chain(&labels).map(|p| format!("/{p}")).collect();
+    // The camera image: the first colour image that no other node derived (a source's).
+    let images: Vec<String> = of(PortType::Image).collect();
+    let camera = images.iter().find(|p| p.ends_with("/rgb") || p.ends_with("/left")).or(images.first()).cloned();
+    let mut views: Vec<ContainerLike> = Vec::new();
+    if let Some(cam) = &camera {
+        let mut contents = vec![format!("/{cam}")];
+        contents.extend(overlays.iter().cloned());
+        views.push(
+            Spatial2DView::new(format!("{cam}: dynamic (red) / static (green)"))
+                .with_origin("/")
+                .with_contents(contents)
+                .into(),
+        );
+    } else if !overlays.is_empty() {
         views.push(Spatial2DView::new("image space").with_origin("/").with_contents(overlays).into());
+    }
+    for p in info
+        .ports
+        .iter()
+        .filter(|(p, ty)| matches!(ty, PortType::Image | PortType::Depth) && Some(*p) != camera.as_ref())
+        .map(|(p, _)| p)
+    {
+        views.push(Spatial2DView::new(p.clone()).with_origin("/").with_contents([format!("/{p}")]).into());
     }
     let right: Vec<ContainerLike> = vec![
         Spatial3DView::new("world").with_origin("/world").into(),
@@ -221,7 +230,11 @@ fn blueprint(info: &RunInfo) -> Blueprint {
     ];
     let mut columns: Vec<ContainerLike> = Vec::new();
     if !views.is_empty() {
-        columns.push(Vertical::new(views).into());
+        // The camera with the decisions gets as much height as the other images together.
+        let others = (views.len() - 1).max(1) as f32;
+        let shares: Vec<f32> =
+            (0..views.len()).map(|i| if i == 0 && camera.is_some() { others } else { 1.0 }).collect();
+        columns.push(Vertical::new(views).with_row_shares(shares).into());
     }
     columns.push(Vertical::new(right).into());
     Blueprint::new(Horizontal::new(columns))
@@ -418,9 +431,16 @@ impl Sink for RrdSink {
             }
             Body::Mask(m) => {
                 if changed(&mut self.logged_classes, &path, &m.class_names) {
-                    let ctx = rerun::AnnotationContext::new(
-                        m.class_names.iter().enumerate().map(|(i, n)| (i as u16, n.as_ref(), class_color(i as u16).0)),
-                    );
+                    // Class 0 is the background: transparent, so only the classes a rule
+                    // looks for tint the image.
+                    let ctx = rerun::AnnotationContext::new(m.class_names.iter().enumerate().map(|(i, n)| {
+                        let color = if i == 0 {
+                            rerun::Color::from_unmultiplied_rgba(0, 0, 0, 0)
+                        } else {
+                            class_color(i as u16)
+                        };
+                        (i as u16, n.as_ref(), color.0)
+                    }));
                     rec.log_static(path.as_str(), &ctx).map_err(|e| self.err(e))?;
                 }
                 let (bytes, encoding, _) = encode::mask_raw(m);
@@ -449,9 +469,10 @@ impl Sink for RrdSink {
                 }
                 rec.log(
                     path.as_str(),
+                    // Radii in UI points: visible at any zoom of the image.
                     &rerun::Points2D::new(xy)
                         .with_colors(colors)
-                        .with_radii([3.0])
+                        .with_radii([rerun::Radius::new_ui_points(2.5)])
                         .with_labels(texts)
                         .with_show_labels(false),
                 )
@@ -638,6 +659,7 @@ mod tests {
             cameras: BTreeMap::new(),
             machine: None,
             graph_digest: String::new(),
+            decisions: Vec::new(),
         };
         let cache = EncodeCache::new(2);
         let mut rrd = RrdSink::new(dir.join("t.rrd")).with_cache(cache.clone());
