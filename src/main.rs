@@ -76,6 +76,9 @@ enum Command {
     Diff(commands::diff::DiffArgs),
     /// Join the recordings of a run split over machines into one `.rrd` or MCAP file.
     Merge(commands::merge::MergeArgs),
+    /// Recorded runs (an ablation) side by side in one rerun recording: images with their
+    /// labels, trajectories against ground truth, per-frame error and dynamic counts.
+    Compare(commands::compare::CompareArgs),
     /// Evaluate a trajectory against ground truth (TUM files): ATE and RPE, as evo computes them.
     Eval(commands::eval::EvalArgs),
     /// Run an ONNX detector on images: detections per image as JSON lines.
@@ -250,6 +253,7 @@ fn main() -> ExitCode {
         }
         Command::Diff(args) => commands::diff::diff(&args),
         Command::Merge(args) => commands::merge::merge(&args),
+        Command::Compare(args) => commands::compare::compare(&args),
         Command::Eval(args) => commands::eval::eval(&args),
         Command::Synth(args) => commands::synth::synth(&args),
         Command::Vocab(c) => commands::vocab::vocab(&c),

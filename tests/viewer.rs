@@ -131,3 +131,48 @@ fn the_default_graph_opens_on_the_camera_with_its_decisions_in_a_real_browser() 
     assert!(stat >= 1_000 && dynamic >= 100, "static {stat} px, dynamic {dynamic} px: the labels are not drawn");
     assert!(dynamic < stat, "dynamic {dynamic} px outnumber static {stat} px: a red tint or the wrong points");
 }
+
+/// The pixels near each label colour in `png`, and its distinct colours.
+fn label_pixels(png: &Path) -> (usize, usize, usize) {
+    let img = image::open(png).unwrap().to_rgb8();
+    let colours: std::collections::HashSet<[u8; 3]> = img.pixels().map(|p| p.0).collect();
+    let dynamic = img.pixels().filter(|p| near(p, DYNAMIC)).count();
+    let stat = img.pixels().filter(|p| near(p, STATIC)).count();
+    (colours.len(), dynamic, stat)
+}
+
+#[test]
+fn a_comparison_of_three_variants_shows_each_run_with_its_labels_in_a_real_browser() {
+    let Some((rerun, python)) = tools() else { return };
+    let dir = common::TempDir::new("viewer-compare");
+    let mut files = Vec::new();
+    for v in ["S", "G", "base"] {
+        let mut c = common::bin();
+        c.arg("run").arg(common::repo().join("graphs/mg_slam.yaml"));
+        if v != "base" {
+            c.args(["--variant", v]);
+        }
+        let out = c
+            .args(["--frames", "30", "--record", "mcap", "--no-progress", "--out"])
+            .arg(dir.path().join(v))
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+        let stem = if v == "base" { "mg_slam".to_owned() } else { format!("mg_slam-{v}") };
+        files.push(dir.path().join(v).join(format!("{stem}.mcap")));
+    }
+    let rrd = dir.path().join("compare.rrd");
+    let out =
+        common::bin().arg("compare").args(&files).args(["--names", "S,G,S+G", "--out"]).arg(&rrd).output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let png = dir.path().join("compare-view.png");
+    screenshot(&rerun, &python, &rrd, &png);
+    if let Some(to) = std::env::var_os("DYNAFLOW_SCREENSHOTS") {
+        std::fs::copy(&png, Path::new(&to).join("compare-view.png")).unwrap();
+    }
+    let (colours, dynamic, stat) = label_pixels(&png);
+    assert!(colours > 5_000, "{colours} colours: the viewer did not show the comparison");
+    // Three runs' images with their labels: at least the single view's share of each colour.
+    assert!(stat >= 3_000 && dynamic >= 300, "static {stat} px, dynamic {dynamic} px: the runs' labels are not drawn");
+    assert!(dynamic < stat, "dynamic {dynamic} px outnumber static {stat} px");
+}

@@ -158,6 +158,8 @@ impl RunInfo {
             ("digest".to_owned(), crate::msg::DIGEST_SCHEME.to_owned()),
             ("machine".to_owned(), self.machine.clone().unwrap_or_default()),
             ("graph_digest".to_owned(), self.graph_digest.clone()),
+            // Comma-separated `node/port`: the point labels tracking decides with.
+            ("decisions".to_owned(), self.decisions.join(",")),
             // Comma-separated `/node/port` topics that carry ground truth (`mcap_replay` keeps
             // the mark on them).
             (

@@ -9,6 +9,7 @@
 //! either no tolerance matches the topic or one of its metrics exceeds the tolerance. A
 //! tolerance on a topic without numeric metrics (images, depth, masks) ignores it.
 
+pub mod compare;
 mod metrics;
 mod overlay;
 mod read;
