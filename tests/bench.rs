@@ -214,3 +214,21 @@ fn cells_run_apart_and_collected_give_the_one_machine_tables() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("this bench has 3"));
 }
+
+/// `--compare` (issue 37): the bench records each run and writes its variants side by side.
+#[test]
+fn bench_compare_writes_the_variants_side_by_side() {
+    let dir = common::TempDir::new("bench-compare");
+    let out = common::bin()
+        .arg("bench")
+        .arg(common::repo().join("graphs/mg_slam.yaml"))
+        .args(["--variants", "base,S,G", "--frames", "6", "--jobs", "2", "--no-progress", "--compare", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("compare-mg_slam-synthetic.rrd (3 runs side by side)"), "{stdout}");
+    let file = dir.path().join("compare-mg_slam-synthetic.rrd");
+    assert!(std::fs::metadata(&file).is_ok_and(|m| m.len() > 100_000), "no comparison recording");
+}

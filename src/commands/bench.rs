@@ -61,6 +61,10 @@ pub struct BenchArgs {
     /// `--out`) into the usual tables and plots in `--out`; no graph arguments needed.
     #[arg(long, value_name = "DIR", num_args = 1..)]
     pub collect: Vec<PathBuf>,
+    /// Record each run's MCAP and write, per graph and sequence, `compare-<graph>-<sequence>.rrd`:
+    /// its variants side by side (`dynaflow compare`).
+    #[arg(long, conflicts_with_all = ["list", "collect"])]
+    pub compare: bool,
 }
 
 /// One run to do.
@@ -212,7 +216,8 @@ fn execute(exe: &Path, job: &Job, args: &BenchArgs) -> Result<bool, String> {
     let _ = std::fs::remove_dir_all(&job.dir);
     let _ = std::fs::create_dir_all(&job.dir);
     let mut cmd = Command::new(exe);
-    cmd.arg("run").arg(&job.graph).args(["--no-progress", "--record", "none", "--out"]).arg(&job.dir);
+    let record = if args.compare { "mcap" } else { "none" };
+    cmd.arg("run").arg(&job.graph).args(["--no-progress", "--record", record, "--out"]).arg(&job.dir);
     if let Some(v) = &job.variant {
         cmd.args(["--variant", v]);
     }
@@ -407,7 +412,43 @@ pub fn bench(args: &BenchArgs) -> u8 {
         .iter()
         .map(|r| r.clone().unwrap_or_default())
         .collect();
-    report(&jobs, &rows, &args.out)
+    let status = report(&jobs, &rows, &args.out);
+    if args.compare {
+        compare_variants(&jobs, &rows, &args.out);
+    }
+    status
+}
+
+/// `--compare`: per graph and sequence, the runs side by side in one recording; a run left
+/// out (failed, or no recording) is named.
+fn compare_variants(jobs: &[Job], rows: &[Row], out: &Path) {
+    let mut groups: BTreeMap<(String, String), Vec<(&Job, &Row)>> = BTreeMap::new();
+    for (j, r) in jobs.iter().zip(rows) {
+        groups.entry((j.name.clone(), j.sequence())).or_default().push((j, r));
+    }
+    for ((graph, sequence), members) in groups {
+        let mut runs = Vec::new();
+        for (j, r) in members {
+            let file = RunFiles::new(&j.dir, &j.name, j.variant.as_deref()).run_file("mcap");
+            if !r.ok {
+                eprintln!("compare {graph} {sequence}: `{}` left out: the run failed ({})", j.variant_name(), r.error);
+                continue;
+            }
+            match dynaflow_recordings::diff::compare::read_run(j.variant_name(), &file) {
+                Ok(run) => runs.push(run),
+                Err(e) => eprintln!("compare {graph} {sequence}: `{}` left out: {e}", j.variant_name()),
+            }
+        }
+        if runs.len() < 2 {
+            eprintln!("compare {graph} {sequence}: fewer than two runs to compare");
+            continue;
+        }
+        let path = out.join(format!("compare-{graph}-{sequence}.rrd"));
+        match dynaflow_recordings::diff::compare::write_compare(&runs, &path) {
+            Ok(_) => println!("wrote {} ({} runs side by side)", path.display(), runs.len()),
+            Err(e) => eprintln!("compare {graph} {sequence}: {e}"),
+        }
+    }
 }
 
 /// Print and write the tables and plots; exit 0 when every row is ok, else 1.
