@@ -46,6 +46,14 @@ struct Peer {
 
 type Peers = Arc<Mutex<HashMap<String, Peer>>>;
 
+/// Why [`ZenohWire::wait_for`] gave up.
+enum Waited {
+    /// This machine did not get there in time.
+    Timeout(String),
+    /// The predicate refused a machine (the message says which and why).
+    Refused(String),
+}
+
 /// One machine's zenoh session for a graph.
 pub struct ZenohWire {
     session: zenoh::Session,
@@ -146,9 +154,14 @@ impl ZenohWire {
         Ok(())
     }
 
-    /// Wait until `done(peer)` holds for every other machine, or `deadline`; `Err` names the
-    /// first machine for which it does not.
-    async fn wait_for(&self, deadline: Instant, ok: impl Fn(&Peer) -> Result<bool, String>) -> Result<(), String> {
+    /// Wait until `ok(machine, peer)` holds for every other machine, or `deadline`: an error
+    /// names the first machine for which it does not ([`Waited::Timeout`]), or carries the
+    /// predicate's own refusal ([`Waited::Refused`]).
+    async fn wait_for(
+        &self,
+        deadline: Instant,
+        ok: impl Fn(&str, &Peer) -> Result<bool, String>,
+    ) -> Result<(), Waited> {
         loop {
             let notified = self.changed.notified();
             let pending = {
@@ -156,7 +169,7 @@ impl ZenohWire {
                 let mut pending = None;
                 for (m, _) in &self.others {
                     let p = peers.get(m).cloned().unwrap_or_default();
-                    if !ok(&p)? {
+                    if !ok(m, &p).map_err(Waited::Refused)? {
                         pending = Some(m.clone());
                         break;
                     }
@@ -166,7 +179,7 @@ impl ZenohWire {
             let Some(missing) = pending else { return Ok(()) };
             let left = deadline.saturating_duration_since(Instant::now());
             if left.is_zero() {
-                return Err(missing);
+                return Err(Waited::Timeout(missing));
             }
             let _ = tokio::time::timeout(left.min(Duration::from_millis(200)), notified).await;
         }
@@ -177,7 +190,9 @@ impl ZenohWire {
     pub async fn finish(&self) {
         let _ = self.token(format!("{}/done/{}", self.ns, self.machine)).await;
         let deadline = Instant::now() + self.timeout;
-        if let Err(m) = self.wait_for(deadline, |p| Ok(p.done || p.gone || p.digest.is_none())).await {
+        if let Err(Waited::Timeout(m)) =
+            self.wait_for(deadline, |_, p| Ok(p.done || p.gone || p.digest.is_none())).await
+        {
             tracing::warn!("machine `{m}` did not finish within {:.0} s; closing anyway", self.timeout.as_secs_f64());
         }
         let _ = self.session.close().await;
@@ -263,32 +278,21 @@ impl Wire for ZenohWire {
         async move {
             self.token(format!("{}/machine/{}/{}", self.ns, self.machine, self.digest)).await?;
             let deadline = Instant::now() + self.timeout;
-            let here = self.digest.clone();
+            let here = &self.digest;
             let checked = self
-                .wait_for(deadline, |p| match &p.digest {
-                    Some(d) if *d != here => Err(format!("digest {d}")),
+                .wait_for(deadline, |m, p| match &p.digest {
+                    Some(d) if d != here => Err(format!(
+                        "machine `{m}` ({}) runs a different graph (digest {d} there, {here} here): start every machine with the same graph file, variant, --set and --seed",
+                        self.endpoint_of(m)
+                    )),
                     Some(_) => Ok(true),
                     None => Ok(false),
                 })
                 .await;
             match checked {
                 Ok(()) => Ok(()),
-                Err(m) if m.starts_with("digest ") => {
-                    // `wait_for` returns the machine name, or the closure's error: find whose.
-                    let peers = lock(&self.peers);
-                    let (who, theirs) = self
-                        .others
-                        .iter()
-                        .find_map(|(o, _)| {
-                            peers.get(o).and_then(|p| p.digest.clone()).filter(|d| *d != here).map(|d| (o.clone(), d))
-                        })
-                        .unwrap_or_default();
-                    Err(format!(
-                        "machine `{who}` ({}) runs a different graph (digest {theirs} there, {here} here): start every machine with the same graph file, variant, --set and --seed",
-                        self.endpoint_of(&who)
-                    ))
-                }
-                Err(m) => Err(format!(
+                Err(Waited::Refused(why)) => Err(why),
+                Err(Waited::Timeout(m)) => Err(format!(
                     "machine `{m}` ({}) did not join within {:.0} s: start `dynaflow run GRAPH --machine {m}` there, and check that its endpoint is reachable from here",
                     self.endpoint_of(&m),
                     self.timeout.as_secs_f64(),

@@ -355,15 +355,13 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     failures.extend(sink_failures);
     // A machine reports the edges that touch it (one from another machine is counted on the
     // consumer's side, where its queue is).
-    let edge_reports: Vec<EdgeReport> = graph
+    let (touching, edge_reports): (Vec<&crate::spec::ResolvedEdge>, Vec<EdgeReport>) = graph
         .edges
         .iter()
         .zip(&probes)
         .filter(|(e, _)| local[e.to_node] || local[e.from_node])
-        .map(|(e, p)| EdgeReport { edge: graph.edge_label(e), stats: p.stats() })
-        .collect();
-    let consumed_here: Vec<&crate::spec::ResolvedEdge> =
-        graph.edges.iter().filter(|e| local[e.to_node] || local[e.from_node]).collect();
+        .map(|(e, p)| (e, EdgeReport { edge: graph.edge_label(e), stats: p.stats() }))
+        .unzip();
     let nodes = graph
         .nodes
         .iter()
@@ -371,7 +369,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
         .filter(|(i, _)| local[*i])
         .zip(node_metrics)
         .map(|((i, n), m)| {
-            let inputs = consumed_here.iter().zip(&edge_reports).filter(|(e, _)| e.to_node == i);
+            let inputs = touching.iter().zip(&edge_reports).filter(|(e, _)| e.to_node == i);
             let (max_queue, dropped) =
                 inputs.fold((0, 0), |(q, d), (_, r)| (q.max(r.stats.max_depth), d + r.stats.dropped));
             NodeReport {
@@ -524,6 +522,14 @@ pub fn stop_on_signals(stop: StopHandle, abort: impl FnOnce() + Send + 'static) 
     });
 }
 
+/// A broken stream between machines: a failure of the run (reported as `wire:<key>`), which
+/// then stops.
+fn wire_failure(failures: &Mutex<Vec<Failure>>, stop: &StopHandle, key: &str, error: String) {
+    tracing::error!("{error}");
+    failures.lock().unwrap_or_else(PoisonError::into_inner).push(Failure { node: format!("wire:{key}"), error });
+    stop.request();
+}
+
 /// Feed the local edges of one incoming stream until it ends; a broken stream (the producing
 /// machine gone, a frame that does not decode) fails the run and stops it.
 async fn bridge_in(
@@ -533,11 +539,7 @@ async fn bridge_in(
     failures: Arc<Mutex<Vec<Failure>>>,
     options: RunOptions,
 ) {
-    let fail = |error: String| {
-        tracing::error!("{error}");
-        failures.lock().unwrap_or_else(PoisonError::into_inner).push(Failure { node: format!("wire:{key}"), error });
-        options.stop.request();
-    };
+    let fail = |error: String| wire_failure(&failures, &options.stop, &key, error);
     loop {
         let frame = match rx.recv().await {
             Ok(f) => f,
@@ -569,14 +571,7 @@ async fn bridge_out(
 ) {
     while let Some(env) = rx.recv().await {
         if let Err(e) = tx.send(remote::encode_frame(env.seq, env.msg.as_deref())).await {
-            let error = format!("stream `{key}`: {e}");
-            tracing::error!("{error}");
-            failures
-                .lock()
-                .unwrap_or_else(PoisonError::into_inner)
-                .push(Failure { node: format!("wire:{key}"), error });
-            stop.request();
-            return;
+            return wire_failure(&failures, &stop, &key, format!("stream `{key}`: {e}"));
         }
     }
     if let Err(e) = tx.send(remote::end_frame()).await {

@@ -180,13 +180,9 @@ fn machine_of(spec: &GraphSpec, n: &NodeSpec) -> Option<Arc<str>> {
 /// `machines:` and `machine:`: every machine named is defined, endpoints differ, and every
 /// edge between two machines carries a payload the wire encoding can carry.
 fn check_machines(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge], diags: &mut Vec<Diagnostic>) {
+    // (A machine named twice is a duplicate key, reported by the parser.)
     for (i, m) in spec.machines.iter().enumerate() {
-        if let Some(first) = spec.machines[..i].iter().find(|o| o.name == m.name) {
-            diags.push(
-                Diagnostic::error("duplicate-key", m.span, format!("machine `{}` is defined twice", m.name))
-                    .with_hint(format!("the first is at offset {}", first.span.offset)),
-            );
-        } else if let Some(other) = spec.machines[..i].iter().find(|o| o.endpoint == m.endpoint) {
+        if let Some(other) = spec.machines[..i].iter().find(|o| o.endpoint == m.endpoint) {
             diags.push(
                 Diagnostic::error(
                     "bad-value",

@@ -17,14 +17,14 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use rerun::blueprint::{
     Blueprint, BlueprintActivation, ContainerLike, Grid, Horizontal, Spatial2DView, Spatial3DView, TextLogView,
     TimeSeriesView, Vertical,
 };
 use serde_json::Value;
 
-use super::{Error, Recording, read_mcap_bytes};
+use super::{Error, Recording, metrics, read_mcap_bytes};
 
 /// One run to compare: its name and what was read of its MCAP file.
 #[derive(Debug)]
@@ -76,8 +76,7 @@ pub fn read_run(name: &str, path: &Path) -> Result<Run, Error> {
     // The camera: a source's colour image (`…/rgb`, `…/left`), else the first colour image.
     let colour: Vec<&String> =
         rec.topics.iter().filter(|(_, t)| t.schema == "foxglove.CompressedImage").map(|(n, _)| n).collect();
-    let camera =
-        colour.iter().find(|n| n.ends_with("/rgb") || n.ends_with("/left")).or(colour.first()).map(|s| (*s).clone());
+    let camera = crate::rrd::camera_of(&colour).map(|s| (*s).clone());
     let mut images = BTreeMap::new();
     if let Some(cam) = &camera {
         use crate::mcap::scan::{Event, scan};
@@ -135,29 +134,15 @@ fn position(v: &Value) -> Option<Vector3<f64>> {
 }
 
 /// Per-frame position errors of `est` against `gt` on their common frames after the best
-/// rigid alignment (Horn/Umeyama without scale, as the ATE), with the frames.
+/// rigid alignment (as the ATE: [`metrics::rigid_alignment`]), with the frames.
 fn aligned_errors(est: &BTreeMap<u64, Vector3<f64>>, gt: &BTreeMap<u64, Vector3<f64>>) -> Vec<(u64, f64)> {
     let common: Vec<(u64, Vector3<f64>, Vector3<f64>)> =
         est.iter().filter_map(|(k, p)| gt.get(k).map(|q| (*k, *p, *q))).collect();
     if common.len() < 3 {
         return Vec::new();
     }
-    let n = common.len() as f64;
-    let ce = common.iter().map(|c| c.1).sum::<Vector3<f64>>() / n;
-    let cg = common.iter().map(|c| c.2).sum::<Vector3<f64>>() / n;
-    let mut h = Matrix3::zeros();
-    for (_, e, g) in &common {
-        h += (e - ce) * (g - cg).transpose();
-    }
-    let svd = h.svd(true, true);
-    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else { return Vec::new() };
-    let mut d = Matrix3::identity();
-    if (v_t.transpose() * u.transpose()).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    // Rotation taking the estimate into the ground truth's frame.
-    let r = v_t.transpose() * d * u.transpose();
-    let t = cg - r * ce;
+    let (g, e): (Vec<Vector3<f64>>, Vec<Vector3<f64>>) = common.iter().map(|c| (c.2, c.1)).unzip();
+    let Some((r, t)) = metrics::rigid_alignment(&g, &e) else { return Vec::new() };
     common.iter().map(|(k, e, g)| (*k, (r * e + t - g).norm())).collect()
 }
 
@@ -323,34 +308,17 @@ pub fn write_compare(runs: &[Run], out: &Path) -> Result<Vec<RunSummary>, Error>
                 let at = d["at"].as_array().cloned().unwrap_or_default();
                 let reasons = d["reason"].as_array().cloned().unwrap_or_default();
                 let scores = d["score"].as_array().cloned().unwrap_or_default();
-                let (mut xy, mut colors, mut texts) = (Vec::new(), Vec::new(), Vec::new());
-                for (j, dynamic) in flags.iter().enumerate() {
-                    let (Some(x), Some(y)) =
-                        (at.get(j).and_then(|p| p[0].as_f64()), at.get(j).and_then(|p| p[1].as_f64()))
-                    else {
-                        continue;
-                    };
-                    xy.push([x as f32, y as f32]);
-                    colors.push(if *dynamic {
-                        rerun::Color::from_rgb(230, 40, 40)
-                    } else {
-                        rerun::Color::from_rgb(40, 200, 60)
-                    });
+                let points = flags.iter().enumerate().filter_map(|(j, dynamic)| {
+                    let p = at.get(j)?;
+                    let (x, y) = (p[0].as_f64()?, p[1].as_f64()?);
                     let reason = reasons.get(j).and_then(Value::as_str).unwrap_or("?");
-                    texts.push(format!("{reason} {:.2}", scores.get(j).and_then(Value::as_f64).unwrap_or(f64::NAN)));
-                }
+                    let score = scores.get(j).and_then(Value::as_f64).unwrap_or(f64::NAN);
+                    Some(([x as f32, y as f32], *dynamic, format!("{reason} {score:.2}")))
+                });
                 let count = flags.iter().filter(|d| **d).count();
                 dynamic_counts.push(count as f64);
                 rec.set_time_sequence("frame", *k as i64);
-                rec.log(
-                    format!("{base}/camera/labels"),
-                    &rerun::Points2D::new(xy)
-                        .with_colors(colors)
-                        .with_radii([rerun::Radius::new_ui_points(2.5)])
-                        .with_labels(texts)
-                        .with_show_labels(false),
-                )
-                .map_err(|e| err(&e))?;
+                rec.log(format!("{base}/camera/labels"), &crate::rrd::label_points(points)).map_err(|e| err(&e))?;
                 rec.log(format!("metrics/dynamic/{}", run.name), &rerun::Scalars::new([count as f64]))
                     .map_err(|e| err(&e))?;
             }

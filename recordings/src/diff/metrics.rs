@@ -162,6 +162,18 @@ pub fn ate(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> (f64, f64) {
     }
     let rmse = |pairs: &mut dyn Iterator<Item = f64>| (pairs.map(|d| d * d).sum::<f64>() / n as f64).sqrt();
     let raw = rmse(&mut a.iter().zip(b).map(|(p, q)| (p - q).norm()));
+    let Some((r, t)) = rigid_alignment(&a[..n], &b[..n]) else { return (raw, raw) };
+    let aligned = rmse(&mut a.iter().zip(b).map(|(p, q)| (p - (r * q + t)).norm()));
+    (raw, aligned)
+}
+
+/// The rotation and translation taking `b` onto `a` (pairs in order) with the least squared
+/// error: Horn/Umeyama without scale. `None` for no pairs or a degenerate decomposition.
+pub fn rigid_alignment(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Option<(Matrix3<f64>, Vector3<f64>)> {
+    let n = a.len().min(b.len());
+    if n == 0 {
+        return None;
+    }
     let ca = a.iter().take(n).sum::<Vector3<f64>>() / n as f64;
     let cb = b.iter().take(n).sum::<Vector3<f64>>() / n as f64;
     let mut h = Matrix3::zeros();
@@ -169,16 +181,13 @@ pub fn ate(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> (f64, f64) {
         h += (q - cb) * (p - ca).transpose();
     }
     let svd = h.svd(true, true);
-    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else { return (raw, raw) };
+    let (Some(u), Some(v_t)) = (svd.u, svd.v_t) else { return None };
     let mut d = Matrix3::identity();
     if (u * v_t).determinant() < 0.0 {
         d[(2, 2)] = -1.0;
     }
-    // Rotation taking b into a's frame.
     let r = (u * d * v_t).transpose();
-    let t = ca - r * cb;
-    let aligned = rmse(&mut a.iter().zip(b).map(|(p, q)| (p - (r * q + t)).norm()));
-    (raw, aligned)
+    Some((r, ca - r * cb))
 }
 
 #[cfg(test)]

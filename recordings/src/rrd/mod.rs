@@ -202,7 +202,7 @@ fn blueprint(info: &RunInfo) -> Blueprint {
     let overlays: Vec<String> = masks.iter().chain(&labels).map(|p| format!("/{p}")).collect();
     // The camera image: the first colour image that no other node derived (a source's).
     let images: Vec<String> = of(PortType::Image).collect();
-    let camera = images.iter().find(|p| p.ends_with("/rgb") || p.ends_with("/left")).or(images.first()).cloned();
+    let camera = camera_of(&images).cloned();
     let mut views: Vec<ContainerLike> = Vec::new();
     if let Some(cam) = &camera {
         let mut contents = vec![format!("/{cam}")];
@@ -238,6 +238,29 @@ fn blueprint(info: &RunInfo) -> Blueprint {
     }
     columns.push(Vertical::new(right).into());
     Blueprint::new(Horizontal::new(columns))
+}
+
+/// Point labels as every dynaflow recording draws them (`(point, dynamic, hover text)`): red
+/// where dynamic, green where static, the text shown on hover, radii in UI points so the
+/// points stay visible at any zoom of the image.
+pub(crate) fn label_points(labels: impl IntoIterator<Item = ([f32; 2], bool, String)>) -> rerun::Points2D {
+    let (mut xy, mut colors, mut texts) = (Vec::new(), Vec::new(), Vec::new());
+    for (at, dynamic, text) in labels {
+        xy.push(at);
+        colors.push(if dynamic { rerun::Color::from_rgb(230, 40, 40) } else { rerun::Color::from_rgb(40, 200, 60) });
+        texts.push(text);
+    }
+    rerun::Points2D::new(xy)
+        .with_colors(colors)
+        .with_radii([rerun::Radius::new_ui_points(2.5)])
+        .with_labels(texts)
+        .with_show_labels(false)
+}
+
+/// The camera among colour image ports or topics: a source's `…/rgb` or `…/left`, else the
+/// first.
+pub(crate) fn camera_of<S: AsRef<str>>(names: &[S]) -> Option<&S> {
+    names.iter().find(|p| p.as_ref().ends_with("/rgb") || p.as_ref().ends_with("/left")).or(names.first())
 }
 
 /// Segment `k` of a path: poses `k * TRAIL_SEGMENT ..= (k + 1) * TRAIL_SEGMENT` (it shares
@@ -451,31 +474,14 @@ impl Sink for RrdSink {
                 rec.log(path.as_str(), &rerun::SegmentationImage::new(bytes, format).with_opacity(0.5))
             }
             Body::PointLabels(l) => {
-                let mut xy = Vec::new();
-                let mut colors = Vec::new();
-                let mut texts = Vec::new();
-                // Each label at its own point (a replayed label of unknown place is left out).
-                for lab in l.labels.iter().filter(|l| l.at.iter().all(|v| v.is_finite())) {
-                    xy.push(lab.at);
-                    colors.push(if lab.dynamic {
-                        rerun::Color::from_rgb(230, 40, 40)
-                    } else {
-                        rerun::Color::from_rgb(40, 200, 60)
-                    });
-                    // The deciding rule and its measure, shown on hover.
+                // Each label at its own point (a replayed label of unknown place is left out),
+                // the deciding rule and its measure shown on hover.
+                let points = l.labels.iter().filter(|l| l.at.iter().all(|v| v.is_finite())).map(|lab| {
                     let reason = serde_json::to_value(lab.reason).ok();
-                    let reason = reason.as_ref().and_then(|v| v.as_str()).unwrap_or("?");
-                    texts.push(format!("{reason} {:.2}", lab.score));
-                }
-                rec.log(
-                    path.as_str(),
-                    // Radii in UI points: visible at any zoom of the image.
-                    &rerun::Points2D::new(xy)
-                        .with_colors(colors)
-                        .with_radii([rerun::Radius::new_ui_points(2.5)])
-                        .with_labels(texts)
-                        .with_show_labels(false),
-                )
+                    let reason = reason.as_ref().and_then(|v| v.as_str()).unwrap_or("?").to_owned();
+                    (lab.at, lab.dynamic, format!("{reason} {:.2}", lab.score))
+                });
+                rec.log(path.as_str(), &label_points(points))
             }
             Body::Pose(p) => {
                 let t = p.world_from_cam.translation.vector;
