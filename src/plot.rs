@@ -97,8 +97,7 @@ pub fn evaluation(e: &Evaluation, title: &str, path: &Path) -> Result<(), String
         Ok(())
     };
     draw(&mut buf).map_err(|e| format!("cannot draw the plot: {e}"))?;
-    let img = image::RgbImage::from_raw(w, h, buf).ok_or("plot buffer has the wrong size")?;
-    img.save(path).map_err(|e| format!("cannot write {}: {e}", path.display()))
+    save_png(w, h, image::ExtendedColorType::Rgb8, &buf, path)
 }
 
 /// Render with `draw` into a `w x h` PNG at `path`.
@@ -111,8 +110,33 @@ fn png(
     fonts()?;
     let mut buf = vec![0u8; (w * h * 3) as usize];
     draw(&mut buf).map_err(|e| format!("cannot draw the plot: {e}"))?;
-    let img = image::RgbImage::from_raw(w, h, buf).ok_or("plot buffer has the wrong size")?;
-    img.save(path).map_err(|e| format!("cannot write {}: {e}", path.display()))
+    save_png(w, h, image::ExtendedColorType::Rgb8, &buf, path)
+}
+
+/// An image file read by its content, not its name (a JPEG named `.png` is read as a JPEG).
+pub fn open_image(path: &Path) -> Result<image::DynamicImage, String> {
+    image::ImageReader::open(path)
+        .map_err(|e| e.to_string())?
+        .with_guessed_format()
+        .map_err(|e| e.to_string())?
+        .decode()
+        .map_err(|e| format!("cannot decode: {e}"))
+}
+
+/// A PNG file's bytes: `data` is `w x h` pixels of `color`.
+pub fn png_bytes(w: u32, h: u32, color: image::ExtendedColorType, data: &[u8]) -> Result<Vec<u8>, String> {
+    use image::ImageEncoder;
+    let mut out = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut out)
+        .write_image(data, w, h, color)
+        .map_err(|e| format!("cannot encode a PNG: {e}"))?;
+    Ok(out)
+}
+
+/// Write a PNG as a new file renamed into place (`files::write_atomic`).
+pub fn save_png(w: u32, h: u32, color: image::ExtendedColorType, data: &[u8], path: &Path) -> Result<(), String> {
+    let bytes = png_bytes(w, h, color, data)?;
+    dynaflow_engine::files::write_atomic(path, &bytes).map_err(|e| format!("cannot write {}: {e}", path.display()))
 }
 
 fn quantile(sorted: &[f64], q: f64) -> f64 {

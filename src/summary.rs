@@ -81,10 +81,10 @@ impl Summary {
         serde_json::from_slice(&bytes).map_err(|e| format!("{}: not a dynaflow summary: {e}", path.display()))
     }
 
-    /// Write it (pretty JSON and a newline).
+    /// Write it (pretty JSON and a newline), as a new file renamed into place.
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
         let text = serde_json::to_string_pretty(self).map_err(std::io::Error::other)?;
-        std::fs::write(path, text + "\n")
+        dynaflow_engine::files::write_atomic(path, (text + "\n").as_bytes())
     }
 
     /// What the operator of node `node` reported, if anything.

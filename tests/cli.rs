@@ -489,3 +489,26 @@ fn the_summary_is_one_typed_struct_that_reads_back_what_run_wrote() {
     assert_eq!(serde_json::to_value(&s).unwrap(), file, "reading the summary lost a field");
     assert!(files.node_file("track", "trajectory.txt").is_file());
 }
+
+#[test]
+fn a_process_a_test_starts_ends_with_everything_it_started() {
+    // As the `rerun` entry point starts the viewer binary: a child with children of its own.
+    let child =
+        common::process::Reaped::spawn(std::process::Command::new("sh").args(["-c", "sleep 60 & sleep 60 & wait"]))
+            .unwrap();
+    let group = child.group();
+    let t0 = Instant::now();
+    while common::process::group_members(group).len() < 3 {
+        assert!(t0.elapsed() < Duration::from_secs(20), "the shell did not start its two children");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    drop(child);
+    // SIGKILL is delivered at once; the processes leave /proc as the kernel ends them.
+    let t0 = Instant::now();
+    let mut left = common::process::group_members(group);
+    while !left.is_empty() && t0.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(20));
+        left = common::process::group_members(group);
+    }
+    assert!(left.is_empty(), "processes {left:?} outlived the test that started them");
+}

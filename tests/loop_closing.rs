@@ -138,6 +138,12 @@ fn after_a_kidnap_tracking_relocalises_in_the_same_map() {
     let read = |name: &str| -> Vec<(f64, nalgebra::Isometry3<f64>)> { ground_truth(&dir.path().join(name)) };
     let gt = read("orb_baseline.track.groundtruth.txt");
     let est = read("orb_baseline.track.trajectory.txt");
+    // Lost frames have no pose: the trajectory leaves out exactly the frames the tracker lost
+    // (the blacked-out ones among them), as ORB-SLAM2 and the TUM tools do.
+    assert_eq!(est.len() as u64 + lost, gt.len() as u64, "{} poses, {lost} lost, {} frames", est.len(), gt.len());
+    for (t, _) in &gt[600..630] {
+        assert!(est.iter().all(|(s, _)| (s - t).abs() > 1e-6), "the blacked-out frame at {t} s has a pose");
+    }
     let e = dynaflow_slam::eval::evaluate(&gt, &est, 0.01, dynaflow_slam::eval::Align::Se3, 1).unwrap();
     let back = gt[630].0;
     let after: Vec<f64> = e.series.iter().filter(|p| p.0 >= back - 1e-6).take(10).map(|p| p.3).collect();

@@ -524,3 +524,262 @@ fn mcap_replay_refuses_or_reads_correctly_every_corruption() {
     }
     fuzz.report();
 }
+
+/// The fields of a map file (`dynaflow_slam::map_file`'s layout) at their byte offsets, found
+/// by walking it as the reader does: what a structure-aware mutation changes.
+#[derive(Default)]
+struct MapFields {
+    counts: Vec<usize>,
+    point_ids: Vec<usize>,
+    point_positions: Vec<usize>,
+    kf_ids: Vec<usize>,
+    kf_stamps: Vec<usize>,
+    kf_translations: Vec<usize>,
+    kf_parents: Vec<usize>,
+    kp_uv: Vec<usize>,
+    kp_octaves: Vec<usize>,
+    kp_depths: Vec<usize>,
+    kp_points: Vec<usize>,
+}
+
+fn map_fields(b: &[u8]) -> MapFields {
+    let u32_at = |o: usize| u32::from_le_bytes(b[o..o + 4].try_into().unwrap()) as usize;
+    let mut f = MapFields { counts: vec![32, 36], ..MapFields::default() };
+    let (nk, np) = (u32_at(32), u32_at(36));
+    let mut at = 40;
+    for _ in 0..np {
+        f.point_ids.push(at);
+        f.point_positions.push(at + 8);
+        at += 72;
+    }
+    for _ in 0..nk {
+        f.kf_ids.push(at);
+        f.kf_stamps.push(at + 8);
+        f.kf_translations.push(at + 16);
+        f.kf_parents.push(at + 72);
+        let loops = u32_at(at + 80);
+        at += 84 + 8 * loops;
+        let kps = u32_at(at);
+        at += 4;
+        for _ in 0..kps {
+            f.kp_uv.push(at);
+            f.kp_octaves.push(at + 16);
+            f.kp_depths.push(at + 17);
+            f.kp_points.push(at + 57);
+            at += 65;
+        }
+    }
+    assert_eq!(at + 8, b.len(), "the test's walk of the map layout is out of date");
+    f
+}
+
+/// Done-when 2 of the trust pass: saved maps and vocabularies with valid checksums but
+/// impossible contents (duplicate or dangling ids, cyclic parents, pyramid level 255,
+/// coordinates of 1e300, counts that disagree with the bytes) are refused naming the file, or
+/// load and run with finite outputs; never a panic.
+#[test]
+fn map_and_vocabulary_files_with_impossible_contents_are_refused_or_run_finite() {
+    let dir = common::TempDir::new("fuzz-map");
+    let graph = common::repo().join("graphs/orb_baseline.yaml");
+    let valid = dir.path().join("valid.dfmap");
+    let o = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--frames", "40", "--out"])
+        .arg(dir.path().join("save"))
+        .arg(&graph)
+        .arg("--save-map")
+        .arg(&valid)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let bytes = std::fs::read(&valid).unwrap();
+    let fields = map_fields(&bytes);
+    let voc = std::sync::Arc::new(
+        dynaflow_slam::bow::Vocabulary::from_bytes(dynaflow_operators::tracking::DEFAULT_VOCABULARY, "default")
+            .unwrap(),
+    );
+    let cam = dynaflow_vision::camera::Pinhole { fx: 525.0, fy: 525.0, cx: 319.5, cy: 239.5 };
+    let reseal = |b: &mut Vec<u8>| {
+        let n = b.len() - 8;
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        for x in &b[..n] {
+            h ^= u64::from(*x);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+        b[n..].copy_from_slice(&h.to_le_bytes());
+    };
+    let put = |b: &mut Vec<u8>, at: usize, v: &[u8]| b[at..at + v.len()].copy_from_slice(v);
+    let mut rng = common::Rng::new(49);
+    let (mut refused, mut loaded, mut ran, mut failures) = (0, 0, 0, Vec::new());
+    for case in 0..60 {
+        let mut b = bytes.clone();
+        let pick = |rng: &mut common::Rng, v: &[usize]| *rng.pick(v);
+        let what = match rng.below(10) {
+            0 => {
+                let (x, y) = (pick(&mut rng, &fields.point_ids), pick(&mut rng, &fields.point_ids));
+                let id = b[y..y + 8].to_vec();
+                put(&mut b, x, &id);
+                "a point id made another's".to_owned()
+            }
+            1 => {
+                let v = *rng.pick(&[1e300, -1e300, 1e7, f64::MIN_POSITIVE]);
+                put(&mut b, pick(&mut rng, &fields.point_positions) + 8 * rng.below(3) as usize, &v.to_le_bytes());
+                format!("a point coordinate {v:e}")
+            }
+            2 => {
+                let (x, y) = (pick(&mut rng, &fields.kf_ids), pick(&mut rng, &fields.kf_ids));
+                let id = b[y..y + 8].to_vec();
+                put(&mut b, x, &id);
+                "a key-frame id made another's".to_owned()
+            }
+            3 => {
+                // A parent made the key frame itself, another key frame, or a stranger.
+                let at = pick(&mut rng, &fields.kf_parents);
+                let idx = fields.kf_parents.iter().position(|&p| p == at).unwrap();
+                let own = b[fields.kf_ids[idx]..fields.kf_ids[idx] + 8].to_vec();
+                let other = pick(&mut rng, &fields.kf_ids);
+                let other = b[other..other + 8].to_vec();
+                let v = match rng.below(3) {
+                    0 => own,
+                    1 => other,
+                    _ => 987_654_321u64.to_le_bytes().to_vec(),
+                };
+                put(&mut b, at, &v);
+                "a parent changed".to_owned()
+            }
+            4 => {
+                let v = *rng.pick(&[255u8, 31, 32, 7]);
+                put(&mut b, pick(&mut rng, &fields.kp_octaves), &[v]);
+                format!("a keypoint on level {v}")
+            }
+            5 => {
+                let v: f64 = *rng.pick(&[1e300, -5.0, 70_000.0, 1e-300]);
+                put(&mut b, pick(&mut rng, &fields.kp_uv) + 8 * rng.below(2) as usize, &v.to_le_bytes());
+                format!("a keypoint coordinate {v:e}")
+            }
+            6 => {
+                let v: f64 = *rng.pick(&[-1.0, 1e300, 1e-300]);
+                put(&mut b, pick(&mut rng, &fields.kp_depths), &f64::to_le_bytes(v));
+                format!("a keypoint depth {v:e}")
+            }
+            7 => {
+                let v = *rng.pick(&[123_456_789u64, u64::MAX - 1]);
+                put(&mut b, pick(&mut rng, &fields.kp_points), &v.to_le_bytes());
+                format!("a keypoint of point {v}")
+            }
+            8 => {
+                let at = pick(&mut rng, &fields.counts);
+                let n = u32::from_le_bytes(b[at..at + 4].try_into().unwrap());
+                let v = *rng.pick(&[n + 1, n.saturating_sub(1), u32::MAX]);
+                put(&mut b, at, &v.to_le_bytes());
+                format!("count at byte {at} {n} -> {v}")
+            }
+            _ => {
+                let v: f64 = *rng.pick(&[1e300, -1e12, 1e5]);
+                put(&mut b, pick(&mut rng, &fields.kf_translations), &v.to_le_bytes());
+                format!("a key-frame position {v:e}")
+            }
+        };
+        reseal(&mut b);
+        let file = dir.path().join(format!("case{case}.dfmap"));
+        std::fs::write(&file, &b).unwrap();
+        let result = std::panic::catch_unwind(|| {
+            dynaflow_slam::map_file::load(&file, cam, 640.0, 480.0, 1.2, voc.clone())
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        });
+        match result {
+            Err(_) => failures.push(format!("case {case} ({what}): the reader panicked")),
+            Ok(Err(e)) if e.contains(&format!("case{case}.dfmap")) => refused += 1,
+            Ok(Err(e)) => failures.push(format!("case {case} ({what}): refused without naming the file: {e}")),
+            Ok(Ok(())) => {
+                loaded += 1;
+                // Loaded: it must run, with finite outputs (a few such cases: each is a run).
+                if ran >= 4 {
+                    continue;
+                }
+                ran += 1;
+                let out = dir.path().join(format!("run{case}"));
+                let o = common::bin()
+                    .args(["run", "--no-progress", "--record", "none", "--frames", "15", "--out"])
+                    .arg(&out)
+                    .arg(&graph)
+                    .arg("--load-map")
+                    .arg(&file)
+                    .output()
+                    .unwrap();
+                let err = String::from_utf8_lossy(&o.stderr);
+                if !matches!(o.status.code(), Some(0..=2)) || err.contains("panicked") {
+                    failures.push(format!("case {case} ({what}): loaded, then the run ended {:?}: {err}", o.status));
+                } else if o.status.code() == Some(0) {
+                    let s = common::summary(&out.join("orb_baseline.summary.json"));
+                    if s.ate.as_ref().is_some_and(|a| !a.rmse.is_finite()) {
+                        failures.push(format!("case {case} ({what}): a non-finite ATE"));
+                    }
+                }
+            }
+        }
+    }
+    eprintln!("maps: 60 cases, {refused} refused naming the file, {loaded} loaded ({ran} of them run)");
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+    assert!(refused >= 30, "only {refused} of 60 impossible maps were refused");
+
+    // Vocabularies: node fields and the header changed, the checksum made valid.
+    let base = dynaflow_operators::tracking::DEFAULT_VOCABULARY.to_vec();
+    let nodes = (base.len() - 24 - 8) / 48;
+    let descriptors: Vec<[u8; 32]> = (0..64u8).map(|i| [i.wrapping_mul(37); 32]).collect();
+    let mut vfail = Vec::new();
+    let mut vrefused = 0;
+    for case in 0..200 {
+        let mut b = base.clone();
+        let node = 24 + 48 * rng.below(nodes as u64) as usize;
+        let what = match rng.below(6) {
+            0 => {
+                put(&mut b, node, &(rng.below(nodes as u64 * 2) as u32).to_le_bytes());
+                "a parent"
+            }
+            1 => {
+                put(&mut b, node + 4, &(rng.below(nodes as u64 + 2) as u32).to_le_bytes());
+                "a word"
+            }
+            2 => {
+                put(&mut b, node + 8, &rng.pick(&[f64::NAN, -1.0, 1e308, 0.0]).to_le_bytes());
+                "a weight"
+            }
+            3 => {
+                put(&mut b, 12 + 4 * rng.below(2) as usize, &(rng.below(100) as u32).to_le_bytes());
+                "k or levels"
+            }
+            4 => {
+                // Only the root left: a well-formed vocabulary with no word.
+                b.truncate(24 + 48 + 8);
+                put(&mut b, 20, &1u32.to_le_bytes());
+                put(&mut b, 24 + 4, &0u32.to_le_bytes());
+                "no word"
+            }
+            _ => {
+                let v = rng.below(256) as u8;
+                b[node + 16 + rng.below(32) as usize] = v;
+                "a descriptor byte"
+            }
+        };
+        reseal(&mut b);
+        let name = format!("case{case}.voc");
+        let result = std::panic::catch_unwind(|| {
+            let v = dynaflow_slam::bow::Vocabulary::from_bytes(&b, &name).map_err(|e| e.to_string())?;
+            let (bow, _) = v.transform(&descriptors, 2);
+            Ok::<bool, String>(bow.values().all(|w| w.is_finite()))
+        });
+        match result {
+            Err(_) => vfail.push(format!("vocabulary case {case} ({what}): panicked")),
+            Ok(Err(e)) if e.contains(&name) => vrefused += 1,
+            Ok(Err(e)) => vfail.push(format!("vocabulary case {case} ({what}): refused without the name: {e}")),
+            Ok(Ok(false)) => vfail.push(format!("vocabulary case {case} ({what}): non-finite weights")),
+            Ok(Ok(true)) if what == "no word" => {
+                vfail.push(format!("vocabulary case {case}: a vocabulary with no word loaded"))
+            }
+            Ok(Ok(true)) => {}
+        }
+    }
+    eprintln!("vocabularies: 200 cases, {vrefused} refused naming the file");
+    assert!(vfail.is_empty(), "{}", vfail.join("\n"));
+}

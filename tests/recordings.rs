@@ -274,22 +274,34 @@ fn full_disk_fails_the_run_with_the_file_named() {
     if !Path::new("/dev/full").exists() {
         return;
     }
-    // Each recorder in turn: the run fails naming the file and the cause (the MCAP writer's
-    // own message hides the cause; the rerun file is written by dynaflow's own sink).
-    for (format, file) in
-        [("jsonl", "engine_smoke.messages.jsonl"), ("rrd", "engine_smoke.rrd"), ("mcap", "engine_smoke.mcap")]
-    {
-        let dir = common::TempDir::new(&format!("full-{format}"));
-        std::os::unix::fs::symlink("/dev/full", dir.path().join(file)).unwrap();
-        let out = common::bin()
-            .args(["run", "--no-progress", "--record", format, "--out"])
-            .arg(dir.path())
-            .arg(common::repo().join("graphs/engine_smoke.yaml"))
-            .output()
-            .unwrap();
-        let stderr = String::from_utf8_lossy(&out.stderr);
-        assert_ne!(out.status.code(), Some(0), "{format}: {stderr}");
-        assert!(stderr.contains(file) && stderr.to_lowercase().contains("no space"), "{format}: {stderr}");
+    // Each recorder in turn, writing to the device itself (the CLI names its files inside
+    // `--out` and replaces a symlink planted there rather than following it, so the device is
+    // given to the recorder directly): the run fails naming the file and the cause (the MCAP
+    // writer's own message hides the cause; the rerun file is written by dynaflow's own sink).
+    use dynaflow_engine::sink::Sink;
+    use dynaflow_recordings::{McapSink, MessageLog, RrdSink};
+    let graph = common::graph(&std::fs::read_to_string(common::repo().join("graphs/engine_smoke.yaml")).unwrap());
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+    let full = Path::new("/dev/full");
+    let sinks: [(&str, Box<dyn Sink>); 3] = [
+        ("jsonl", Box::new(MessageLog::new(full))),
+        ("rrd", Box::new(RrdSink::new(full))),
+        ("mcap", Box::new(McapSink::new(full))),
+    ];
+    for (format, sink) in sinks {
+        let said = match rt.block_on(dynaflow_engine::runtime::run(&graph, Default::default(), vec![sink])) {
+            Err(e) => e.to_string(),
+            Ok(r) => {
+                assert_ne!(
+                    r.status,
+                    dynaflow_engine::runtime::RunStatus::Completed,
+                    "{format}: completed on a full disk"
+                );
+                r.failures.iter().map(|f| f.error.clone()).collect::<Vec<_>>().join("; ")
+            }
+        };
+        assert!(said.contains("/dev/full") && said.to_lowercase().contains("no space"), "{format}: {said}");
+        assert!(full.exists(), "the device was removed");
     }
 }
 

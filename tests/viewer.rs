@@ -45,27 +45,19 @@ fn tools() -> Option<(std::path::PathBuf, std::path::PathBuf)> {
     (rerun_ok && chromium_ok).then_some((rerun, python))
 }
 
-struct Killed(std::process::Child);
-impl Drop for Killed {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 /// Serve `rrd` with the web viewer and take the browser's screenshot into `png`.
 fn screenshot(rerun: &Path, python: &Path, rrd: &Path, png: &Path) {
     let (web, grpc) = (free_port(), free_port());
-    let _server = Killed(
+    // The `rerun` script starts the viewer binary: both are ended with the test's group.
+    let _server = common::process::Reaped::spawn(
         Command::new(rerun)
             .args(["--serve-web", "--web-viewer-port", &web.to_string(), "--port", &grpc.to_string()])
             .arg(rrd)
             .stdin(Stdio::null())
             .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
+            .stderr(Stdio::null()),
+    )
+    .unwrap();
     let t0 = Instant::now();
     while std::net::TcpStream::connect(("127.0.0.1", web)).is_err() {
         assert!(t0.elapsed() < Duration::from_secs(60), "the web viewer did not start");

@@ -59,9 +59,14 @@ fn calib_line(path: &Path, key: &str) -> usize {
 fn read_calib(path: &Path) -> Result<[[f64; 12]; 4], Error> {
     let text = std::fs::read_to_string(path).map_err(|e| Error::file(path, e))?;
     let mut p = [[f64::NAN; 12]; 4];
+    let mut defined = [0usize; 4];
     for (i, line) in text.lines().enumerate() {
         let Some((key, rest)) = line.split_once(':') else { continue };
         let Some(k) = ["P0", "P1", "P2", "P3"].iter().position(|n| *n == key.trim()) else { continue };
+        if defined[k] > 0 {
+            return Err(input(path, i + 1, format!("{} is defined twice (first on line {})", key.trim(), defined[k])));
+        }
+        defined[k] = i + 1;
         let v = numbers(path, i + 1, rest)?;
         let slot = p.get_mut(k).ok_or_else(|| input(path, i + 1, "bad key"))?;
         *slot = v
@@ -126,6 +131,8 @@ pub struct KittiSequence {
     intrinsics: Intrinsics,
     /// Stereo baseline, metres.
     pub baseline: f64,
+    /// The first left image's size: every frame must have it (the intrinsics are for it).
+    size: (u32, u32),
 }
 
 impl KittiSequence {
@@ -160,8 +167,33 @@ impl KittiSequence {
                 }
             }
         }
+        // A rectified pair shares one camera matrix: the right camera's fx, fy, cx, cy are
+        // the left's (KITTI's calib.txt writes them identically).
+        let right_name = format!("P{ri}");
+        for (what, l, r) in [("fx", pl[0], pr[0]), ("fy", pl[5], pr[5]), ("cx", pl[2], pr[2]), ("cy", pl[6], pr[6])] {
+            if (l - r).abs() > 1e-6 * l.abs().max(1.0) {
+                let line = calib_line(&calib_path, &right_name);
+                return Err(input(
+                    &calib_path,
+                    line,
+                    format!(
+                        "{right_name}: {what} = {r} differs from P{li}'s {l}: a rectified pair shares one camera matrix"
+                    ),
+                ));
+            }
+        }
         // P = K [I | t] with K's fx on the diagonal: t_x = P[3] / fx relative to camera 0.
         let baseline = (pl[3] - pr[3]) / fx;
+        if baseline.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            let line = calib_line(&calib_path, &right_name);
+            return Err(input(
+                &calib_path,
+                line,
+                format!(
+                    "{right_name} gives a baseline of {baseline} m from P{li}: the right camera must be to the right of the left one (P{ri}[3] < P{li}[3])"
+                ),
+            ));
+        }
         let left_offset = Vector3::new(pl[3] / fx, pl[7] / fx, pl[11]);
         let times_text = std::fs::read_to_string(&times_path).map_err(|e| Error::file(&times_path, e))?;
         let mut times = Vec::new();
@@ -180,6 +212,30 @@ impl KittiSequence {
         if times.is_empty() {
             return Err(Error::file(&times_path, "no frame (the file has no time)"));
         }
+        // One time per image: a times.txt shorter or longer than the image folder would run a
+        // part of the sequence without a word.
+        let (li_dir, ri_dir) = (dir.join(format!("image_{li}")), dir.join(format!("image_{ri}")));
+        for d in [&li_dir, &ri_dir] {
+            if let Some(missing) = (0..times.len()).map(|i| d.join(format!("{i:06}.png"))).find(|p| !p.is_file()) {
+                return Err(Error::file(
+                    &missing,
+                    format!("missing: {} has {} times, one per image", times_path.display(), times.len()),
+                ));
+            }
+            let images = std::fs::read_dir(d)
+                .map_err(|e| Error::file(d, e))?
+                .filter_map(Result::ok)
+                .filter(|e| e.path().extension().is_some_and(|x| x == "png"))
+                .count();
+            if images != times.len() {
+                return Err(Error::file(
+                    &times_path,
+                    format!("{} times for {images} images in {}: one time per image", times.len(), d.display()),
+                ));
+            }
+        }
+        let first = li_dir.join("000000.png");
+        let size = image::image_dimensions(&first).map_err(|e| Error::file(&first, e))?;
         if frames > 0 {
             times.truncate(frames);
         }
@@ -197,7 +253,7 @@ impl KittiSequence {
         let poses = match &pose_path {
             Some(p) => {
                 let poses = read_poses(p)?;
-                if poses.len() < times.len() {
+                if poses.len() != times.len() {
                     return Err(Error::file(
                         p,
                         format!("{} poses for {} frames in times.txt", poses.len(), times.len()),
@@ -220,6 +276,7 @@ impl KittiSequence {
             poses,
             intrinsics: Intrinsics::pinhole(fx, pl[5], pl[2], pl[6]),
             baseline,
+            size,
         })
     }
 
@@ -242,6 +299,7 @@ impl KittiSequence {
         let left = load_rgb(&left_path)?;
         let right = load_rgb(&right_path)?;
         same_size(right_path.display(), (right.width, right.height), left_path.display(), (left.width, left.height))?;
+        same_size(left_path.display(), (left.width, left.height), "the sequence's first image", self.size)?;
         let camera = self.intrinsics.camera_info(left.width, left.height);
         let gt_pose = self.poses.as_ref().and_then(|p| p.get(index)).copied();
         Ok(Some(KittiFrame { stamp, left, right, camera, gt_pose }))

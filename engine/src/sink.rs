@@ -308,4 +308,15 @@ impl Sink for DigestSink {
     fn close(&mut self) -> Result<(), SinkError> {
         Ok(())
     }
+    /// Messages per port (no file: the digests go into the summary's `digests`).
+    fn report(&self) -> SinkReport {
+        let ports = self.ports.lock().unwrap_or_else(PoisonError::into_inner);
+        SinkReport {
+            ports: ports
+                .iter()
+                .map(|(k, (count, _))| (k.clone(), PortReport { messages: *count, ..PortReport::default() }))
+                .collect(),
+            ..SinkReport::default()
+        }
+    }
 }

@@ -133,8 +133,15 @@ pub fn bt_bytes(tree: &OcTree) -> Vec<u8> {
 
 fn write_file(path: &Path, bytes: &[u8]) -> Result<(), Error> {
     // Write beside, then rename: an interrupted run never leaves half a file.
+    // The temporary file is created new (`O_EXCL`), so a symlink planted at its name is an
+    // error, never followed.
     let tmp = path.with_extension("partial");
-    std::fs::write(&tmp, bytes)
+    let _ = std::fs::remove_file(&tmp);
+    std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&tmp)
+        .and_then(|mut f| std::io::Write::write_all(&mut f, bytes))
         .and_then(|()| std::fs::rename(&tmp, path))
         .map_err(|e| Error::Io { path: path.display().to_string(), message: e.to_string() })
 }

@@ -11,7 +11,7 @@ use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
 use dynaflow_engine::msg::Message;
-use dynaflow_engine::sink::{RunInfo, Sink, SinkError};
+use dynaflow_engine::sink::{PortReport, RunInfo, Sink, SinkError, SinkReport};
 
 /// Messages per flush.
 const FLUSH_EVERY: u64 = 64;
@@ -22,12 +22,14 @@ pub struct MessageLog {
     path: PathBuf,
     out: Option<BufWriter<File>>,
     count: u64,
+    /// `node/port` -> messages written.
+    ports: std::collections::BTreeMap<String, u64>,
 }
 
 impl MessageLog {
     /// A log that will be written to `path` when the run opens it.
     pub fn new(path: impl Into<PathBuf>) -> Self {
-        Self { path: path.into(), out: None, count: 0 }
+        Self { path: path.into(), out: None, count: 0, ports: std::collections::BTreeMap::new() }
     }
 
     /// Where the log is written.
@@ -55,7 +57,7 @@ impl Sink for MessageLog {
     }
 
     fn open(&mut self, info: &RunInfo) -> Result<(), SinkError> {
-        let file = File::create(&self.path).map_err(|e| self.err(e))?;
+        let file = dynaflow_engine::files::create_new(&self.path).map_err(|e| self.err(e))?;
         self.out = Some(BufWriter::new(file));
         let mut v = serde_json::to_value(info).map_err(|e| self.err(e))?;
         if let Some(obj) = v.as_object_mut() {
@@ -79,6 +81,7 @@ impl Sink for MessageLog {
         });
         self.line(&v)?;
         self.count += 1;
+        *self.ports.entry(format!("{node}/{port}")).or_default() += 1;
         if self.count.is_multiple_of(FLUSH_EVERY) {
             self.out.as_mut().map_or(Ok(()), Write::flush).map_err(|e| self.err(e))?;
         }
@@ -95,6 +98,19 @@ impl Sink for MessageLog {
         match out {
             Some(mut w) => w.flush().and_then(|()| w.get_ref().sync_all()).map_err(|e| self.err(e)),
             None => Ok(()),
+        }
+    }
+
+    fn report(&self) -> SinkReport {
+        SinkReport {
+            path: Some(self.path.display().to_string()),
+            file_bytes: std::fs::metadata(&self.path).ok().map(|m| m.len()),
+            ports: self
+                .ports
+                .iter()
+                .map(|(k, &messages)| (k.clone(), PortReport { messages, ..PortReport::default() }))
+                .collect(),
+            ..SinkReport::default()
         }
     }
 }

@@ -34,11 +34,29 @@ impl Input {
     }
 }
 
-fn check_machines(inputs: &[Input]) -> Result<(), String> {
+fn check_machines(inputs: &[Input], out: &Path) -> Result<(), String> {
+    use dynaflow_engine::files::{refuse_overwriting_inputs, same_file};
     if inputs.len() < 2 {
         return Err("give the recordings of at least two machines".into());
     }
+    refuse_overwriting_inputs("--out", out, inputs.iter().map(|i| i.path.as_path()))?;
     for (i, a) in inputs.iter().enumerate() {
+        // Machine names are graph ids (they become `dynaflow.<machine>` records and channel
+        // metadata): no `/`, `,`, `..` or empty names.
+        if !dynaflow_engine::spec::valid_id(&a.machine) {
+            return Err(format!(
+                "{}: machine name `{}` is not a machine id (a letter or `_`, then letters, digits, `_` and `-`)",
+                a.path.display(),
+                a.machine
+            ));
+        }
+        if let Some(b) = inputs[..i].iter().find(|b| same_file(&b.path, &a.path)) {
+            return Err(format!(
+                "{} and {} are the same file: give one recording per machine",
+                b.path.display(),
+                a.path.display()
+            ));
+        }
         if let Some(b) = inputs[..i].iter().find(|b| b.machine == a.machine) {
             return Err(format!(
                 "{} and {} are both from machine `{}`: give one recording per machine",
@@ -53,7 +71,7 @@ fn check_machines(inputs: &[Input]) -> Result<(), String> {
 
 /// Merge MCAP recordings into `out`; returns the number of messages written.
 pub fn merge_mcap(inputs: &[Input], out: &Path) -> Result<u64, String> {
-    check_machines(inputs)?;
+    check_machines(inputs, out)?;
     let bufs: Vec<Vec<u8>> = inputs
         .iter()
         .map(|i| std::fs::read(&i.path).map_err(|e| format!("cannot read {}: {e}", i.path.display())))
@@ -61,14 +79,26 @@ pub fn merge_mcap(inputs: &[Input], out: &Path) -> Result<u64, String> {
     // Each input's `dynaflow` metadata: the run's provenance and its graph digest.
     let mut metas = Vec::new();
     for (input, buf) in inputs.iter().zip(&bufs) {
-        let bad = |e: &dyn std::fmt::Display| format!("{}: not a readable MCAP file: {e}", input.path.display());
-        let summary = mcap::Summary::read(buf).map_err(|e| bad(&e))?.ok_or_else(|| bad(&"no summary section"))?;
+        // Read linearly, as `diff` and `compare` do: a cut recording (a killed machine) is
+        // merged up to its cut.
         let mut meta = None;
-        for idx in summary.metadata_indexes.iter().filter(|m| m.name == "dynaflow") {
-            meta = Some(mcap::read::metadata(buf, idx).map_err(|e| bad(&e))?.metadata);
-        }
+        crate::mcap::scan::scan(buf, |event| {
+            if let crate::mcap::scan::Event::Metadata(m) = event
+                && m.name == "dynaflow"
+            {
+                meta = Some(m.metadata);
+            }
+            Ok(())
+        })
+        .map_err(|e| format!("{}: not a readable MCAP file: {e}", input.path.display()))?;
         let meta =
             meta.ok_or_else(|| format!("{}: no `dynaflow` metadata: not a dynaflow recording", input.path.display()))?;
+        if meta.get("machine").is_none_or(String::is_empty) {
+            return Err(format!(
+                "{}: not written by `dynaflow run --machine NAME`: it holds a one-process run, which needs no merge",
+                input.path.display()
+            ));
+        }
         metas.push(meta);
     }
     let key = |m: &BTreeMap<String, String>| (m.get("graph").cloned(), m.get("graph_digest").cloned());
@@ -85,7 +115,7 @@ pub fn merge_mcap(inputs: &[Input], out: &Path) -> Result<u64, String> {
             ));
         }
     }
-    let file = std::fs::File::create(out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
+    let file = dynaflow_engine::files::create_new(out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
     let werr = |e: mcap::McapError| format!("writing {}: {e}", out.display());
     let mut writer = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))
@@ -108,23 +138,37 @@ pub fn merge_mcap(inputs: &[Input], out: &Path) -> Result<u64, String> {
     // A k-way merge by log time (ties: input order, then file order).
     let mut streams = Vec::new();
     for (input, buf) in inputs.iter().zip(&bufs) {
-        let s = mcap::MessageStream::new(buf).map_err(|e| format!("{}: {e}", input.path.display()))?;
+        let s = mcap::MessageStream::new_with_options(buf, enumset::enum_set!(mcap::read::Options::IgnoreEndMagic))
+            .map_err(|e| format!("{}: {e}", input.path.display()))?;
         streams.push(s.peekable());
     }
     let mut channels: BTreeMap<(usize, u16), u16> = BTreeMap::new();
     let mut written = 0u64;
+    let mut cut = vec![false; streams.len()];
     loop {
         let mut best: Option<(u64, usize)> = None;
         for (i, s) in streams.iter_mut().enumerate() {
-            match s.peek() {
-                Some(Ok(m)) if best.is_none_or(|(t, _)| m.log_time < t) => best = Some((m.log_time, i)),
-                Some(Err(_)) => best = Some((0, i)),
-                _ => {}
+            if cut[i] {
+                continue;
+            }
+            if let Some(Err(e)) = s.peek() {
+                // The recording ends here (cut by a kill, or damaged): what came before is
+                // merged, and the user told.
+                eprintln!(
+                    "warning: {}: read up to a cut or damage ({e}): the rest of it is not merged",
+                    inputs[i].path.display()
+                );
+                cut[i] = true;
+                continue;
+            }
+            if let Some(Ok(m)) = s.peek()
+                && best.is_none_or(|(t, _)| m.log_time < t)
+            {
+                best = Some((m.log_time, i));
             }
         }
         let Some((_, i)) = best else { break };
-        let Some(next) = streams[i].next() else { break };
-        let m = next.map_err(|e| format!("{}: {e}", inputs[i].path.display()))?;
+        let Some(Ok(m)) = streams[i].next() else { break };
         let id = match channels.get(&(i, m.channel.id)) {
             Some(id) => *id,
             None => {
@@ -158,8 +202,8 @@ pub fn merge_mcap(inputs: &[Input], out: &Path) -> Result<u64, String> {
 pub fn merge_rrd(inputs: &[Input], out: &Path) -> Result<u64, String> {
     use rerun::external::re_log_encoding::{CrateVersion, DecoderApp, Encoder, EncodingOptions};
     use rerun::external::re_log_types::{LogMsg, StoreKind};
-    check_machines(inputs)?;
-    let file = std::fs::File::create(out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
+    check_machines(inputs, out)?;
+    let file = dynaflow_engine::files::create_new(out).map_err(|e| format!("cannot create {}: {e}", out.display()))?;
     let mut encoder = Encoder::new_eager(
         CrateVersion::LOCAL,
         EncodingOptions::PROTOBUF_COMPRESSED,

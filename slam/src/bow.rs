@@ -13,7 +13,7 @@
 //!   features grouped by their node `levels_up` above the words (the direct index that
 //!   ORB-SLAM2's `SearchByBoW` matches within).
 //! - **Similarity** ([`score`]): DBoW2's L1 score `1 - |v/|v| - w/|w||_1 / 2`, in [0, 1].
-//! - **Files** ([`Vocabulary::save`], [`Vocabulary::load`]): a versioned little-endian binary
+//! - **Files** ([`Vocabulary::to_bytes`], [`Vocabulary::load`]): a versioned little-endian binary
 //!   format with a checksum; [`Vocabulary::id`] names its content (a saved map records the id of
 //!   the vocabulary it was built with).
 //!
@@ -322,7 +322,8 @@ impl Vocabulary {
         (bow, features)
     }
 
-    fn to_bytes(&self) -> Vec<u8> {
+    /// The file's bytes (`dynaflow vocab train` writes them as a new file renamed into place).
+    pub fn to_bytes(&self) -> Vec<u8> {
         let mut b = Vec::with_capacity(HEADER + NODE * self.nodes.len() + 8);
         b.extend_from_slice(MAGIC);
         for v in [FORMAT_VERSION, self.k as u32, self.levels as u32, self.nodes.len() as u32] {
@@ -345,12 +346,6 @@ impl Vocabulary {
         let mut tail = [0u8; 8];
         tail.copy_from_slice(&b[b.len() - 8..]);
         format!("{:016x}", u64::from_le_bytes(tail))
-    }
-
-    /// Write to `path`.
-    pub fn save(&self, path: &Path) -> Result<(), BowError> {
-        std::fs::write(path, self.to_bytes())
-            .map_err(|source| BowError::Io { path: path.display().to_string(), source })
     }
 
     /// Read from `path`; every inconsistency is an error naming the file.
@@ -422,6 +417,9 @@ impl Vocabulary {
             if n.children.is_empty() != n.word.is_some() && i > 0 {
                 return Err(corrupt(format!("node {i}: a leaf must be a word and a word a leaf")));
             }
+        }
+        if words.is_empty() {
+            return Err(corrupt("no word: a vocabulary needs at least one leaf to put descriptors in".into()));
         }
         Ok(Self { k, levels, nodes, words })
     }

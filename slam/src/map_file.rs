@@ -24,6 +24,16 @@ const MAGIC: &[u8; 8] = b"DFMAP\0\0\0";
 /// Version of the layout written.
 pub const MAP_FORMAT_VERSION: u32 = 1;
 
+/// Largest coordinate of a stored point or key frame, metres: a bound far beyond any map a
+/// camera builds (1000 km), so that a damaged or crafted file cannot carry values that overflow
+/// the optimisers. Chosen, not from a source.
+const MAX_COORDINATE_M: f64 = 1e6;
+/// Pyramid levels a keypoint may sit on: ORB-SLAM2 uses 8; the octave is a `u8` index into
+/// per-level tables, so anything at or beyond this is refused.
+const MAX_OCTAVES: usize = 32;
+/// Largest keypoint coordinate, pixels (no camera has an image this large).
+const MAX_IMAGE_PX: f64 = 65_536.0;
+
 /// Why a map file could not be written or read.
 #[derive(Debug, thiserror::Error)]
 pub enum MapFileError {
@@ -47,6 +57,10 @@ pub enum MapFileError {
         "{path}: the map was built with vocabulary {map}, but this run uses vocabulary {run}: words differ between vocabularies, so its key frames cannot be recognised (load the map with the vocabulary it was saved with)"
     )]
     Vocabulary { path: String, map: String, run: String },
+    #[error(
+        "{path}: the map holds no key frame (saved by a run whose tracker never started a map): there is nothing to localise in"
+    )]
+    Empty { path: String },
 }
 
 /// 64-bit FNV-1a.
@@ -59,8 +73,9 @@ fn fnv(bytes: &[u8]) -> u64 {
     h
 }
 
-/// Write `map` to `path`.
-pub fn save(map: &KeyFrameMap, path: &Path) -> Result<(), MapFileError> {
+/// The file's bytes for `map` (written as a new file renamed into place by the caller,
+/// `dynaflow_engine::files::write_atomic`).
+pub fn encode(map: &KeyFrameMap) -> Vec<u8> {
     let mut b: Vec<u8> = Vec::new();
     b.extend_from_slice(MAGIC);
     b.extend_from_slice(&MAP_FORMAT_VERSION.to_le_bytes());
@@ -108,7 +123,7 @@ pub fn save(map: &KeyFrameMap, path: &Path) -> Result<(), MapFileError> {
     }
     let sum = fnv(&b);
     b.extend_from_slice(&sum.to_le_bytes());
-    std::fs::write(path, b).map_err(|source| MapFileError::Io { path: path.display().to_string(), source })
+    b
 }
 
 struct Reader<'a> {
@@ -197,9 +212,21 @@ pub fn load(
         let first_keyframe = r.u64("a point")?;
         batch.points.push(MapPoint { id, position, descriptor, observations: 0, first_keyframe });
     }
+    let corrupt = |what: String| MapFileError::Corrupt { path: p.clone(), what };
+    let mut point_ids = std::collections::HashSet::new();
+    for pt in &batch.points {
+        if !point_ids.insert(pt.id) {
+            return Err(corrupt(format!("point {} is stored twice", pt.id)));
+        }
+        if pt.position.coords.iter().any(|c| c.abs() > MAX_COORDINATE_M) {
+            return Err(corrupt(format!("point {} lies {:e} m from the origin", pt.id, pt.position.coords.amax())));
+        }
+    }
     let mut map = KeyFrameMap::new(cam, width, height, scale_factor, vocabulary);
     map.switch_map(map_id);
     map.apply_refinements(&batch);
+    let mut seen = std::collections::HashSet::new();
+    let mut parents = std::collections::HashMap::new();
     for _ in 0..nk {
         let id = r.u64("a key frame")?;
         let stamp = r.f64("a key frame")?;
@@ -207,6 +234,15 @@ pub fn load(
         let q = Quaternion::new(v[6], v[3], v[4], v[5]);
         if (q.norm() - 1.0).abs() > 1e-6 {
             return Err(MapFileError::Corrupt { path: p.clone(), what: format!("key frame {id}: not a rotation") });
+        }
+        if v[..3].iter().any(|c| c.abs() > MAX_COORDINATE_M) {
+            return Err(corrupt(format!(
+                "key frame {id} lies {:e} m from the origin",
+                v[0].abs().max(v[1].abs()).max(v[2].abs())
+            )));
+        }
+        if !seen.insert(id) {
+            return Err(corrupt(format!("key frame {id} is stored twice")));
         }
         let pose = Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), UnitQuaternion::from_quaternion(q));
         let parent = r.u64("a key frame")?;
@@ -224,6 +260,20 @@ pub fn load(
             let depth = r.f64("a keypoint")?;
             let descriptor = r.descriptor("a keypoint")?;
             let point = r.u64("a keypoint")?;
+            if usize::from(octave) >= MAX_OCTAVES {
+                return Err(corrupt(format!("key frame {id}: a keypoint on pyramid level {octave}")));
+            }
+            if uv.iter().any(|c| !(-1.0..=MAX_IMAGE_PX).contains(c)) {
+                return Err(corrupt(format!("key frame {id}: a keypoint at ({}, {})", uv[0], uv[1])));
+            }
+            if !(0.0..=MAX_COORDINATE_M).contains(&depth) {
+                return Err(corrupt(format!("key frame {id}: a keypoint at depth {depth} m")));
+            }
+            if point != u64::MAX && !point_ids.contains(&point) {
+                return Err(corrupt(format!(
+                    "key frame {id}: a keypoint of point {point}, which the map does not hold"
+                )));
+            }
             kf.keypoints.push(KeyFrameKeypoint {
                 keyframe: id,
                 uv,
@@ -233,6 +283,7 @@ pub fn load(
                 point: (point != u64::MAX).then_some(point),
             });
         }
+        parents.insert(id, parent);
         if kf.keypoints.is_empty() {
             continue;
         }
@@ -247,6 +298,23 @@ pub fn load(
     if r.at != body.len() {
         let extra = body.len() - r.at;
         return Err(MapFileError::Corrupt { path: p.clone(), what: format!("{extra} bytes after the last key frame") });
+    }
+    // The spanning tree: every parent a key frame of the map, and no cycle.
+    for (&id, &parent) in &parents {
+        if parent != u64::MAX && !parents.contains_key(&parent) {
+            return Err(corrupt(format!("key frame {id} has parent {parent}, which the map does not hold")));
+        }
+        let (mut at, mut steps) = (parent, 0usize);
+        while at != u64::MAX {
+            steps += 1;
+            if steps > parents.len() {
+                return Err(corrupt(format!("key frame {id}'s parents form a cycle")));
+            }
+            at = parents.get(&at).copied().unwrap_or(u64::MAX);
+        }
+    }
+    if map.kfs.is_empty() {
+        return Err(MapFileError::Empty { path: p });
     }
     Ok(map)
 }

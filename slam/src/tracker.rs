@@ -444,7 +444,8 @@ impl Tracker {
     /// Track one frame.
     pub fn track(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
         let r = self.track_frame(stamp, features);
-        if let (Some(pose), Some(k)) = (r.pose, self.reference)
+        // Lost frames (a dead-reckoned guess) stay out of the trajectory, as in ORB-SLAM2.
+        if let (Some(pose), Some(k), false) = (r.pose, self.reference, r.state == TrackState::Lost)
             && let Some(kp) = self.keyframe_poses.get(&k)
         {
             self.anchors.push((stamp, k, kp.inverse() * pose));

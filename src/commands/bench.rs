@@ -15,7 +15,7 @@ use dynaflow_engine::LoadRequest;
 use dynaflow_engine::files::RunFiles;
 use dynaflow_slam::eval::{Align, evaluate};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK};
 
 /// `dynaflow bench` arguments.
 #[derive(Debug, clap::Args)]
@@ -74,6 +74,8 @@ struct Job {
     name: String,
     variant: Option<String>,
     input: Option<PathBuf>,
+    /// The sequence's name in tables and folders, unique among the bench's inputs.
+    sequence: String,
     dir: PathBuf,
 }
 
@@ -82,11 +84,46 @@ impl Job {
         self.variant.as_deref().unwrap_or("base")
     }
     fn sequence(&self) -> String {
-        self.input.as_ref().map_or_else(
-            || "synthetic".to_string(),
-            |p| p.file_name().map_or_else(|| p.display().to_string(), |n| n.to_string_lossy().into_owned()),
-        )
+        self.sequence.clone()
     }
+}
+
+/// A name per input, unique among them: the folder's name (`walking_xyz`), or where two share
+/// it (every KITTI sequence folder is `00`, `01`, ... under its own data set) as many of its
+/// parents as tell them apart, joined by `-` (`kitti_a-sequences-00`); an input given twice
+/// gets its position (`00#2`).
+fn sequence_names(inputs: &[PathBuf]) -> Vec<String> {
+    let parts = |p: &PathBuf| -> Vec<String> {
+        let abs = std::path::absolute(p).unwrap_or_else(|_| p.clone());
+        abs.components()
+            .filter_map(|c| match c {
+                std::path::Component::Normal(s) => Some(s.to_string_lossy().into_owned()),
+                _ => None,
+            })
+            .collect()
+    };
+    let all: Vec<Vec<String>> = inputs.iter().map(parts).collect();
+    let name = |i: usize, depth: usize| -> String {
+        let p = &all[i];
+        p[p.len().saturating_sub(depth)..].join("-")
+    };
+    let longest = all.iter().map(Vec::len).max().unwrap_or(1).max(1);
+    let mut names: Vec<String> = Vec::with_capacity(inputs.len());
+    for i in 0..inputs.len() {
+        let mut depth = 1;
+        while depth < longest
+            && (0..inputs.len()).any(|j| j != i && all[j] != all[i] && name(j, depth) == name(i, depth))
+        {
+            depth += 1;
+        }
+        names.push(name(i, depth));
+    }
+    let mut out: Vec<String> = Vec::with_capacity(names.len());
+    for (i, n) in names.iter().enumerate() {
+        let repeats = names[..i].iter().filter(|m| *m == n).count();
+        out.push(if repeats == 0 { n.clone() } else { format!("{n}#{}", repeats + 1) });
+    }
+    out
 }
 
 /// What a run gave.
@@ -110,13 +147,18 @@ struct Row {
     trajectory: Option<(PathBuf, PathBuf)>,
     /// The ATE's alignment (`sim3` for a monocular tracker).
     sim3: bool,
+    /// The bench was interrupted: the run was stopped, or never started.
+    interrupted: bool,
 }
 
 fn jobs(args: &BenchArgs) -> Result<Vec<Job>, String> {
     let registry = dynaflow::registry();
     let mut out = Vec::new();
-    let inputs: Vec<Option<PathBuf>> =
-        if args.inputs.is_empty() { vec![None] } else { args.inputs.iter().cloned().map(Some).collect() };
+    let inputs: Vec<(Option<PathBuf>, String)> = if args.inputs.is_empty() {
+        vec![(None, "synthetic".to_owned())]
+    } else {
+        args.inputs.iter().cloned().map(Some).zip(sequence_names(&args.inputs)).collect()
+    };
     for g in &args.graphs {
         let loaded = dynaflow_engine::load(g, &registry, &LoadRequest::default())
             .map_err(|e| format!("cannot read graph file {}: {e}", g.display()))?;
@@ -142,13 +184,14 @@ fn jobs(args: &BenchArgs) -> Result<Vec<Job>, String> {
             }
             w
         };
-        for input in &inputs {
+        for (input, sequence) in &inputs {
             for v in &wanted {
                 let job = Job {
                     graph: g.clone(),
                     name: spec.name.clone(),
                     variant: v.clone(),
                     input: input.clone(),
+                    sequence: sequence.clone(),
                     dir: PathBuf::new(),
                 };
                 let dir = args.out.join("runs").join(format!("{}-{}-{}", job.name, job.variant_name(), job.sequence()));
@@ -171,6 +214,9 @@ struct CellRecord {
     name: String,
     variant: Option<String>,
     input: Option<PathBuf>,
+    /// The sequence's name in the tables.
+    #[serde(default)]
+    sequence: String,
     /// The `dynaflow run` process exited 0.
     exit_ok: bool,
 }
@@ -189,9 +235,76 @@ fn plan_id(jobs: &[Job], args: &BenchArgs) -> String {
     format!("{:016x}", d.finish())
 }
 
+/// The bench's running `dynaflow run` children and the signals it has had. Each child runs in
+/// a process group of its own, so a terminal's Ctrl-C reaches the bench alone, which passes
+/// one SIGINT to each child: the child finishes its in-flight frames and writes its summary and
+/// recordings (its row reads "run interrupted"), no new run starts, and the tables of what
+/// finished are written. A second signal kills the children at once.
+#[derive(Debug, Default)]
+struct Interrupt {
+    signals: std::sync::atomic::AtomicU32,
+    running: Mutex<Vec<u32>>,
+}
+
+impl Interrupt {
+    fn stopped(&self) -> bool {
+        self.signals.load(std::sync::atomic::Ordering::SeqCst) > 0
+    }
+
+    /// Pass the signal for the `n`-th interrupt (1: SIGINT, then SIGKILL) to one child.
+    fn forward(pid: u32, n: u32) {
+        let sig = if n <= 1 { "INT" } else { "KILL" };
+        // The `kill` utility: std has no signal but SIGKILL, and the bench needs no unsafe code.
+        let _ = Command::new("kill").args(["-s", sig, &pid.to_string()]).stderr(std::process::Stdio::null()).status();
+    }
+
+    /// Listen for SIGINT and SIGTERM on a thread of its own for the rest of the process.
+    fn watch(self: &Arc<Self>) {
+        let state = self.clone();
+        let spawned = std::thread::Builder::new().name("bench-signals".into()).spawn(move || {
+            let Ok(rt) = tokio::runtime::Builder::new_current_thread().enable_all().build() else { return };
+            rt.block_on(async move {
+                #[cfg(unix)]
+                {
+                    use tokio::signal::unix::{SignalKind, signal};
+                    let (Ok(mut int), Ok(mut term)) = (signal(SignalKind::interrupt()), signal(SignalKind::terminate()))
+                    else {
+                        return;
+                    };
+                    loop {
+                        tokio::select! {
+                            _ = int.recv() => {}
+                            _ = term.recv() => {}
+                        }
+                        let n = state.signals.fetch_add(1, std::sync::atomic::Ordering::SeqCst) + 1;
+                        let running = state.running.lock().unwrap_or_else(std::sync::PoisonError::into_inner).clone();
+                        if n == 1 {
+                            eprintln!(
+                                "interrupted: {} runs finish their in-flight frames, no new run starts, then the tables of what finished are written (signal again to kill the runs)",
+                                running.len()
+                            );
+                        } else {
+                            eprintln!("killing {} runs", running.len());
+                        }
+                        for pid in running {
+                            Self::forward(pid, n);
+                        }
+                    }
+                }
+            });
+        });
+        if let Err(e) = spawned {
+            tracing::warn!("cannot watch for signals ({e}): Ctrl-C will end the bench without its tables");
+        }
+    }
+}
+
 /// Run a job's `dynaflow run` process, keep its stderr and `cell.json`, and read its row.
-fn run_one(exe: &Path, job: &Job, args: &BenchArgs, cell: (usize, usize, &str)) -> Row {
-    let ok = execute(exe, job, args);
+fn run_one(exe: &Path, job: &Job, args: &BenchArgs, cell: (usize, usize, &str), interrupt: &Interrupt) -> Row {
+    if interrupt.stopped() {
+        return Row { error: "not run: the bench was interrupted".into(), interrupted: true, ..Row::default() };
+    }
+    let ok = execute(exe, job, args, interrupt);
     let record = CellRecord {
         plan: cell.2.to_owned(),
         cell: cell.0,
@@ -200,6 +313,7 @@ fn run_one(exe: &Path, job: &Job, args: &BenchArgs, cell: (usize, usize, &str)) 
         name: job.name.clone(),
         variant: job.variant.clone(),
         input: job.input.clone(),
+        sequence: job.sequence.clone(),
         exit_ok: ok.as_ref().is_ok_and(|ok| *ok),
     };
     if let Ok(text) = serde_json::to_string_pretty(&record) {
@@ -212,7 +326,7 @@ fn run_one(exe: &Path, job: &Job, args: &BenchArgs, cell: (usize, usize, &str)) 
 }
 
 /// Run the job; `Ok(exit status was 0)`, `Err` when the process could not start.
-fn execute(exe: &Path, job: &Job, args: &BenchArgs) -> Result<bool, String> {
+fn execute(exe: &Path, job: &Job, args: &BenchArgs, interrupt: &Interrupt) -> Result<bool, String> {
     let _ = std::fs::remove_dir_all(&job.dir);
     let _ = std::fs::create_dir_all(&job.dir);
     let mut cmd = Command::new(exe);
@@ -233,7 +347,20 @@ fn execute(exe: &Path, job: &Job, args: &BenchArgs) -> Result<bool, String> {
     for s in &args.set {
         cmd.args(["--set", s]);
     }
-    let out = cmd.output().map_err(|e| format!("cannot start {}: {e}", exe.display()))?;
+    #[cfg(unix)]
+    std::os::unix::process::CommandExt::process_group(&mut cmd, 0);
+    cmd.stdin(std::process::Stdio::null()).stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped());
+    let child = cmd.spawn().map_err(|e| format!("cannot start {}: {e}", exe.display()))?;
+    let pid = child.id();
+    interrupt.running.lock().unwrap_or_else(std::sync::PoisonError::into_inner).push(pid);
+    // A signal between the check in `run_one` and the registration above still reaches it.
+    let signals = interrupt.signals.load(std::sync::atomic::Ordering::SeqCst);
+    if signals > 0 {
+        Interrupt::forward(pid, signals);
+    }
+    let out = child.wait_with_output();
+    interrupt.running.lock().unwrap_or_else(std::sync::PoisonError::into_inner).retain(|p| *p != pid);
+    let out = out.map_err(|e| format!("waiting for {}: {e}", exe.display()))?;
     let _ = std::fs::write(job.dir.join("stderr.txt"), &out.stderr);
     Ok(out.status.success())
 }
@@ -261,6 +388,7 @@ fn read_row(job: &Job, exit_ok: bool) -> Row {
     } else if !row.ok {
         row.error = format!("run {:?}", s.run.status).to_lowercase();
     }
+    row.interrupted = s.run.status == dynaflow_engine::runtime::RunStatus::Interrupted;
     row.oracle = s.run.oracle.is_some();
     row.frames = s.run.frames;
     row.wall_s = s.run.wall_s;
@@ -352,6 +480,8 @@ pub fn bench(args: &BenchArgs) -> u8 {
             return EXIT_FAILED;
         }
     };
+    let interrupt = Arc::new(Interrupt::default());
+    interrupt.watch();
     if let Some(i) = args.cell {
         let Some(job) = jobs.get(i) else {
             eprintln!(
@@ -361,7 +491,7 @@ pub fn bench(args: &BenchArgs) -> u8 {
             );
             return EXIT_BAD_INPUT;
         };
-        let row = run_one(&exe, job, args, (i, jobs.len(), &plan));
+        let row = run_one(&exe, job, args, (i, jobs.len(), &plan), &interrupt);
         let status = if row.ok { "ok".to_owned() } else { format!("failed: {}", row.error) };
         println!(
             "cell {i} of {}: {} {} {}: {status} ({})",
@@ -395,7 +525,7 @@ pub fn bench(args: &BenchArgs) -> u8 {
                     };
                     let Some(job) = jobs.get(i) else { break };
                     bar.set_message(format!("{} {} {}", job.name, job.variant_name(), job.sequence()));
-                    let row = run_one(&exe, job, args, (i, jobs.len(), &plan));
+                    let row = run_one(&exe, job, args, (i, jobs.len(), &plan), &interrupt);
                     if !row.ok && bar.is_hidden() {
                         eprintln!("failed: {} {} {}: {}", job.name, job.variant_name(), job.sequence(), row.error);
                     }
@@ -416,7 +546,7 @@ pub fn bench(args: &BenchArgs) -> u8 {
     if args.compare {
         compare_variants(&jobs, &rows, &args.out);
     }
-    status
+    if interrupt.stopped() { EXIT_INTERRUPTED } else { status }
 }
 
 /// `--compare`: per graph and sequence, the runs side by side in one recording; a run left
@@ -521,13 +651,29 @@ fn collect(dirs: &[PathBuf]) -> Result<(Vec<Job>, Vec<Row>), String> {
     for i in 0..cells {
         match found.remove(&i) {
             Some((rec, dir)) => {
-                let job = Job { graph: rec.graph, name: rec.name, variant: rec.variant, input: rec.input, dir };
+                let sequence = if rec.sequence.is_empty() {
+                    rec.input
+                        .as_ref()
+                        .and_then(|p| p.file_name())
+                        .map_or_else(|| "synthetic".into(), |n| n.to_string_lossy().into_owned())
+                } else {
+                    rec.sequence
+                };
+                let job =
+                    Job { graph: rec.graph, name: rec.name, variant: rec.variant, input: rec.input, sequence, dir };
                 rows.push(read_row(&job, rec.exit_ok));
                 jobs.push(job);
             }
             None => {
                 let dir = PathBuf::from(format!("(cell {i})"));
-                jobs.push(Job { graph: PathBuf::new(), name: format!("cell {i}"), variant: None, input: None, dir });
+                jobs.push(Job {
+                    graph: PathBuf::new(),
+                    name: format!("cell {i}"),
+                    variant: None,
+                    input: None,
+                    sequence: String::new(),
+                    dir,
+                });
                 rows.push(Row {
                     error: format!("cell {i} of {cells} (plan {plan}) is in none of the collected folders"),
                     ..Row::default()
@@ -583,10 +729,11 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
             ));
         } else {
             md.push_str(&format!(
-                "| {} | {} | {} | **failed**: {} | | | | | | | | |\n",
+                "| {} | {} | {} | **{}**: {} | | | | | | | | |\n",
                 j.name,
                 variant,
                 j.sequence(),
+                if r.interrupted { "interrupted" } else { "failed" },
                 r.error.replace('|', "/")
             ));
         }
@@ -596,7 +743,13 @@ fn tables(jobs: &[Job], rows: &[Row]) -> (String, String) {
             j.name,
             j.variant_name(),
             j.sequence(),
-            if r.ok { "ok" } else { "failed" },
+            if r.ok {
+                "ok"
+            } else if r.interrupted {
+                "interrupted"
+            } else {
+                "failed"
+            },
             r.frames,
             f(ate[0]),
             f(ate[1]),

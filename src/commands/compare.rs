@@ -30,6 +30,13 @@ pub fn compare(args: &CompareArgs) -> u8 {
         eprintln!("error: --names gives {} names for {} runs", args.names.len(), args.runs.len());
         return EXIT_BAD_INPUT;
     }
+    let out_ok = dynaflow_engine::files::require_extension("--out", &args.out, "rrd").and_then(|()| {
+        dynaflow_engine::files::refuse_overwriting_inputs("--out", &args.out, args.runs.iter().map(PathBuf::as_path))
+    });
+    if let Err(e) = out_ok {
+        eprintln!("error: {e}");
+        return EXIT_BAD_INPUT;
+    }
     let mut runs = Vec::new();
     for (i, path) in args.runs.iter().enumerate() {
         let name = args.names.get(i).cloned().unwrap_or_else(|| {

@@ -38,6 +38,15 @@ pub fn diff(args: &DiffArgs) -> u8 {
             }
         }
     }
+    if let Some(out) = &args.out {
+        let out_ok = dynaflow_engine::files::require_extension("--out", out, "rrd").and_then(|()| {
+            dynaflow_engine::files::refuse_overwriting_inputs("--out", out, [args.a.as_path(), args.b.as_path()])
+        });
+        if let Err(e) = out_ok {
+            eprintln!("error: {e}");
+            return EXIT_BAD_INPUT;
+        }
+    }
     let (a, b) = match (diff::read_mcap(&args.a), diff::read_mcap(&args.b)) {
         (Ok(a), Ok(b)) => (a, b),
         (Err(e), _) | (_, Err(e)) => {

@@ -91,6 +91,12 @@ pub fn eval(args: &EvalArgs) -> u8 {
         return EXIT_BAD_INPUT;
     }
     if let Some(path) = &args.plot {
+        if let Err(e) =
+            dynaflow_engine::files::refuse_overwriting_inputs("--plot", path, [args.gt.as_path(), args.est.as_path()])
+        {
+            eprintln!("error: {e}");
+            return EXIT_BAD_INPUT;
+        }
         let title = format!("{} vs {}", args.est.display(), args.gt.display());
         if let Err(e) = crate::plot::evaluation(&result, &title, path) {
             // The path is the user's input: a folder that does not exist, one not writable.

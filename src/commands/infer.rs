@@ -78,7 +78,7 @@ pub fn infer(args: &InferArgs) -> u8 {
     let names: Vec<&str> = COCO_NAMES.lines().collect();
     let mut out = std::io::stdout().lock();
     for path in &args.images {
-        let img = match image::open(path) {
+        let img = match crate::plot::open_image(path) {
             Ok(i) => i.into_rgb8(),
             Err(e) => {
                 eprintln!("error: {}: {e}", path.display());

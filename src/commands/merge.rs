@@ -42,6 +42,13 @@ pub fn merge(args: &MergeArgs) -> u8 {
         eprintln!("error: no such recording: {}", f.display());
         return EXIT_BAD_INPUT;
     }
+    // Before anything is written: the error path below removes a half-written `--out`.
+    if let Err(e) =
+        dynaflow_engine::files::refuse_overwriting_inputs("--out", &args.out, args.files.iter().map(PathBuf::as_path))
+    {
+        eprintln!("error: {e}");
+        return EXIT_BAD_INPUT;
+    }
     let inputs: Vec<Input> = args
         .files
         .iter()

@@ -60,8 +60,14 @@ pub fn octree(args: &OctreeArgs) -> u8 {
             eprintln!("error: {}: no occupied voxel to draw", args.file.display());
             return EXIT_FAILED;
         }
-        if let Err(e) = plot(&tree, &occupied, lo, hi, args.scale).save(out) {
-            eprintln!("error: {}: {e}", out.display());
+        if let Err(e) = dynaflow_engine::files::refuse_overwriting_inputs("--plot", out, [args.file.as_path()]) {
+            eprintln!("error: {e}");
+            return EXIT_BAD_INPUT;
+        }
+        let img = plot(&tree, &occupied, lo, hi, args.scale);
+        let (w, h) = img.dimensions();
+        if let Err(e) = crate::plot::save_png(w, h, image::ExtendedColorType::Rgb8, img.as_raw(), out) {
+            eprintln!("error: {e}");
             return EXIT_FAILED;
         }
     }

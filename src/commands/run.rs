@@ -258,8 +258,11 @@ pub fn run(args: &RunArgs) -> u8 {
             Some((name, r)) if r > 0.0 => format!(" ({:+.1} % vs `{name}`)", 100.0 * (ate.rmse / r - 1.0)),
             _ => String::new(),
         };
+        // Lost frames have no pose (the trajectory leaves them out): say how many.
+        let lost = n.report.as_ref().and_then(|r| r.get("frames")?.get("lost")?.as_u64()).unwrap_or(0);
+        let lost = if lost > 0 { format!(", {lost} lost frames left out") } else { String::new() };
         say!(
-            "ATE of `{}`{oracle} ({} poses, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m{versus}",
+            "ATE of `{}`{oracle} ({} poses{lost}, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m{versus}",
             n.node,
             ate.pairs,
             ate.align.as_deref().unwrap_or("se3"),
@@ -348,7 +351,11 @@ fn recording_costs(recorders: &std::collections::BTreeMap<String, dynaflow_engin
         let dropped: u64 = r.ports.values().map(|p| p.dropped).sum();
         let (Some(file), Some(per_frame)) = (r.file_bytes, r.bytes_per_frame) else {
             let messages: u64 = r.ports.values().map(|p| p.messages).sum();
-            say!("streamed {name}: {messages} messages, {dropped} dropped (per port in the summary)");
+            if name == "digest" {
+                say!("digested {messages} messages of {} ports (the summary's `digests`)", r.ports.len());
+            } else {
+                say!("streamed {name}: {messages} messages, {dropped} dropped (per port in the summary)");
+            }
             continue;
         };
         let mut line = format!("recorded {name}: {:.1} MiB, {:.0} KiB/frame", file as f64 / 1048576.0, kib(per_frame));

@@ -49,6 +49,35 @@ pub fn segment(args: &SegmentArgs) -> u8 {
         eprintln!("error: --threshold must be in 0..=1, got {}", args.threshold);
         return EXIT_BAD_INPUT;
     }
+    // Every output named before any work: none may be an input, and no two images may
+    // write the same file.
+    let stems: Vec<String> = args
+        .images
+        .iter()
+        .map(|p| p.file_stem().map_or_else(|| "image".into(), |s| s.to_string_lossy().into_owned()))
+        .collect();
+    for (i, stem) in stems.iter().enumerate() {
+        if let Some(j) = stems[..i].iter().position(|s| s == stem) {
+            eprintln!(
+                "error: {} and {} would both write {}: segment images of the same name into different --out folders",
+                args.images[j].display(),
+                args.images[i].display(),
+                args.out.join(format!("{stem}.png")).display()
+            );
+            return EXIT_BAD_INPUT;
+        }
+        for ext in ["png", "json"] {
+            let out = args.out.join(format!("{stem}.{ext}"));
+            if let Err(e) = dynaflow_engine::files::refuse_overwriting_inputs(
+                "output",
+                &out,
+                args.images.iter().map(PathBuf::as_path),
+            ) {
+                eprintln!("error: {e} (--out {})", args.out.display());
+                return EXIT_BAD_INPUT;
+            }
+        }
+    }
     let none = PathBuf::new();
     let loaded = load_segmenter(
         args.model.as_ref().unwrap_or(&none),
@@ -72,8 +101,8 @@ pub fn segment(args: &SegmentArgs) -> u8 {
         eprintln!("error: cannot create {}: {e}", args.out.display());
         return EXIT_BAD_INPUT;
     }
-    for path in &args.images {
-        let rgb = match image::open(path) {
+    for (k, path) in args.images.iter().enumerate() {
+        let rgb = match crate::plot::open_image(path) {
             Ok(i) => i.into_rgb8(),
             Err(e) => {
                 eprintln!("error: {}: {e}", path.display());
@@ -89,12 +118,13 @@ pub fn segment(args: &SegmentArgs) -> u8 {
                 return EXIT_FAILED;
             }
         };
-        let stem = path.file_stem().map_or_else(|| "image".into(), |s| s.to_string_lossy().into_owned());
+        let stem = &stems[k];
         let png = args.out.join(format!("{stem}.png"));
         let bytes: Vec<u8> = classes.iter().map(|&c| c as u8).collect();
-        let written = image::GrayImage::from_raw(w, h, bytes).map(|g| g.save(&png));
-        if !matches!(written, Some(Ok(()))) {
-            eprintln!("error: cannot write {}", png.display());
+        let written = crate::plot::png_bytes(w, h, image::ExtendedColorType::L8, &bytes)
+            .and_then(|b| dynaflow_engine::files::write_atomic(&png, &b).map_err(|e| e.to_string()));
+        if let Err(e) = written {
+            eprintln!("error: cannot write {}: {e}", png.display());
             return EXIT_FAILED;
         }
         let mut counts = vec![0u64; segmenter.classes().len()];
@@ -112,7 +142,7 @@ pub fn segment(args: &SegmentArgs) -> u8 {
             "instances": instances.iter().copied().max().unwrap_or(0),
         });
         let json = args.out.join(format!("{stem}.json"));
-        if let Err(e) = std::fs::write(&json, summary.to_string() + "\n") {
+        if let Err(e) = dynaflow_engine::files::write_atomic(&json, (summary.to_string() + "\n").as_bytes()) {
             eprintln!("error: cannot write {}: {e}", json.display());
             return EXIT_FAILED;
         }

@@ -49,6 +49,12 @@ pub fn vocab(command: &VocabCommand) -> u8 {
 }
 
 fn train(args: &TrainArgs) -> u8 {
+    if let Err(e) =
+        dynaflow_engine::files::refuse_overwriting_inputs("--out", &args.out, args.images.iter().map(PathBuf::as_path))
+    {
+        eprintln!("error: {e}");
+        return EXIT_BAD_INPUT;
+    }
     let t0 = Instant::now();
     let mut orb = OrbExtractor::new(OrbConfig { features: args.features as usize, ..OrbConfig::default() });
     let mut images = Vec::with_capacity(args.images.len());
@@ -78,8 +84,17 @@ fn train(args: &TrainArgs) -> u8 {
             return EXIT_BAD_INPUT;
         }
     };
-    if let Err(e) = voc.save(&args.out) {
-        eprintln!("error: {e}");
+    // A vocabulary with fewer words than two of its levels would hold cannot tell places apart
+    // (threshold chosen: k^2, e.g. 100 for k 10; ORB-SLAM2's holds about a million words).
+    let few = (args.k * args.k) as usize;
+    if stats.words < few {
+        eprintln!(
+            "warning: only {} words from {} descriptors (fewer than k^2 = {few}): too few to tell places apart; train on more, or larger, images",
+            stats.words, stats.descriptors
+        );
+    }
+    if let Err(e) = dynaflow_engine::files::write_atomic(&args.out, &voc.to_bytes()) {
+        eprintln!("error: cannot write {}: {e}", args.out.display());
         return EXIT_FAILED;
     }
     println!(

@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 
 pub mod peers;
+pub mod process;
 mod rng;
 mod tempdir;
 #[allow(unused_imports)]

@@ -182,12 +182,23 @@ fn machine_of(spec: &GraphSpec, n: &NodeSpec) -> Option<Arc<str>> {
 fn check_machines(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge], diags: &mut Vec<Diagnostic>) {
     // (A machine named twice is a duplicate key, reported by the parser.)
     for (i, m) in spec.machines.iter().enumerate() {
-        if let Some(other) = spec.machines[..i].iter().find(|o| o.endpoint == m.endpoint) {
+        let socket = |e: &str| super::parse::canonical_endpoint(e).ok();
+        if let Some(other) = spec.machines[..i]
+            .iter()
+            .find(|o| o.endpoint == m.endpoint || socket(&o.endpoint).is_some_and(|s| Some(s) == socket(&m.endpoint)))
+        {
             diags.push(
                 Diagnostic::error(
                     "bad-value",
                     m.endpoint_span,
-                    format!("machines `{}` and `{}` both listen on `{}`", other.name, m.name, m.endpoint),
+                    format!(
+                        "machines `{}` and `{}` both listen on `{}` (`{}` and `{}`)",
+                        other.name,
+                        m.name,
+                        socket(&m.endpoint).map_or_else(|| m.endpoint.clone(), |(h, p)| format!("{h}:{p}")),
+                        other.endpoint,
+                        m.endpoint
+                    ),
                 )
                 .with_hint("give each machine its own endpoint (another port on the same host)"),
             );
@@ -213,6 +224,16 @@ fn check_machines(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge
             diags.push(
                 Diagnostic::error("unknown-machine", *span, format!("node `{}` names undefined machine `{m}`", n.id))
                     .with_hint(hint),
+            );
+        }
+    }
+    // Every machine runs a node: one with none would join the start-up barrier and do
+    // nothing, and its process is easily forgotten.
+    for m in &spec.machines {
+        if !nodes.iter().any(|n| !n.disabled && n.machine.as_deref() == Some(m.name.as_str())) {
+            diags.push(
+                Diagnostic::error("unused-machine", m.span, format!("machine `{}` runs no node", m.name))
+                    .with_hint(format!("place a node on it with `machine: {}`, or remove it from `machines:`", m.name)),
             );
         }
     }

@@ -233,9 +233,10 @@ impl Operator for Octomap {
             if self.config.color == Colour::Class {
                 tree.recolor(class_color);
             }
-            let io_err = |e: dynaflow_octomap::Error| OpError::Input(e.to_string());
-            io::write_ot(&tree, &ot).map_err(io_err)?;
-            io::write_bt(&tree, &bt).map_err(io_err)?;
+            for (path, bytes) in [(&ot, io::ot_bytes(&tree)), (&bt, io::bt_bytes(&tree))] {
+                dynaflow_engine::files::write_atomic(path, &bytes)
+                    .map_err(|source| OpError::Io { path: path.clone(), source })?;
+            }
             report["files"] = serde_json::json!([ot.display().to_string(), bt.display().to_string()]);
         }
         ctx.report = Some(report);

@@ -111,6 +111,25 @@ pub const PNP_TRACK: OpSpec = OpSpec {
                 message: "`mapping: false` (localisation mode) needs a map to localise in: set `load_map` (or `dynaflow run --load-map FILE`)".into(),
             });
         }
+        // Where the map will be written, checked now (as the recorders check their files):
+        // a run must not end with its map lost for a wrong path.
+        if !config.save_map.as_os_str().is_empty() {
+            let path = &config.save_map;
+            let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+            let problem = if path.is_dir() {
+                Some("is a directory; give a file name".to_owned())
+            } else if !parent.is_dir() {
+                Some(format!("its folder {} does not exist", parent.display()))
+            } else {
+                None
+            };
+            if let Some(problem) = problem {
+                return Err(OpError::Config {
+                    key: "save_map".into(),
+                    message: format!("{}: {problem}", path.display()),
+                });
+            }
+        }
         // Read the map now, so that a bad file stops the run before it starts; the tracker
         // gives it its camera (`Tracker::use_map`) on the first frame.
         let loaded = if config.load_map.as_os_str().is_empty() {
@@ -334,7 +353,10 @@ impl Operator for PnpTrack {
             ("keyframe".into(), if r.keyframe.is_some() { 1.0 } else { 0.0 }),
         ];
         let mut out = Outputs::new().send(&STATS, header.clone(), Scalars { values: stats });
-        if let Some(pose) = r.pose {
+        // A lost frame's pose is the motion model's guess, not an estimate: it is left out of
+        // the pose stream and the trajectory, as ORB-SLAM2's SaveTrajectoryTUM and the TUM tools
+        // leave lost frames out (their count is in the report beside the ATE).
+        if let Some(pose) = r.pose.filter(|_| r.state != dynaflow_slam::TrackState::Lost) {
             self.trajectory.push((stamp, pose));
             out = out.send(&POSE, header.clone(), Pose { world_from_cam: pose });
         }
@@ -361,6 +383,15 @@ impl Operator for PnpTrack {
             let last = self.tracker.as_ref().and_then(Tracker::init_failure).unwrap_or("no frame");
             let why = format!(
                 "the monocular tracker never initialised in {not_initialised} frames (it needs two views with enough parallax); the last attempt: {last}"
+            );
+            tracing::warn!("`{}`: {why}", ctx.node);
+            report["initialised"] = serde_json::json!(false);
+            report["not_initialised_because"] = serde_json::json!(why);
+        } else if self.first_pose_frame.is_none() && !self.config.load_map.as_os_str().is_empty() {
+            let why = format!(
+                "the camera was never relocalised in the loaded map {}: {lost} frames lost of {}",
+                self.config.load_map.display(),
+                self.frames
             );
             tracing::warn!("`{}`: {why}", ctx.node);
             report["initialised"] = serde_json::json!(false);
@@ -427,13 +458,15 @@ impl PnpTrack {
         if self.config.save_map.as_os_str().is_empty() {
             return Ok(None);
         }
-        let Some(map) = self.tracker.as_ref().and_then(Tracker::places) else {
+        let Some(map) = self.tracker.as_ref().and_then(Tracker::places).filter(|m| !m.kfs.is_empty()) else {
             return Err(OpError::Failed(format!(
                 "no map to save to {}: the tracker never started one",
                 self.config.save_map.display()
             )));
         };
-        dynaflow_slam::map_file::save(map, &self.config.save_map).map_err(|e| OpError::Failed(e.to_string()))?;
+        let path = &self.config.save_map;
+        dynaflow_engine::files::write_atomic(path, &dynaflow_slam::map_file::encode(map))
+            .map_err(|source| OpError::Io { path: path.clone(), source })?;
         Ok(Some((map.kfs.len(), map.points.len())))
     }
 
@@ -459,7 +492,7 @@ impl PnpTrack {
             }
             let Some(path) = ctx.output_file(&format!("{what}.txt")) else { return Ok(()) };
             let io = |source| OpError::Io { path: path.clone(), source };
-            let mut f = std::io::BufWriter::new(std::fs::File::create(&path).map_err(io)?);
+            let mut f = std::io::BufWriter::new(dynaflow_engine::files::create_new(&path).map_err(io)?);
             writeln!(f, "# timestamp tx ty tz qx qy qz qw (world_from_cam, dynaflow pnp_track {what})").map_err(io)?;
             for (t, p) in poses.iter() {
                 let (v, q) = (p.translation.vector, p.rotation.coords);

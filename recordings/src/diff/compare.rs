@@ -246,9 +246,24 @@ fn run_color(i: usize) -> rerun::Color {
 
 /// Write the comparison of `runs` (the first is the reference the others part from) to `out`.
 pub fn write_compare(runs: &[Run], out: &Path) -> Result<Vec<RunSummary>, Error> {
+    // Written beside `out` under a temporary name and renamed into place: a reader never
+    // sees half a recording, and a symlink at `out` is replaced, not followed.
+    let tmp = dynaflow_engine::files::temporary_beside(out);
+    let written = write_compare_at(runs, &tmp, out).and_then(|r| {
+        std::fs::rename(&tmp, out).map_err(|e| Error::Overlay(format!("{}: {e}", out.display())))?;
+        Ok(r)
+    });
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
+/// [`write_compare`] into the file `path`; `out` names the recording in errors.
+fn write_compare_at(runs: &[Run], path: &Path, out: &Path) -> Result<Vec<RunSummary>, Error> {
     check(runs)?;
     let err = |e: &dyn std::fmt::Display| Error::Overlay(format!("{}: {e}", out.display()));
-    let rec = rerun::RecordingStreamBuilder::new("dynaflow-compare").save(out).map_err(|e| err(&e))?;
+    let rec = rerun::RecordingStreamBuilder::new("dynaflow-compare").save(path).map_err(|e| err(&e))?;
     rec.set_log_time_enabled(false);
     blueprint(runs).send(&rec, BlueprintActivation { make_active: true, make_default: true }).map_err(|e| err(&e))?;
     let (_, gt_topic) = pose_topics(&runs[0].rec);
@@ -356,5 +371,6 @@ pub fn write_compare(runs: &[Run], out: &Path) -> Result<Vec<RunSummary>, Error>
         });
     }
     rec.flush_blocking().map_err(|e| err(&e))?;
+    drop(rec);
     Ok(summaries)
 }

@@ -93,7 +93,11 @@ pub fn compare(ty: &str, a: &Value, b: &Value) -> BTreeMap<String, f64> {
         "scalars" => {
             if let (Some(oa), Some(ob)) = (a.as_object(), b.as_object()) {
                 for (k, va) in oa {
-                    let d = ob.get(k).map_or(f64::INFINITY, |vb| (f(va) - f(vb)).abs());
+                    // Two NaNs (or two equal infinities) are the same value recorded twice.
+                    let d = ob.get(k).map_or(f64::INFINITY, |vb| {
+                        let (x, y) = (f(va), f(vb));
+                        if x == y || (x.is_nan() && y.is_nan()) { 0.0 } else { (x - y).abs() }
+                    });
                     m.insert(k.clone(), if d.is_nan() { f64::INFINITY } else { d });
                 }
                 for k in ob.keys().filter(|k| !oa.contains_key(*k)) {
@@ -134,18 +138,38 @@ fn iou(a: &[f64; 4], b: &[f64; 4]) -> f64 {
     if union > 0.0 { inter / union } else { 0.0 }
 }
 
-/// Mean distance of mutual nearest neighbours within the match radius, and the number of
-/// points of either set left unmatched.
+/// A one-to-one matching of two point sets within the match radius, nearest pairs first (ties
+/// by index, so it is deterministic): the mean distance of the matched pairs, and the number
+/// of points of either set left unmatched. Points at one position (a keypoint found on two
+/// pyramid levels) each find their own partner, so a set matched with itself leaves none.
 fn mutual_nn(a: &[[f64; 2]], b: &[[f64; 2]]) -> (f64, usize) {
-    let nearest = |p: &[f64; 2], set: &[[f64; 2]]| -> Option<(usize, f64)> {
-        set.iter().enumerate().map(|(i, q)| (i, (p[0] - q[0]).hypot(p[1] - q[1]))).min_by(|x, y| x.1.total_cmp(&y.1))
-    };
+    // Candidate pairs from a grid of radius-sized cells: only neighbouring cells are searched.
+    let cell = |p: &[f64; 2]| ((p[0] / MATCH_RADIUS_PX).floor() as i64, (p[1] / MATCH_RADIUS_PX).floor() as i64);
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = std::collections::HashMap::new();
+    for (j, q) in b.iter().enumerate().filter(|(_, q)| q[0].is_finite() && q[1].is_finite()) {
+        grid.entry(cell(q)).or_default().push(j);
+    }
+    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+    for (i, p) in a.iter().enumerate().filter(|(_, p)| p[0].is_finite() && p[1].is_finite()) {
+        let (cx, cy) = cell(p);
+        for gy in cy - 1..=cy + 1 {
+            for gx in cx - 1..=cx + 1 {
+                for &j in grid.get(&(gx, gy)).map_or(&[][..], Vec::as_slice) {
+                    let d = (p[0] - b[j][0]).hypot(p[1] - b[j][1]);
+                    if d <= MATCH_RADIUS_PX {
+                        pairs.push((d, i, j));
+                    }
+                }
+            }
+        }
+    }
+    pairs.sort_by(|x, y| x.0.total_cmp(&y.0).then(x.1.cmp(&y.1)).then(x.2.cmp(&y.2)));
+    let (mut used_a, mut used_b) = (vec![false; a.len()], vec![false; b.len()]);
     let mut dists = Vec::new();
-    for (i, p) in a.iter().enumerate() {
-        if let Some((j, d)) = nearest(p, b)
-            && d <= MATCH_RADIUS_PX
-            && b.get(j).and_then(|q| nearest(q, a)).is_some_and(|(k, _)| k == i)
-        {
+    for (d, i, j) in pairs {
+        if !used_a[i] && !used_b[j] {
+            used_a[i] = true;
+            used_b[j] = true;
             dists.push(d);
         }
     }
@@ -203,6 +227,19 @@ mod tests {
         let (raw, aligned) = ate(&a, &b);
         assert!(raw > 1.0);
         assert!(aligned < 1e-9, "{aligned}");
+    }
+
+    #[test]
+    fn a_set_matches_itself_one_to_one_even_with_points_at_one_position() {
+        // Keypoints found at one position on two pyramid levels, and a NaN scalar.
+        let a = serde_json::json!({"xy": [[10, 10], [10, 10], [10, 10], [50, 50]], "octave": [0, 1, 2, 0]});
+        let m = compare("keypoints", &a, &a);
+        assert_eq!((m["unmatched"], m["position_px"], m["count"]), (0.0, 0.0, 0.0));
+        // Three at one place against two there: one is left over, the rest pair.
+        let b = serde_json::json!({"xy": [[10, 10], [10, 10], [50, 50]]});
+        assert_eq!(compare("keypoints", &a, &b)["unmatched"], 1.0);
+        let s = serde_json::json!({"ratio": null, "n": 3});
+        assert!(compare("scalars", &s, &s).values().all(|v| *v == 0.0));
     }
 
     #[test]

@@ -82,8 +82,23 @@ fn log_run(
 
 /// Write the overlay of runs `a` and `b` to `out`.
 pub fn write_overlay(a: &Recording, b: &Recording, out: &Path) -> Result<(), Error> {
+    // Written beside `out` under a temporary name and renamed into place: a reader never
+    // sees half a recording, and a symlink at `out` is replaced, not followed.
+    let tmp = dynaflow_engine::files::temporary_beside(out);
+    let written = write_overlay_at(a, b, &tmp, out).and_then(|r| {
+        std::fs::rename(&tmp, out).map_err(|e| Error::Overlay(format!("{}: {e}", out.display())))?;
+        Ok(r)
+    });
+    if written.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    written
+}
+
+/// [`write_overlay`] into the file `path`; `out` names the recording in errors.
+fn write_overlay_at(a: &Recording, b: &Recording, path: &Path, out: &Path) -> Result<(), Error> {
     let err = |e: &dyn std::fmt::Display| Error::Overlay(format!("{}: {e}", out.display()));
-    let rec = rerun::RecordingStreamBuilder::new("dynaflow-diff").save(out).map_err(|e| err(&e))?;
+    let rec = rerun::RecordingStreamBuilder::new("dynaflow-diff").save(path).map_err(|e| err(&e))?;
     let image_topics: Vec<String> = a
         .topics
         .iter()
@@ -118,5 +133,6 @@ pub fn write_overlay(a: &Recording, b: &Recording, out: &Path) -> Result<(), Err
         }
     }
     rec.flush_blocking().map_err(|e| err(&e))?;
+    drop(rec);
     Ok(())
 }

@@ -155,7 +155,7 @@ impl Sink for McapSink {
     }
 
     fn open(&mut self, info: &RunInfo) -> Result<(), SinkError> {
-        let file = File::create(&self.path).map_err(|e| self.err(e))?;
+        let file = dynaflow_engine::files::create_new(&self.path).map_err(|e| self.err(e))?;
         let options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
             // Level 1: 0.68x the CPU of the default 3 for 1.13x the bytes on the default

@@ -56,7 +56,7 @@ pub(super) struct SharedFile {
 
 impl SharedFile {
     pub(super) fn create(path: &std::path::Path) -> Result<Self, String> {
-        let file = File::create(path).map_err(|e| e.to_string())?;
+        let file = dynaflow_engine::files::create_new(path).map_err(|e| e.to_string())?;
         let mut encoder = Encoder::new_eager(CrateVersion::LOCAL, OPTIONS, BufWriter::with_capacity(1 << 20, file))
             .map_err(|e| e.to_string())?;
         // The manifest is kept here (see the module doc), not by the encoder.
