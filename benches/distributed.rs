@@ -46,7 +46,9 @@ fn main() {
     let graph = loaded.graph.expect("bench graph");
     rt.block_on(async {
         let timeout = Duration::from_secs(20);
-        let (a, b) = futures_join(ZenohWire::open(&graph, "a", timeout), ZenohWire::open(&graph, "b", timeout)).await;
+        let (a, b) =
+            futures_join(ZenohWire::open(&graph, "a", timeout, None), ZenohWire::open(&graph, "b", timeout, None))
+                .await;
         let (a, b) = (a.expect("machine a"), b.expect("machine b"));
         let mut rx = b.subscriber("camera/tick", "a").await.expect("subscriber");
         let (ra, rb) = futures_join(a.ready(), b.ready()).await;

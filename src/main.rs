@@ -185,6 +185,16 @@ pub struct RunArgs {
     /// With `--machine`: how long to wait for the other machines at the start and at the end.
     #[arg(long, value_name = "SECONDS", default_value_t = 20.0, requires = "machine")]
     pub peer_timeout: f64,
+    /// With `--machine` and `tls/` endpoints: this machine's TLS identity, a folder with
+    /// `ca.pem` (the authority that signed every machine's certificate), `<machine>.pem` (its
+    /// certificate: common name the machine's name, subject alternative names its endpoint's
+    /// host) and `<machine>.key`. Peers are mutually authenticated and only the graph's other
+    /// machines are admitted (docs/distributed.md).
+    #[arg(long, value_name = "DIR", requires = "machine")]
+    pub tls: Option<PathBuf>,
+    /// With `--machine`: refuse to run over plain TCP (unauthenticated) endpoints.
+    #[arg(long, requires = "machine")]
+    pub require_tls: bool,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]

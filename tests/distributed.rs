@@ -224,3 +224,147 @@ fn a_machine_killed_mid_run_ends_the_other_with_an_error_and_valid_recordings() 
     assert!(frames > 0 && frames < 300, "stopped mid-run: {frames} frames");
     peers_accept(&dir.path().join("robot/mg_slam.robot.rrd"), &dir.path().join("robot/mg_slam.robot.mcap"));
 }
+
+/// `openssl` with arguments in `dir`; panics with its output if it fails.
+fn openssl(dir: &Path, args: &[&str]) {
+    let o = Command::new("openssl").args(args).current_dir(dir).stdin(Stdio::null()).output().unwrap();
+    assert!(o.status.success(), "openssl {args:?}: {}", text(&o));
+}
+
+/// A certificate authority in `dir` (`ca.pem`, `ca.key`) and, signed by it, a certificate per
+/// `(file stem, common name)` for 127.0.0.1 (`<stem>.pem`, `<stem>.key`): a `--tls` folder.
+fn authority(dir: &Path, certs: &[(&str, &str)]) {
+    std::fs::create_dir_all(dir).unwrap();
+    let ec = ["-newkey", "ec", "-pkeyopt", "ec_paramgen_curve:prime256v1", "-nodes"];
+    openssl(
+        dir,
+        &[
+            &["req", "-x509"][..],
+            &ec,
+            &["-keyout", "ca.key", "-out", "ca.pem", "-days", "2", "-subj", "/CN=dynaflow test authority"],
+        ]
+        .concat(),
+    );
+    std::fs::write(
+        dir.join("ext.cnf"),
+        "subjectAltName=IP:127.0.0.1,DNS:localhost\nbasicConstraints=CA:FALSE\nkeyUsage=digitalSignature\nextendedKeyUsage=serverAuth,clientAuth\n",
+    )
+    .unwrap();
+    for (stem, cn) in certs {
+        let (key, csr, pem, subj) =
+            (format!("{stem}.key"), format!("{stem}.csr"), format!("{stem}.pem"), format!("/CN={cn}"));
+        openssl(dir, &[&["req"][..], &ec, &["-keyout", &key, "-out", &csr, "-subj", &subj]].concat());
+        openssl(
+            dir,
+            &[
+                "x509",
+                "-req",
+                "-in",
+                &csr,
+                "-CA",
+                "ca.pem",
+                "-CAkey",
+                "ca.key",
+                "-CAcreateserial",
+                "-out",
+                &pem,
+                "-days",
+                "2",
+                "-extfile",
+                "ext.cnf",
+            ],
+        );
+    }
+}
+
+/// The engine smoke graph with `smooth` on machine `server`, over `scheme` (`tls` or `tcp`).
+fn smoke_split(dir: &Path, scheme: &str, ports: (u16, u16)) -> PathBuf {
+    let text = std::fs::read_to_string(common::repo().join("graphs/engine_smoke.yaml")).unwrap();
+    let at = "  smooth:\n    op: testing.scalar_sum\n";
+    assert!(text.contains(at), "graphs/engine_smoke.yaml changed");
+    let text = text.replace(at, &format!("{at}    machine: server\n"))
+        + &format!(
+            "\nmachines:\n  robot: {{ endpoint: \"{scheme}/127.0.0.1:{}\" }}\n  server: {{ endpoint: \"{scheme}/127.0.0.1:{}\" }}\n",
+            ports.0, ports.1
+        );
+    let path = dir.join(format!("smoke_{scheme}.yaml"));
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn a_split_run_over_mutual_tls_matches_one_process_and_refuses_peers_without_the_graphs_certificates() {
+    if Command::new("openssl").arg("version").output().is_err() {
+        panic!("no `openssl` to make the test's certificates (scripts/peers.sh installs it)");
+    }
+    let dir = common::TempDir::new("split-tls");
+    let good = dir.path().join("good");
+    authority(&good, &[("robot", "robot"), ("server", "server"), ("intruder", "intruder")]);
+    // Another authority's certificate for `robot`, and the right authority's for another name.
+    let rogue = dir.path().join("rogue");
+    authority(&rogue, &[("robot", "robot")]);
+    let renamed = dir.path().join("renamed");
+    std::fs::create_dir_all(&renamed).unwrap();
+    std::fs::copy(good.join("ca.pem"), renamed.join("ca.pem")).unwrap();
+    std::fs::copy(good.join("intruder.pem"), renamed.join("robot.pem")).unwrap();
+    std::fs::copy(good.join("intruder.key"), renamed.join("robot.key")).unwrap();
+
+    // The whole run over TLS: per-port digests equal the one-process run's.
+    let graph = smoke_split(dir.path(), "tls", free_ports());
+    let tls = |d: &Path| vec!["--tls".to_owned(), d.display().to_string(), "--frames".into(), "60".into()];
+    let run = |name: &str, certs: &Path, timeout: &str| {
+        let args = [tls(certs), vec!["--peer-timeout".into(), timeout.into(), "--require-tls".into()]].concat();
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        machine(
+            &graph,
+            name,
+            &dir.path().join(format!("{name}-{}", certs.file_name().unwrap().to_string_lossy())),
+            &args,
+        )
+    };
+    let server = run("server", &good, "20");
+    let robot = run("robot", &good, "20");
+    let (robot, server) = (robot.wait_with_output().unwrap(), server.wait_with_output().unwrap());
+    assert_eq!(robot.status.code(), Some(0), "robot: {}", text(&robot));
+    assert_eq!(server.status.code(), Some(0), "server: {}", text(&server));
+    let one = dir.path().join("one");
+    let out = common::bin()
+        .arg("run")
+        .arg(common::repo().join("graphs/engine_smoke.yaml"))
+        .args(["--frames", "60", "--no-progress", "--digest", "--record", "none", "--out"])
+        .arg(&one)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let mut got = digests(&dir.path().join("robot-good/engine_smoke.robot.summary.json"));
+    got.extend(digests(&dir.path().join("server-good/engine_smoke.server.summary.json")));
+    assert_eq!(got, digests(&one.join("engine_smoke.summary.json")), "the TLS run's digests differ from one process's");
+
+    // A robot with another authority's certificate, or one issued to another name: the server
+    // admits nothing from it and names the machine it waited for, with its endpoint.
+    for certs in [&rogue, &renamed] {
+        let graph_ports = std::fs::read_to_string(&graph).unwrap();
+        let server = run("server", &good, "4");
+        let robot = run("robot", certs, "4");
+        let (robot, server) = (robot.wait_with_output().unwrap(), server.wait_with_output().unwrap());
+        assert_eq!(server.status.code(), Some(2), "{}: server: {}", certs.display(), text(&server));
+        assert_ne!(robot.status.code(), Some(0), "{}: robot: {}", certs.display(), text(&robot));
+        let robot_endpoint =
+            graph_ports.lines().find(|l| l.contains("robot: {")).unwrap().split('"').nth(1).unwrap().to_owned();
+        assert!(
+            text(&server).contains(&format!("machine `robot` ({robot_endpoint}) did not join")),
+            "{}: server: {}",
+            certs.display(),
+            text(&server)
+        );
+    }
+
+    // No certificates at all, and plain TCP where TLS is required: refused before connecting.
+    let o = machine(&graph, "robot", &dir.path().join("bare"), &["--frames", "5"]).wait_with_output().unwrap();
+    assert!(o.status.code() == Some(2) && text(&o).contains("--tls DIR"), "{}", text(&o));
+    let tcp = smoke_split(dir.path(), "tcp", free_ports());
+    let o = machine(&tcp, "robot", &dir.path().join("plain"), &["--require-tls", "--frames", "5"])
+        .wait_with_output()
+        .unwrap();
+    assert!(o.status.code() == Some(2) && text(&o).contains("--require-tls"), "{}", text(&o));
+}

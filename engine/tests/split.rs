@@ -118,9 +118,9 @@ fn placement_errors_are_reported_where_they_are_written() {
     let no_map = bad("name: x\nnodes:\n  camera: { op: testing.test_pattern, machine: a }\n");
     assert!(no_map.contains("has no `machines:`"), "{no_map}");
     let same = bad(&SPLIT.replace("17448", "17447"));
-    assert!(same.contains("both listen on `tcp/127.0.0.1:17447`"), "{same}");
+    assert!(same.contains("both listen on `127.0.0.1:17447`"), "{same}");
     let udp = bad(&SPLIT.replace("tcp/127.0.0.1:17448", "udp/127.0.0.1:17448"));
-    assert!(udp.contains("not a `tcp/` endpoint"), "{udp}");
+    assert!(udp.contains("not a `tcp/` or `tls/` endpoint"), "{udp}");
     let port = bad(&SPLIT.replace(":17448", ":70000"));
     assert!(port.contains("port `70000`"), "{port}");
 }

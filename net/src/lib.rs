@@ -1,5 +1,6 @@
-//! The engine's [`Wire`] over zenoh (issue 36): one zenoh session per machine of a graph,
-//! peer to peer over TCP.
+//! The engine's [`Wire`] over zenoh: one zenoh session per machine of a graph, peer to peer
+//! over TCP (unauthenticated: loopback or a trusted network) or over TLS with mutual
+//! authentication and access control by certificate name ([`Tls`]).
 //!
 //! Configuration that fails loudly rather than guessing: each machine *listens* on its own
 //! `machines:` endpoint and *connects* to every other machine's endpoint; multicast and gossip
@@ -32,6 +33,69 @@ use zenoh::qos::CongestionControl;
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(20);
 /// Frames a subscription holds before the sender waits.
 const QUEUE: usize = 64;
+
+/// A machine's TLS identity: the folder given with `dynaflow run --tls DIR`.
+///
+/// Every machine of the graph holds a certificate signed by one certificate authority (the
+/// graph's), whose common name is the machine's name in `machines:` and whose subject
+/// alternative names are the hosts of its endpoint. Connections are mutually authenticated
+/// (each side checks the other's certificate against the authority, and the connecting side
+/// checks the host name), and zenoh's access control admits only the peers whose certificate
+/// names one of the graph's other machines: a process with no certificate, one from another
+/// authority or one issued to another name cannot join the run nor inject a frame.
+#[derive(Clone, Debug)]
+pub struct Tls {
+    /// The folder.
+    pub dir: std::path::PathBuf,
+}
+
+impl Tls {
+    /// What the folder holds.
+    pub const LAYOUT: &str =
+        "a folder with `ca.pem` (the authority's certificate) and this machine's `<machine>.pem` and `<machine>.key`";
+
+    /// The zenoh configuration of machine `machine` whose peers are `others`.
+    fn zenoh_config(&self, machine: &str, others: &[&str]) -> Result<Vec<(&'static str, String)>, String> {
+        let file = |name: String| -> Result<String, String> {
+            let path = self.dir.join(&name);
+            if !path.is_file() {
+                return Err(format!("`--tls {}`: no {} ({})", self.dir.display(), path.display(), Self::LAYOUT));
+            }
+            let path = std::path::absolute(&path).unwrap_or(path);
+            serde_json::to_string(&path.display().to_string()).map_err(|e| e.to_string())
+        };
+        let (ca, cert, key) =
+            (file("ca.pem".into())?, file(format!("{machine}.pem"))?, file(format!("{machine}.key"))?);
+        let names = serde_json::to_string(others).map_err(|e| e.to_string())?;
+        // Every message kind zenoh's access control knows, on dynaflow's key space only.
+        let acl = format!(
+            r#"{{
+                enabled: true,
+                default_permission: "deny",
+                rules: [{{
+                    id: "graph",
+                    messages: ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable",
+                               "liveliness_token", "declare_liveliness_subscriber", "liveliness_query"],
+                    flows: ["egress", "ingress"],
+                    permission: "allow",
+                    key_exprs: ["dynaflow/**"],
+                }}],
+                subjects: [{{ id: "machines", cert_common_names: {names} }}],
+                policies: [{{ rules: ["graph"], subjects: ["machines"] }}],
+            }}"#
+        );
+        Ok(vec![
+            ("transport/link/tls/root_ca_certificate", ca),
+            ("transport/link/tls/listen_certificate", cert.clone()),
+            ("transport/link/tls/listen_private_key", key.clone()),
+            ("transport/link/tls/connect_certificate", cert),
+            ("transport/link/tls/connect_private_key", key),
+            ("transport/link/tls/enable_mtls", "true".into()),
+            ("transport/link/tls/verify_name_on_connect", "true".into()),
+            ("access_control", acl),
+        ])
+    }
+}
 
 /// What the liveliness tokens say of one peer.
 #[derive(Clone, Debug, Default)]
@@ -77,7 +141,12 @@ fn lock(p: &Peers) -> std::sync::MutexGuard<'_, HashMap<String, Peer>> {
 impl ZenohWire {
     /// Open `machine`'s session for `graph` (listening on its endpoint, connecting to the
     /// others'), waiting at most `timeout` for peers later on.
-    pub async fn open(graph: &ResolvedGraph, machine: &str, timeout: Duration) -> Result<Self, String> {
+    pub async fn open(
+        graph: &ResolvedGraph,
+        machine: &str,
+        timeout: Duration,
+        tls: Option<&Tls>,
+    ) -> Result<Self, String> {
         let Some((_, endpoint)) = graph.machines.iter().find(|(m, _)| &**m == machine) else {
             let names: Vec<&str> = graph.machines.iter().map(|(m, _)| &**m).collect();
             return Err(format!("the graph has no machine `{machine}` (its machines: {})", names.join(", ")));
@@ -95,6 +164,27 @@ impl ZenohWire {
             ("scouting/gossip/enabled", "false".to_owned()),
         ] {
             config.insert_json5(key, &value).map_err(|e| format!("zenoh configuration `{key}`: {e}"))?;
+        }
+        let over_tls = endpoint.starts_with("tls/");
+        match (over_tls, tls) {
+            (true, None) => {
+                return Err(format!(
+                    "the graph's endpoints are `tls/`: give this machine's certificates with `--tls DIR` ({})",
+                    Tls::LAYOUT
+                ));
+            }
+            (false, Some(_)) => {
+                return Err(
+                    "`--tls`: the graph's endpoints are `tcp/`; write them `tls/HOST:PORT` to run over TLS".into()
+                );
+            }
+            (true, Some(tls)) => {
+                let others: Vec<&str> = others.iter().map(|(m, _)| m.as_str()).collect();
+                for (key, value) in tls.zenoh_config(machine, &others)? {
+                    config.insert_json5(key, &value).map_err(|e| format!("zenoh configuration `{key}`: {e}"))?;
+                }
+            }
+            (false, None) => {}
         }
         let session = zenoh::open(config)
             .await
@@ -292,11 +382,22 @@ impl Wire for ZenohWire {
             match checked {
                 Ok(()) => Ok(()),
                 Err(Waited::Refused(why)) => Err(why),
-                Err(Waited::Timeout(m)) => Err(format!(
-                    "machine `{m}` ({}) did not join within {:.0} s: start `dynaflow run GRAPH --machine {m}` there, and check that its endpoint is reachable from here",
-                    self.endpoint_of(&m),
-                    self.timeout.as_secs_f64(),
-                )),
+                Err(Waited::Timeout(m)) => {
+                    let endpoint = self.endpoint_of(&m);
+                    // Over TLS a peer whose certificate does not hold is refused by the
+                    // handshake or the access control, and looks to this side like no peer.
+                    let tls = if endpoint.starts_with("tls/") {
+                        format!(
+                            "; over TLS a peer is refused unless its certificate is signed by this graph's `ca.pem` and issued to `{m}` (the warnings above name a failed handshake)"
+                        )
+                    } else {
+                        String::new()
+                    };
+                    Err(format!(
+                        "machine `{m}` ({endpoint}) did not join within {:.0} s: start `dynaflow run GRAPH --machine {m}` there, and check that its endpoint is reachable from here{tls}",
+                        self.timeout.as_secs_f64(),
+                    ))
+                }
             }
         }
         .boxed()

@@ -134,6 +134,14 @@ pub fn run(args: &RunArgs) -> u8 {
             eprintln!("error: `--peer-timeout {}`: give a positive number of seconds", args.peer_timeout);
             return EXIT_BAD_INPUT;
         }
+        if args.require_tls
+            && let Some((name, endpoint)) = graph.machines.iter().find(|(_, e)| !e.starts_with("tls/"))
+        {
+            eprintln!(
+                "error: `--require-tls`: machine `{name}` listens on `{endpoint}`, plain TCP that anyone who reaches the port can join; write the endpoints `tls/HOST:PORT` and give `--tls DIR`"
+            );
+            return EXIT_BAD_INPUT;
+        }
         // Each machine's own summary and recordings: `<stem>.<machine>.*`.
         files.stem = format!("{}.{m}", files.stem);
     } else if graph.machines.len() > 1 {
@@ -305,7 +313,8 @@ type Joined = (runtime::remote::Placement, std::pin::Pin<Box<dyn std::future::Fu
 async fn join_machines(graph: &dynaflow_engine::spec::ResolvedGraph, args: &RunArgs) -> Result<Option<Joined>, String> {
     let Some(m) = &args.machine else { return Ok(None) };
     let timeout = Duration::from_secs_f64(args.peer_timeout);
-    let wire = std::sync::Arc::new(dynaflow_net::ZenohWire::open(graph, m, timeout).await?);
+    let tls = args.tls.as_ref().map(|dir| dynaflow_net::Tls { dir: dir.clone() });
+    let wire = std::sync::Arc::new(dynaflow_net::ZenohWire::open(graph, m, timeout, tls.as_ref()).await?);
     let placement = runtime::remote::Placement { machine: m.as_str().into(), wire: wire.clone() };
     Ok(Some((placement, Box::pin(async move { wire.finish().await }))))
 }

@@ -339,13 +339,14 @@ fn parse_machine(name: &Key, body: &Yaml, diags: &mut Vec<Diagnostic>) -> Option
     if let Err(why) = check_endpoint(&endpoint) {
         diags.push(
             Diagnostic::error("bad-value", endpoint_span, format!("endpoint `{endpoint}` of {what}: {why}"))
-                .with_hint("a TCP endpoint such as `tcp/127.0.0.1:7447` or `tcp/robot.local:7447`"),
+                .with_hint("an endpoint such as `tcp/127.0.0.1:7447` (loopback) or `tls/robot.local:7447` (across a network, with `run --tls`)"),
         );
     }
     Some(MachineSpec { name: name.text.clone(), span: name.span, endpoint, endpoint_span })
 }
 
-/// A zenoh TCP endpoint: `tcp/HOST:PORT` (the only transport dynaflow builds zenoh with).
+/// A zenoh endpoint: `tcp/HOST:PORT`, or `tls/HOST:PORT` for mutually authenticated TLS (the
+/// transports dynaflow builds zenoh with).
 pub fn check_endpoint(endpoint: &str) -> Result<(), String> {
     canonical_endpoint(endpoint).map(|_| ())
 }
@@ -355,8 +356,8 @@ pub fn check_endpoint(endpoint: &str) -> Result<(), String> {
 /// number (`07447` is `7447`); so two machines that name one socket two ways are caught. A
 /// host name is kept as written, lower-cased (DNS names are case-insensitive).
 pub fn canonical_endpoint(endpoint: &str) -> Result<(String, u16), String> {
-    let Some(addr) = endpoint.strip_prefix("tcp/") else {
-        return Err("not a `tcp/` endpoint (dynaflow builds zenoh with its TCP transport only)".into());
+    let Some(addr) = endpoint.strip_prefix("tcp/").or_else(|| endpoint.strip_prefix("tls/")) else {
+        return Err("not a `tcp/` or `tls/` endpoint (dynaflow builds zenoh with these transports only)".into());
     };
     let (host, port) = if let Some(rest) = addr.strip_prefix('[') {
         let Some((ip, port)) = rest.split_once("]:") else {

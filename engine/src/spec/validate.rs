@@ -227,6 +227,25 @@ fn check_machines(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge
             );
         }
     }
+    // One transport for the whole graph: a TLS machine would refuse a plain-TCP peer.
+    if let Some(first) = spec.machines.first() {
+        let scheme = |e: &str| e.split_once('/').map(|(s, _)| s.to_owned());
+        for m in &spec.machines[1..] {
+            if scheme(&m.endpoint) != scheme(&first.endpoint) {
+                diags.push(
+                    Diagnostic::error(
+                        "bad-value",
+                        m.endpoint_span,
+                        format!(
+                            "machine `{}` uses `{}` but `{}` uses `{}`",
+                            m.name, m.endpoint, first.name, first.endpoint
+                        ),
+                    )
+                    .with_hint("every machine of a graph uses one transport: all `tls/` (authenticated) or all `tcp/`"),
+                );
+            }
+        }
+    }
     // Every machine runs a node: one with none would join the start-up barrier and do
     // nothing, and its process is easily forgotten.
     for m in &spec.machines {
