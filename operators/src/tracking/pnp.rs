@@ -73,7 +73,8 @@ const TRACKS: In<Tracks> = In::optional(
 );
 const GT_POSE: In<Pose> =
     In::optional("gt_pose", "ground truth, for the ATE in the summary").with_role(InputRole::Evaluation);
-const POSE: Out<Pose> = Out::new("pose", "world_from_cam (the first key frame is the world)");
+const POSE: Out<Pose> =
+    Out::new("pose", "world_from_cam (the first key frame is the world); none on a frame the tracker lost");
 const KEYFRAME: Out<SparseMap> =
     Out::new("keyframe", "a new key frame with its observations and new points (to `local_map`)");
 const STATS: Out<Scalars> = Out::new(
