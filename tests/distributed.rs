@@ -60,6 +60,19 @@ fn digests(summary: &Path) -> serde_json::Map<String, serde_json::Value> {
     v["digests"].as_object().unwrap().clone()
 }
 
+/// The per-port digests of shipped graph `name` run whole in one process for `frames` frames.
+fn one_process_digests(name: &str, frames: &str, out: &Path) -> serde_json::Map<String, serde_json::Value> {
+    let o = common::bin()
+        .arg("run")
+        .arg(common::repo().join(format!("graphs/{name}.yaml")))
+        .args(["--frames", frames, "--no-progress", "--digest", "--record", "none", "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    digests(&out.join(format!("{name}.summary.json")))
+}
+
 fn peer(tool: &str, comparison: &str) -> Option<PathBuf> {
     let exe = common::peers::venv().join("bin").join(tool);
     let probe: &[&str] = if tool == "python" { &["-c", "import mcap, google.protobuf"] } else { &["--version"] };
@@ -100,16 +113,7 @@ fn mg_slam_split_over_two_processes_matches_one_process_and_merges() {
     assert_eq!(robot.status.code(), Some(0), "robot: {}", text(&robot));
     assert_eq!(server.status.code(), Some(0), "server: {}", text(&server));
     // The whole graph in one process, as written.
-    let one = dir.path().join("one");
-    let out = common::bin()
-        .arg("run")
-        .arg(common::repo().join("graphs/mg_slam.yaml"))
-        .args(["--frames", "40", "--no-progress", "--digest", "--record", "none", "--out"])
-        .arg(&one)
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
-    let want = digests(&one.join("mg_slam.summary.json"));
+    let want = one_process_digests("mg_slam", "40", &dir.path().join("one"));
     let r = digests(&dir.path().join("robot/mg_slam.robot.summary.json"));
     let s = digests(&dir.path().join("server/mg_slam.server.summary.json"));
     assert!(s.contains_key("segmenter/mask") && !r.contains_key("segmenter/mask"), "{s:?}");
@@ -327,18 +331,10 @@ fn a_split_run_over_mutual_tls_matches_one_process_and_refuses_peers_without_the
     let (robot, server) = (robot.wait_with_output().unwrap(), server.wait_with_output().unwrap());
     assert_eq!(robot.status.code(), Some(0), "robot: {}", text(&robot));
     assert_eq!(server.status.code(), Some(0), "server: {}", text(&server));
-    let one = dir.path().join("one");
-    let out = common::bin()
-        .arg("run")
-        .arg(common::repo().join("graphs/engine_smoke.yaml"))
-        .args(["--frames", "60", "--no-progress", "--digest", "--record", "none", "--out"])
-        .arg(&one)
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(0), "{}", text(&out));
+    let want = one_process_digests("engine_smoke", "60", &dir.path().join("one"));
     let mut got = digests(&dir.path().join("robot-good/engine_smoke.robot.summary.json"));
     got.extend(digests(&dir.path().join("server-good/engine_smoke.server.summary.json")));
-    assert_eq!(got, digests(&one.join("engine_smoke.summary.json")), "the TLS run's digests differ from one process's");
+    assert_eq!(got, want, "the TLS run's digests differ from one process's");
 
     // A robot with another authority's certificate, or one issued to another name: the server
     // admits nothing from it and names the machine it waited for, with its endpoint.
