@@ -307,6 +307,42 @@ fn a_map_path_is_checked_before_the_first_frame_and_an_empty_map_is_refused() {
         assert!(!dir.path().join("out/orb_baseline.summary.json").exists(), "the run started");
         assert!(t0.elapsed() < Duration::from_secs(600));
     }
+    // A run that never relocalises in the loaded map says so (here no pose can have the
+    // inliers it is asked for), not that "the tracker never initialised".
+    let map = dir.path().join("room.dfmap");
+    let o = dynaflow(
+        &["run", "--no-progress", "--record", "none", "--frames", "30", "--out"],
+        &[&dir.path().join("save"), &graph, Path::new("--save-map"), &map],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", text(&o));
+    let o = dynaflow(
+        &[
+            "run",
+            "--no-progress",
+            "--record",
+            "none",
+            "--frames",
+            "8",
+            "--localise",
+            "--set",
+            "track.min_inliers=100000",
+            "--out",
+        ],
+        &[&dir.path().join("load"), &graph, Path::new("--load-map"), &map],
+    );
+    assert!(
+        text(&o).contains("never relocalised in the loaded map") && text(&o).contains("8 frames lost of 8"),
+        "{}",
+        text(&o)
+    );
+    assert!(!text(&o).contains("never initialised"), "{}", text(&o));
+    // A vocabulary trained on one small image has a handful of words: said.
+    let img = dir.path().join("small.png");
+    image::GrayImage::from_fn(128, 128, |x, y| image::Luma([if (x / 12 + y / 12) % 2 == 0 { 30 } else { 220 }]))
+        .save(&img)
+        .unwrap();
+    let o = dynaflow(&["vocab", "train", "--features", "50", "--out"], &[&dir.path().join("small.voc"), &img]);
+    assert!(text(&o).contains("warning: only") && text(&o).contains("too few"), "{}", text(&o));
     // A map with no key frame (what a monocular run that never initialised had) is refused.
     let voc = std::sync::Arc::new(
         dynaflow_slam::bow::Vocabulary::from_bytes(dynaflow_operators::tracking::DEFAULT_VOCABULARY, "default")
