@@ -336,6 +336,28 @@ fn a_map_path_is_checked_before_the_first_frame_and_an_empty_map_is_refused() {
         text(&o)
     );
     assert!(!text(&o).contains("never initialised"), "{}", text(&o));
+    // The map in a run of smaller images (another camera) is refused naming the file.
+    let o = dynaflow(
+        &[
+            "run",
+            "--no-progress",
+            "--record",
+            "none",
+            "--frames",
+            "3",
+            "--set",
+            "camera.width=320",
+            "--set",
+            "camera.height=240",
+            "--out",
+        ],
+        &[&dir.path().join("small"), &graph, Path::new("--load-map"), &map],
+    );
+    assert!(
+        o.status.code() == Some(1) && text(&o).contains("room.dfmap") && text(&o).contains("320x240"),
+        "{}",
+        text(&o)
+    );
     // A vocabulary trained on one small image has a handful of words: said.
     let img = dir.path().join("small.png");
     image::GrayImage::from_fn(128, 128, |x, y| image::Luma([if (x / 12 + y / 12) % 2 == 0 { 30 } else { 220 }]))

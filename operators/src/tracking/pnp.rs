@@ -300,6 +300,23 @@ impl Operator for PnpTrack {
             let mut tracker = Tracker::new(tc, cam, k.width as usize, k.height as usize, ctx.rng.next_u64())
                 .with_vocabulary(self.vocabulary.clone());
             if let Some(map) = self.loaded.take() {
+                // A map of another camera's images cannot be found in these: refused, naming
+                // the file, rather than tracked against keypoints outside the image.
+                let outside = map
+                    .kfs
+                    .values()
+                    .flat_map(|k| &k.keypoints)
+                    .find(|kp| kp.uv[0] > f64::from(k.width) + 1.0 || kp.uv[1] > f64::from(k.height) + 1.0);
+                if let Some(kp) = outside {
+                    return Err(OpError::Input(format!(
+                        "{}: the map holds a keypoint at ({:.0}, {:.0}), outside this run's {}x{} images: it was made with another camera",
+                        self.config.load_map.display(),
+                        kp.uv[0],
+                        kp.uv[1],
+                        k.width,
+                        k.height
+                    )));
+                }
                 tracker.use_map(map, self.config.mapping);
             }
             self.tracker = Some(tracker);
