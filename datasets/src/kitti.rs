@@ -170,29 +170,20 @@ impl KittiSequence {
         // A rectified pair shares one camera matrix: the right camera's fx, fy, cx, cy are
         // the left's (KITTI's calib.txt writes them identically).
         let right_name = format!("P{ri}");
+        let right_error = |message: String| input(&calib_path, calib_line(&calib_path, &right_name), message);
         for (what, l, r) in [("fx", pl[0], pr[0]), ("fy", pl[5], pr[5]), ("cx", pl[2], pr[2]), ("cy", pl[6], pr[6])] {
             if (l - r).abs() > 1e-6 * l.abs().max(1.0) {
-                let line = calib_line(&calib_path, &right_name);
-                return Err(input(
-                    &calib_path,
-                    line,
-                    format!(
-                        "{right_name}: {what} = {r} differs from P{li}'s {l}: a rectified pair shares one camera matrix"
-                    ),
-                ));
+                return Err(right_error(format!(
+                    "{right_name}: {what} = {r} differs from P{li}'s {l}: a rectified pair shares one camera matrix"
+                )));
             }
         }
         // P = K [I | t] with K's fx on the diagonal: t_x = P[3] / fx relative to camera 0.
         let baseline = (pl[3] - pr[3]) / fx;
         if baseline.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-            let line = calib_line(&calib_path, &right_name);
-            return Err(input(
-                &calib_path,
-                line,
-                format!(
-                    "{right_name} gives a baseline of {baseline} m from P{li}: the right camera must be to the right of the left one (P{ri}[3] < P{li}[3])"
-                ),
-            ));
+            return Err(right_error(format!(
+                "{right_name} gives a baseline of {baseline} m from P{li}: the right camera must be to the right of the left one (P{ri}[3] < P{li}[3])"
+            )));
         }
         let left_offset = Vector3::new(pl[3] / fx, pl[7] / fx, pl[11]);
         let times_text = std::fs::read_to_string(&times_path).map_err(|e| Error::file(&times_path, e))?;

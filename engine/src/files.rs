@@ -69,13 +69,28 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> std::io::Result<()> {
     if std::fs::symlink_metadata(path).is_ok_and(|m| m.is_dir()) {
         return Err(std::io::Error::new(std::io::ErrorKind::IsADirectory, "is a directory, not a file"));
     }
+    write_renamed_into_place(
+        path,
+        |tmp| {
+            let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(tmp)?;
+            f.write_all(bytes)?;
+            f.sync_data()
+        },
+        |e| e,
+    )
+}
+
+/// Have `write` make the file at a temporary name beside `path` (a name nothing else uses),
+/// then rename it over `path`; on any failure the temporary file is removed and `path` is left
+/// as it was. `rename_error` turns a failed rename into `write`'s error type. For writers that
+/// create their file themselves (a rerun recording stream).
+pub fn write_renamed_into_place<T, E>(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<T, E>,
+    rename_error: impl FnOnce(std::io::Error) -> E,
+) -> Result<T, E> {
     let tmp = temporary_beside(path);
-    let written = (|| {
-        let mut f = std::fs::OpenOptions::new().write(true).create_new(true).open(&tmp)?;
-        f.write_all(bytes)?;
-        f.sync_data()?;
-        std::fs::rename(&tmp, path)
-    })();
+    let written = write(&tmp).and_then(|r| std::fs::rename(&tmp, path).map(|()| r).map_err(rename_error));
     if written.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }

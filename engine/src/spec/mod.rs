@@ -46,7 +46,7 @@ mod resolved;
 pub(crate) mod validate;
 mod variant;
 
-pub use parse::{check_endpoint, parse_graph, valid_id};
+pub use parse::{parse_graph, valid_id};
 pub use resolved::{ResolvedEdge, ResolvedGraph, ResolvedInput, ResolvedNode, ResolvedOutput};
 pub use validate::{ResolveContext, validate};
 pub use variant::{Override, OverrideOrigins, apply_overrides, apply_variant};

@@ -181,11 +181,14 @@ fn machine_of(spec: &GraphSpec, n: &NodeSpec) -> Option<Arc<str>> {
 /// edge between two machines carries a payload the wire encoding can carry.
 fn check_machines(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge], diags: &mut Vec<Diagnostic>) {
     // (A machine named twice is a duplicate key, reported by the parser.)
+    // Each endpoint's socket in one spelling (`None` for a malformed one, reported by the parser).
+    let sockets: Vec<Option<(String, u16)>> =
+        spec.machines.iter().map(|m| super::parse::canonical_endpoint(&m.endpoint).ok()).collect();
     for (i, m) in spec.machines.iter().enumerate() {
-        let socket = |e: &str| super::parse::canonical_endpoint(e).ok();
-        if let Some(other) = spec.machines[..i]
+        if let Some((other, _)) = spec.machines[..i]
             .iter()
-            .find(|o| o.endpoint == m.endpoint || socket(&o.endpoint).is_some_and(|s| Some(s) == socket(&m.endpoint)))
+            .zip(&sockets)
+            .find(|(o, s)| o.endpoint == m.endpoint || (s.is_some() && **s == sockets[i]))
         {
             diags.push(
                 Diagnostic::error(
@@ -195,7 +198,7 @@ fn check_machines(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge
                         "machines `{}` and `{}` both listen on `{}` (`{}` and `{}`)",
                         other.name,
                         m.name,
-                        socket(&m.endpoint).map_or_else(|| m.endpoint.clone(), |(h, p)| format!("{h}:{p}")),
+                        sockets[i].as_ref().map_or_else(|| m.endpoint.clone(), |(h, p)| format!("{h}:{p}")),
                         other.endpoint,
                         m.endpoint
                     ),

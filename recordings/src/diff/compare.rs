@@ -248,15 +248,11 @@ fn run_color(i: usize) -> rerun::Color {
 pub fn write_compare(runs: &[Run], out: &Path) -> Result<Vec<RunSummary>, Error> {
     // Written beside `out` under a temporary name and renamed into place: a reader never
     // sees half a recording, and a symlink at `out` is replaced, not followed.
-    let tmp = dynaflow_engine::files::temporary_beside(out);
-    let written = write_compare_at(runs, &tmp, out).and_then(|r| {
-        std::fs::rename(&tmp, out).map_err(|e| Error::Overlay(format!("{}: {e}", out.display())))?;
-        Ok(r)
-    });
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written
+    dynaflow_engine::files::write_renamed_into_place(
+        out,
+        |tmp| write_compare_at(runs, tmp, out),
+        |e| Error::Overlay(format!("{}: {e}", out.display())),
+    )
 }
 
 /// [`write_compare`] into the file `path`; `out` names the recording in errors.

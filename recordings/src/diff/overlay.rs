@@ -84,15 +84,11 @@ fn log_run(
 pub fn write_overlay(a: &Recording, b: &Recording, out: &Path) -> Result<(), Error> {
     // Written beside `out` under a temporary name and renamed into place: a reader never
     // sees half a recording, and a symlink at `out` is replaced, not followed.
-    let tmp = dynaflow_engine::files::temporary_beside(out);
-    let written = write_overlay_at(a, b, &tmp, out).and_then(|r| {
-        std::fs::rename(&tmp, out).map_err(|e| Error::Overlay(format!("{}: {e}", out.display())))?;
-        Ok(r)
-    });
-    if written.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    written
+    dynaflow_engine::files::write_renamed_into_place(
+        out,
+        |tmp| write_overlay_at(a, b, tmp, out),
+        |e| Error::Overlay(format!("{}: {e}", out.display())),
+    )
 }
 
 /// [`write_overlay`] into the file `path`; `out` names the recording in errors.
