@@ -15,8 +15,15 @@ rm -rf "$skips" && mkdir -p "$skips"
 export DYNAFLOW_SKIP_LOG="$skips"
 # `--features zenoh`: graphs across machines are built and tested too (the default build has
 # no zenoh crate; tests/dependencies.rs checks that).
-cargo test --workspace --release --no-fail-fast --features zenoh "$@"
-status=$?
+log="$target/test-output.txt"
+cargo test --workspace --release --no-fail-fast --features zenoh "$@" 2>&1 | tee "$log"
+status=${PIPESTATUS[0]}
+# The wall time of each test binary, slowest first (from cargo's own "finished in" lines).
+awk '/^ *Running / { bin = $2; if (bin == "unittests") { n = split($NF, a, "/"); b = a[n]; sub(/-[0-9a-f]+\)$/, "", b); bin = "unittests " b } }
+     /^ *Doc-tests / { bin = "doc-tests " $2 }
+     /^test result:/ { t = $NF; sub(/s$/, "", t); printf "%8.1f s  %s\n", t, bin }' "$log" |
+  sort -rn | awk 'BEGIN { print "test binaries by wall time:" } { print; total += $1 } END { printf "%8.1f s  in all\n", total }'
+
 list="$(cat "$skips"/*.txt 2>/dev/null | sort -u)"
 if [ -z "$list" ]; then
   echo "peer comparisons skipped: none"

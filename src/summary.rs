@@ -5,8 +5,9 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use dynaflow_engine::runtime::RunReport;
+pub use dynaflow_operators::report::{LabelAccuracyReport, NodeReport, TrackerReport};
 
-/// A tracker's absolute trajectory error, as `pnp_track` reports it (its node named).
+/// A tracker's absolute trajectory error, as the tracker reports it (its node named).
 #[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Ate {
     /// The tracker node (set on the summary's top-level `ate`, the first tracker's).
@@ -63,8 +64,10 @@ impl Summary {
             .nodes
             .iter()
             .filter_map(|n| {
-                let ate = n.report.as_ref()?.get("ate")?;
-                Some((n.node.clone(), serde_json::from_value(ate.clone()).ok()?))
+                let Some(NodeReport::Tracker(t)) = n.report.as_ref().and_then(NodeReport::from_json) else {
+                    return None;
+                };
+                Some((n.node.clone(), serde_json::from_value(serde_json::to_value(t.ate?).ok()?).ok()?))
             })
             .collect();
         let ate = run.nodes.iter().find_map(|n| {
@@ -90,5 +93,18 @@ impl Summary {
     /// What the operator of node `node` reported, if anything.
     pub fn node_report(&self, node: &str) -> Option<&serde_json::Value> {
         self.run.nodes.iter().find(|n| n.node == node)?.report.as_ref()
+    }
+
+    /// Every node's typed report, by node, in graph order (reports of no known kind left out).
+    pub fn reports(&self) -> impl Iterator<Item = (&str, NodeReport)> {
+        self.run.nodes.iter().filter_map(|n| Some((n.node.as_str(), NodeReport::from_json(n.report.as_ref()?)?)))
+    }
+
+    /// The tracker report of node `node`.
+    pub fn tracker(&self, node: &str) -> Option<TrackerReport> {
+        match NodeReport::from_json(self.node_report(node)?)? {
+            NodeReport::Tracker(t) => Some(*t),
+            _ => None,
+        }
     }
 }

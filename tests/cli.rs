@@ -424,7 +424,7 @@ fn constants_table_lists_every_default() {
         "oracle_boxes",
         "orb_extract",
         "lk_flow",
-        "pnp_track",
+        "track_rgbd",
         "local_map",
         "octomap",
     ] {

@@ -417,7 +417,7 @@ fn a_mask_of_another_size_than_the_image_is_an_error_naming_both() {
         ("orb", "orb: { op: orb_extract, in: { image: camera.rgb, mask: small.gt_mask } }"),
         (
             "track",
-            "orb: { op: orb_extract, in: { image: camera.rgb } }\n  track: { op: pnp_track, in: { keypoints: orb.keypoints, depth: camera.depth, camera_info: camera.camera_info, mask: small.gt_mask } }",
+            "orb: { op: orb_extract, in: { image: camera.rgb } }\n  track: { op: track_rgbd, in: { keypoints: orb.keypoints, depth: camera.depth, camera_info: camera.camera_info, mask: small.gt_mask } }",
         ),
         (
             "map",

@@ -41,7 +41,7 @@ fn run_with(
 }
 
 fn final_ate(s: &dynaflow::summary::Summary) -> f64 {
-    s.node_report("track").unwrap()["ate_final"]["rmse"].as_f64().unwrap()
+    s.tracker("track").unwrap().ate_final.unwrap().rmse
 }
 
 /// Ground-truth poses (`stamp tx ty tz qx qy qz qw`) of the run's frames.
@@ -95,7 +95,7 @@ fn check(with: &dynaflow::summary::Summary, without: &dynaflow::summary::Summary
         a * 100.0,
         b * 100.0,
         a / b,
-        with.node_report("track").unwrap()["ate"]["rmse"].as_f64().unwrap() * 100.0
+        with.tracker("track").unwrap().ate.unwrap().rmse * 100.0
     )
 }
 
@@ -129,10 +129,10 @@ fn after_a_kidnap_tracking_relocalises_in_the_same_map() {
     let dir = common::TempDir::new("kidnap");
     let s =
         run_with("orb_baseline", None, 0, 0, dir.path(), &["--set", "camera.frames=800", "--set", "camera.kidnap=600"]);
-    let track = s.node_report("track").unwrap();
-    assert_eq!(track["maps"], 1, "one map throughout: {track}");
-    assert!(track["map_relocalisations"].as_u64().unwrap() >= 1, "{track}");
-    let lost = track["frames"]["lost"].as_u64().unwrap();
+    let track = s.tracker("track").unwrap();
+    assert_eq!(track.maps, 1, "one map throughout: {track:?}");
+    assert!(track.map_relocalisations >= 1, "{track:?}");
+    let lost = track.frames.lost;
     assert!((30..=33).contains(&lost), "lost only while blacked out (30 frames) and at most 3 after: {lost}");
     // The first frames after the kidnap, against the ground truth (the whole run SE(3)-aligned).
     let read = |name: &str| -> Vec<(f64, nalgebra::Isometry3<f64>)> { ground_truth(&dir.path().join(name)) };
@@ -152,7 +152,7 @@ fn after_a_kidnap_tracking_relocalises_in_the_same_map() {
     println!(
         "kidnap: relocalised with {lost} frames lost, the 10 frames after within {:.2} cm; ATE {:.2} cm",
         worst * 100.0,
-        track["ate"]["rmse"].as_f64().unwrap() * 100.0
+        track.ate.as_ref().unwrap().rmse * 100.0
     );
 }
 
@@ -164,8 +164,8 @@ fn a_saved_map_is_reused_in_localisation_mode_and_a_bad_file_is_refused() {
     let frames = ["--set", "camera.frames=300"];
     let a =
         run_with("orb_baseline", None, 0, 0, &dir.path().join("a"), &[&frames[..], &["--save-map", &map_s]].concat());
-    let saved = &a.node_report("track").unwrap()["map_saved"];
-    assert!(saved["keyframes"].as_u64().unwrap() >= 5 && saved["points"].as_u64().unwrap() >= 500, "{saved}");
+    let saved = a.tracker("track").unwrap().map_saved.unwrap();
+    assert!(saved.keyframes >= 5 && saved.points >= 500, "{saved:?}");
     // The same sequence in the saved map, mapping off: every frame localised, no key frame.
     let b = run_with(
         "orb_baseline",
@@ -175,15 +175,19 @@ fn a_saved_map_is_reused_in_localisation_mode_and_a_bad_file_is_refused() {
         &dir.path().join("b"),
         &[&frames[..], &["--load-map", &map_s, "--localise"]].concat(),
     );
-    let track = b.node_report("track").unwrap();
-    let f = &track["frames"];
-    assert_eq!(track["first_pose_frame"], 0, "{track}");
-    assert_eq!((f["lost"].as_u64(), f["new_map"].as_u64()), (Some(0), Some(0)), "{track}");
-    assert_eq!(f["tracked"].as_u64().unwrap() + f["relocalised"].as_u64().unwrap(), 300, "{track}");
+    let track = b.tracker("track").unwrap();
+    let f = &track.frames;
+    assert_eq!(track.first_pose_frame, Some(0), "{track:?}");
+    assert_eq!((f.lost, f.new_map), (0, 0), "{track:?}");
+    assert_eq!(f.tracked + f.relocalised, 300, "{track:?}");
     assert_eq!(b.node_report("mapping").unwrap()["keyframes"], 0, "mapping is off");
     let (ate_a, ate_b) = (a.ate.as_ref().unwrap().rmse, b.ate.as_ref().unwrap().rmse);
     assert!(ate_b <= 0.02, "localised in the saved map: ATE {ate_b} (mapping run {ate_a})");
-    println!("map reuse: {saved}; localisation-mode ATE {:.2} cm (mapping run {:.2} cm)", ate_b * 100.0, ate_a * 100.0);
+    println!(
+        "map reuse: {saved:?}; localisation-mode ATE {:.2} cm (mapping run {:.2} cm)",
+        ate_b * 100.0,
+        ate_a * 100.0
+    );
 
     // Damaged files and another vocabulary are refused before the run starts, naming the file.
     let bytes = std::fs::read(&map).unwrap();

@@ -303,10 +303,24 @@ fn a_map_path_is_checked_before_the_first_frame_and_an_empty_map_is_refused() {
             &[&dir.path().join("out"), &graph, Path::new("--save-map"), &path],
         );
         assert_eq!(o.status.code(), Some(2), "{}", text(&o));
-        assert!(text(&o).contains("save_map") && text(&o).contains(why), "{}", text(&o));
+        // Located at the tracker, naming the flag that gave the path.
+        let flag = format!("`--save-map {}`", path.display());
+        assert!(text(&o).contains(&flag) && text(&o).contains("save_map") && text(&o).contains(why), "{}", text(&o));
         assert!(!dir.path().join("out/orb_baseline.summary.json").exists(), "the run started");
         assert!(t0.elapsed() < Duration::from_secs(600));
     }
+    // A graph with two trackers: the flags do not guess which one keeps the map.
+    let o = dynaflow(
+        &["run", "--no-progress", "--record", "none", "--frames", "2", "--out"],
+        &[
+            &dir.path().join("two"),
+            &common::repo().join("graphs/default.yaml"),
+            Path::new("--save-map"),
+            &dir.path().join("m"),
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o));
+    assert!(text(&o).contains("need one enabled tracker in the graph, it has 2 (baseline, track)"), "{}", text(&o));
     // A run that never relocalises in the loaded map says so (here no pose can have the
     // inliers it is asked for), not that "the tracker never initialised".
     let map = dir.path().join("room.dfmap");

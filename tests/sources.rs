@@ -273,8 +273,8 @@ fn an_image_folder_runs_monocular_and_a_graph_needing_depth_fails_validation() {
     let o = run("orb_baseline", &["--variant", "mono"]);
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
     let summary = common::summary(&dir.path().join("orb_baseline/orb_baseline-mono.summary.json"));
-    let track = summary.node_report("track").unwrap();
-    assert!(track["frames"]["tracked"].as_u64().unwrap() > 20, "{track}");
+    let track = summary.tracker("track").unwrap();
+    assert!(track.frames.tracked > 20, "{track:?}");
     assert!(summary.ate.is_none(), "an image folder has no ground truth");
 
     let o = run("yoec_dslam", &[]);
@@ -285,10 +285,14 @@ fn an_image_folder_runs_monocular_and_a_graph_needing_depth_fails_validation() {
         "{stderr}"
     );
 
+    // The RGB-D tracker requires depth: refused at validation, at its place in the file.
     let o = run("orb_baseline", &[]);
     let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(1), "{stderr}");
-    assert!(stderr.contains("`sensor: rgbd` needs `depth`") && stderr.contains("sensor: mono"), "{stderr}");
+    assert_eq!(o.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("orb_baseline.yaml:") && stderr.contains("(op `image_folder`) has no output `depth`"),
+        "{stderr}"
+    );
 }
 
 #[test]
@@ -335,8 +339,8 @@ fn kitti_sequence_reads_stereo_calibration_and_poses() {
             .unwrap();
     assert_eq!(report.status, RunStatus::Completed, "{:?}", report.failures);
     assert_eq!((sink.port("cam", "rgb").len(), sink.port("cam", "right").len()), (3, 3));
-    let Body::Scalars(s) = &sink.port("cam", "stereo")[0].body else { panic!() };
-    assert!((s.get("baseline_m").unwrap() - 386.1448 / fx).abs() < 1e-9);
+    let Body::StereoRig(rig) = &sink.port("cam", "stereo")[0].body else { panic!() };
+    assert!((rig.baseline - 386.1448 / fx).abs() < 1e-9);
     let Body::CameraInfo(k) = &sink.port("cam", "camera_info")[0].body else { panic!() };
     assert_eq!((k.fx, k.cx, k.cy, k.width), (fx, 607.1928, 185.2157, 64));
     let poses = sink.port("cam", "gt_pose");

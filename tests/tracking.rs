@@ -1,4 +1,4 @@
-//! `graphs/orb_baseline.yaml` (ORB -> `pnp_track` -> `local_map`) on the synthetic scene,
+//! `graphs/orb_baseline.yaml` (ORB -> `track_rgbd` -> `local_map`) on the synthetic scene,
 //! judged against the generator's ground truth twice: by the ATE the run puts in its summary
 //! and, independently, by `evaluate` on the trajectory file against `dynaflow synth`'s
 //! `groundtruth.txt` (the camera path depends on the motion only, not on the scene seed).
@@ -70,9 +70,9 @@ fn baseline_meets_the_ate_bounds_on_static_scenes() {
         assert!((reported - rmse).abs() < 1e-6, "{reported} vs {rmse}");
         assert_eq!(ate.align.as_deref(), Some("se3"));
         assert_eq!(ate.node.as_deref(), Some("track"));
-        let track = summary.node_report("track").unwrap();
-        assert_eq!(track["frames"]["lost"], 0, "{variant}");
-        assert_eq!(track["maps"], 1, "{variant}");
+        let track = summary.tracker("track").unwrap();
+        assert_eq!(track.frames.lost, 0, "{variant}");
+        assert_eq!(track.maps, 1, "{variant}");
         let mapping = summary.run.nodes.iter().find(|n| n.node == "mapping").unwrap();
         assert!(mapping.frames >= 3, "key frames reached local mapping");
     }
@@ -93,8 +93,8 @@ fn stereo_tracks_static_scenes_within_the_rgbd_bounds() {
         if let Some(r) = ratio {
             assert!(stereo <= r * rgbd, "{motion}: stereo {stereo} m > {r} x RGB-D {rgbd} m");
         }
-        let track = summary.node_report("track").unwrap();
-        assert_eq!(track["frames"]["lost"], 0, "{motion}");
+        let track = summary.tracker("track").unwrap();
+        assert_eq!(track.frames.lost, 0, "{motion}");
         let matcher = summary.run.nodes.iter().find(|n| n.node == "stereo").unwrap();
         assert_eq!(matcher.frames, 300, "every frame was matched");
     }
@@ -379,11 +379,11 @@ fn monocular_initialises_within_30_frames_and_reports_a_sim3_ate() {
     let dir = common::TempDir::new("tracking-mono");
     for motion in ["xyz", "halfsphere"] {
         let (stdout, summary, est) = run_mono(motion, "300", dir.path());
-        let track = summary.node_report("track").unwrap();
-        let first = track["first_pose_frame"].as_u64().unwrap();
+        let track = summary.tracker("track").unwrap();
+        let first = track.first_pose_frame.unwrap();
         assert!(first <= 30, "{motion}: initialised at frame {first}");
-        assert_eq!(track["frames"]["lost"], 0, "{motion}");
-        assert_eq!(track["maps"], 1, "{motion}");
+        assert_eq!(track.frames.lost, 0, "{motion}");
+        assert_eq!(track.maps, 1, "{motion}");
         // Every frame from the initialisation on has a pose, none before.
         assert_eq!(est.len() as u64, 300 - first, "{motion}");
         let ate = summary.ate.clone().unwrap();

@@ -471,3 +471,23 @@ fn every_shipped_graph_declares_its_oracles() {
     ];
     assert_eq!(oracles, expected);
 }
+
+#[test]
+fn a_tracker_without_what_its_sensor_needs() {
+    // The stereo matcher without the right image, the stereo tracker without the rig.
+    check(
+        "track_stereo_unwired.yaml",
+        &[
+            (5, 3, "missing-input", "`right` (image) is not connected | wire it, e.g. `in: { right: camera.right }`"),
+            (8, 3, "missing-input", "required input `stereo` (stereo_rig) is not connected"),
+        ],
+    );
+    // The RGB-D tracker without depth; the retired `pnp_track` names its replacements.
+    check(
+        "track_rgbd_no_depth.yaml",
+        &[
+            (5, 3, "missing-input", "required input `depth` (depth) is not connected"),
+            (9, 9, "unknown-op", "`op: track_rgbd`"),
+        ],
+    );
+}

@@ -41,6 +41,7 @@ pub const PASSTHROUGH: OpSpec = OpSpec {
     params: &[],
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |_| Ok(Instance::Transform(Box::new(Passthrough))),
 };
 
@@ -74,6 +75,7 @@ pub const GATE: OpSpec = OpSpec {
     params: GateConfig::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(Gate(GateConfig::from_params(p)?)))),
 };
 

@@ -20,4 +20,4 @@ pub mod testing;
 pub mod yaml;
 
 pub use dynaflow_msg as msg;
-pub use load::{LoadRequest, Loaded, SourceOverride, load, load_str};
+pub use load::{LoadRequest, Loaded, MapRequest, SourceOverride, load, load_str};

@@ -1,6 +1,6 @@
 //! From a graph file on disk to a validated graph, with every diagnostic.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use crate::diag::{Diagnostic, Source};
 use crate::op::Registry;
@@ -20,6 +20,76 @@ pub struct LoadRequest {
     pub all_variants: bool,
     /// `--input DIR`: replace the graph's single source with this reader.
     pub source: Option<SourceOverride>,
+    /// `--save-map`, `--load-map`, `--localise`: set on the graph's map-keeping node.
+    pub map: MapRequest,
+}
+
+/// `dynaflow run --save-map FILE --load-map FILE --localise`: what the graph's one enabled
+/// node with a map ([`crate::op::OpSpec::map_store`], the tracker) gets, through the
+/// parameters its operator names (typed: no parameter name or node id is spelled here).
+#[derive(Clone, Debug, Default)]
+pub struct MapRequest {
+    /// Write the map here at the end.
+    pub save: Option<PathBuf>,
+    /// Start in this map.
+    pub load: Option<PathBuf>,
+    /// Localisation mode: no new key frames.
+    pub localise: bool,
+}
+
+impl MapRequest {
+    /// Whether it asks for nothing.
+    pub fn is_empty(&self) -> bool {
+        self.save.is_none() && self.load.is_none() && !self.localise
+    }
+
+    /// The overrides it makes of `spec` (after its variant): one per flag, on the one enabled
+    /// node whose operator keeps a map; an error when there is no such node, or several.
+    pub fn overrides(&self, spec: &GraphSpec, registry: &Registry) -> Result<Vec<Override>, Diagnostic> {
+        if self.is_empty() {
+            return Ok(Vec::new());
+        }
+        let keepers: Vec<(&str, crate::op::MapStore)> = spec
+            .nodes
+            .iter()
+            .filter(|n| !n.disabled)
+            .filter_map(|n| Some((n.id.as_str(), registry.get(&n.op)?.map_store?)))
+            .collect();
+        let [(node, store)] = keepers.as_slice() else {
+            let names: Vec<&str> = keepers.iter().map(|(n, _)| *n).collect();
+            return Err(Diagnostic::error(
+                "map-store",
+                None,
+                format!(
+                    "--save-map, --load-map and --localise need one enabled tracker in the graph, it has {}{}",
+                    keepers.len(),
+                    if names.is_empty() { String::new() } else { format!(" ({})", names.join(", ")) }
+                ),
+            )
+            .with_hint("set the `save_map`, `load_map` and `mapping` params of the tracker you mean with --set"));
+        };
+        let scalar = |text: String, quoted: bool| yaml::Yaml {
+            kind: yaml::YamlKind::Scalar { text, quoted },
+            span: yaml::Span::new(0, 0),
+        };
+        // Relative to the working directory, as typed (graph params resolve against the graph
+        // file's folder).
+        let abs = |p: &Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
+        let mut out = Vec::new();
+        let mut set = |param: &str, value: yaml::Yaml, text: String| {
+            out.push(Override { node: (*node).to_owned(), param: param.to_owned(), value, text });
+        };
+        if let Some(p) = &self.save {
+            set(store.save, scalar(abs(p).display().to_string(), true), format!("--save-map {}", p.display()));
+        }
+        if let Some(p) = &self.load {
+            set(store.load, scalar(abs(p).display().to_string(), true), format!("--load-map {}", p.display()));
+        }
+        if self.localise {
+            set(store.mapping, scalar("false".into(), false), "--localise".into());
+        }
+        Ok(out)
+    }
 }
 
 /// A replacement for the graph's source node (`dynaflow run --input DIR`).
@@ -232,7 +302,12 @@ pub fn load_str(
         if let Some(over) = &req.source {
             diags.extend(apply_source(&mut spec, registry, over));
         }
-        let (d, origins) = spec::apply_overrides(&mut spec, &req.overrides);
+        let mut overrides = req.overrides.clone();
+        match req.map.overrides(&spec, registry) {
+            Ok(o) => overrides.extend(o),
+            Err(d) => diags.push(d),
+        }
+        let (d, origins) = spec::apply_overrides(&mut spec, &overrides);
         diags.extend(d);
         let (g, mut d) = spec::validate(&spec, registry, &cx);
         origins.attribute(&mut d);

@@ -78,6 +78,7 @@ pub const TEST_PATTERN: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: build_test_pattern,
 };
 
@@ -136,6 +137,7 @@ pub const SIMULATE_WORK: OpSpec = OpSpec {
     params: WorkConfig::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(SimulateWork(WorkConfig::from_params(p)?)))),
 };
 
@@ -185,6 +187,7 @@ pub const RANDOM_SCALAR: OpSpec = OpSpec {
     params: RandomConfig::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(RandomScalar(RandomConfig::from_params(p)?)))),
 };
 
@@ -223,6 +226,7 @@ pub const SCALAR_SUM: OpSpec = OpSpec {
     params: &[],
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |_| Ok(Instance::Transform(Box::new(ScalarSum))),
 };
 
@@ -277,6 +281,7 @@ pub const FAULT: OpSpec = OpSpec {
     params: FaultConfig::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(Fault(FaultConfig::from_params(p)?)))),
 };
 

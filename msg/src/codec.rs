@@ -16,8 +16,8 @@ use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use crate::{
     Body, CameraInfo, DepthImage, Descriptors, Detection, Detections, Header, Image, Isometry3, Keypoint, Keypoints,
     LabelReason, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, Message, OctreeUpdate, PixelFormat,
-    PointCloud, PointLabel, PointLabels, PortType, Pose, Scalars, SegmentationMask, SparseMap, StampedPose, Track,
-    Tracks, Trajectory,
+    PointCloud, PointLabel, PointLabels, PortType, Pose, Scalars, SegmentationMask, SparseMap, StampedPose, StereoRig,
+    Track, Tracks, Trajectory,
 };
 
 /// The encoding's version byte; a reader refuses any other.
@@ -65,7 +65,7 @@ pub fn decode(bytes: &[u8]) -> Result<Message, CodecError> {
 
 /// The body's tag is its type's index in [`PortType::ALL`] (a reordering there is a new
 /// [`VERSION`]).
-const TYPES: [PortType; 14] = PortType::ALL;
+const TYPES: [PortType; PortType::ALL.len()] = PortType::ALL;
 
 fn tag(ty: PortType) -> u8 {
     TYPES.iter().position(|t| *t == ty).map_or(u8::MAX, |i| i as u8)
@@ -263,6 +263,7 @@ fn body(w: &mut W, b: &Body) {
                 w.f64(*v);
             }
         }
+        Body::StereoRig(s) => w.f64(s.baseline),
     }
 }
 
@@ -538,6 +539,7 @@ fn read_body(r: &mut R<'_>, tag: u8) -> Result<Body, CodecError> {
             let values = (0..n).map(|_| Ok((Arc::from(r.str()?), r.f64()?))).collect::<Result<_, CodecError>>()?;
             Body::Scalars(Scalars { values })
         }
+        PortType::StereoRig => Body::StereoRig(StereoRig { baseline: r.f64()? }),
         PortType::Any => return Err(CodecError("payload type `any`".into())),
     })
 }
@@ -688,6 +690,7 @@ mod tests {
                 }],
             }),
             Body::Scalars(Scalars { values: vec![("ate".into(), 0.01), ("nan".into(), f64::NAN)] }),
+            Body::StereoRig(StereoRig { baseline: 0.12 }),
         ]
     }
 

@@ -112,3 +112,18 @@ impl CameraInfo {
         }
     }
 }
+
+/// A rectified stereo pair: the right camera lies `baseline` metres along the left camera's x
+/// axis, and both images share the left camera's intrinsics ([`CameraInfo`]), so a match at
+/// disparity `d` pixels lies at depth `fx * baseline / d`.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct StereoRig {
+    /// Distance between the optical centres, metres (positive).
+    pub baseline: f64,
+}
+
+impl StereoRig {
+    pub(super) fn digest_into(&self, d: &mut Digest) {
+        d.f64(self.baseline);
+    }
+}

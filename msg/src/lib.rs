@@ -31,7 +31,7 @@ pub use geometry::{
     Isometry3, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, OctreeUpdate, PointCloud, Pose,
     SparseMap, StampedPose, Trajectory,
 };
-pub use image::{CameraInfo, DepthImage, Image, PixelFormat};
+pub use image::{CameraInfo, DepthImage, Image, PixelFormat, StereoRig};
 pub use scalar::Scalars;
 pub use semantic::{Detection, Detections, SegmentationMask, class_rgb};
 
@@ -78,116 +78,105 @@ impl std::fmt::Debug for Message {
     }
 }
 
-/// The payload of a [`Message`]; one variant per [`PortType`].
-#[derive(Clone, Debug, PartialEq)]
-#[non_exhaustive]
-pub enum Body {
-    /// An RGB8 or Gray8 image.
-    Image(Image),
-    /// A depth image in metres.
-    Depth(DepthImage),
-    /// Pinhole intrinsics and distortion.
-    CameraInfo(CameraInfo),
-    /// Keypoints with optional binary descriptors.
-    Keypoints(Keypoints),
-    /// Point correspondences between two frames (optical flow tracks or matches).
-    Tracks(Tracks),
-    /// Object detections.
-    Detections(Detections),
-    /// A per-pixel class (and instance) mask.
-    Mask(SegmentationMask),
-    /// Static/dynamic decision per point, with the reason.
-    PointLabels(PointLabels),
-    /// A camera pose.
-    Pose(Pose),
-    /// A sequence of stamped poses.
-    Trajectory(Trajectory),
-    /// A 3-D point cloud.
-    PointCloud(PointCloud),
-    /// Changed voxels of an occupancy octree.
-    OctreeUpdate(OctreeUpdate),
-    /// A batch of a sparse SLAM map (key frames, points, observations).
-    Map(SparseMap),
-    /// Named scalar metrics.
-    Scalars(Scalars),
+/// The one list of payload types: each line declares a [`Body`] variant, its payload type, the
+/// [`PortType`] of the same name and that type's name in graph files. Everything that must
+/// name every payload (the two enums, [`PortType::ALL`], [`PortType::name`], [`Payload`], the
+/// digest) is generated from it, so a new payload is one line here plus its codec and
+/// recorders (whose matches the compiler checks for exhaustiveness).
+macro_rules! payloads {
+    ($($(#[doc = $doc:literal])* $variant:ident($ty:ty) = $name:literal,)*) => {
+        /// The payload of a [`Message`]; one variant per [`PortType`].
+        #[derive(Clone, Debug, PartialEq)]
+        #[non_exhaustive]
+        pub enum Body {
+            $( $(#[doc = $doc])* $variant($ty), )*
+        }
+
+        /// The type of a port, checked when edges are validated.
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
+        #[serde(rename_all = "snake_case")]
+        pub enum PortType {
+            $( #[doc = concat!("[`", stringify!($ty), "`].")] $variant, )*
+            /// Accepts any message (inputs of generic operators only).
+            Any,
+        }
+
+        impl PortType {
+            /// Every concrete type (not `Any`), in declaration order (the wire codec's tags:
+            /// append, never reorder).
+            pub const ALL: [PortType; [$(stringify!($variant)),*].len()] = [$(PortType::$variant),*];
+
+            /// The name used in graph files and docs.
+            pub fn name(self) -> &'static str {
+                match self {
+                    $( PortType::$variant => $name, )*
+                    PortType::Any => "any",
+                }
+            }
+        }
+
+        impl Body {
+            /// The port type this payload travels on.
+            pub fn port_type(&self) -> PortType {
+                match self { $( Body::$variant(_) => PortType::$variant, )* }
+            }
+
+            fn digest_into(&self, d: &mut Digest) {
+                match self { $( Body::$variant(m) => m.digest_into(d), )* }
+            }
+        }
+
+        $(
+        impl Payload for $ty {
+            const PORT: PortType = PortType::$variant;
+            fn of(body: &Body) -> Option<&Self> {
+                match body {
+                    Body::$variant(v) => Some(v),
+                    _ => None,
+                }
+            }
+            fn into_body(self) -> Body {
+                Body::$variant(self)
+            }
+        }
+        )*
+    };
 }
 
-/// The type of a port, checked when edges are validated.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum PortType {
-    /// [`Image`].
-    Image,
-    /// [`DepthImage`].
-    Depth,
-    /// [`CameraInfo`].
-    CameraInfo,
-    /// [`Keypoints`].
-    Keypoints,
-    /// [`Tracks`].
-    Tracks,
-    /// [`Detections`].
-    Detections,
-    /// [`SegmentationMask`].
-    Mask,
-    /// [`PointLabels`].
-    PointLabels,
-    /// [`Pose`].
-    Pose,
-    /// [`Trajectory`].
-    Trajectory,
-    /// [`PointCloud`].
-    PointCloud,
-    /// [`OctreeUpdate`].
-    OctreeUpdate,
-    /// [`SparseMap`].
-    Map,
-    /// [`Scalars`].
-    Scalars,
-    /// Accepts any message (inputs of generic operators only).
-    Any,
+payloads! {
+    /// An RGB8 or Gray8 image.
+    Image(Image) = "image",
+    /// A depth image in metres.
+    Depth(DepthImage) = "depth",
+    /// Pinhole intrinsics and distortion.
+    CameraInfo(CameraInfo) = "camera_info",
+    /// Keypoints with optional binary descriptors.
+    Keypoints(Keypoints) = "keypoints",
+    /// Point correspondences between two frames (optical flow tracks or matches).
+    Tracks(Tracks) = "tracks",
+    /// Object detections.
+    Detections(Detections) = "detections",
+    /// A per-pixel class (and instance) mask.
+    Mask(SegmentationMask) = "mask",
+    /// Static/dynamic decision per point, with the reason.
+    PointLabels(PointLabels) = "point_labels",
+    /// A camera pose.
+    Pose(Pose) = "pose",
+    /// A sequence of stamped poses.
+    Trajectory(Trajectory) = "trajectory",
+    /// A 3-D point cloud.
+    PointCloud(PointCloud) = "point_cloud",
+    /// Changed voxels of an occupancy octree.
+    OctreeUpdate(OctreeUpdate) = "octree_update",
+    /// A batch of a sparse SLAM map (key frames, points, observations).
+    Map(SparseMap) = "map",
+    /// Named scalar metrics.
+    Scalars(Scalars) = "scalars",
+    /// A rectified stereo pair's baseline.
+    StereoRig(StereoRig) = "stereo_rig",
 }
 
 impl PortType {
-    /// Every concrete type (not `Any`).
-    pub const ALL: [PortType; 14] = [
-        PortType::Image,
-        PortType::Depth,
-        PortType::CameraInfo,
-        PortType::Keypoints,
-        PortType::Tracks,
-        PortType::Detections,
-        PortType::Mask,
-        PortType::PointLabels,
-        PortType::Pose,
-        PortType::Trajectory,
-        PortType::PointCloud,
-        PortType::OctreeUpdate,
-        PortType::Map,
-        PortType::Scalars,
-    ];
-
-    /// The name used in graph files and docs.
-    pub fn name(self) -> &'static str {
-        match self {
-            PortType::Image => "image",
-            PortType::Depth => "depth",
-            PortType::CameraInfo => "camera_info",
-            PortType::Keypoints => "keypoints",
-            PortType::Tracks => "tracks",
-            PortType::Detections => "detections",
-            PortType::Mask => "mask",
-            PortType::PointLabels => "point_labels",
-            PortType::Pose => "pose",
-            PortType::Trajectory => "trajectory",
-            PortType::PointCloud => "point_cloud",
-            PortType::OctreeUpdate => "octree_update",
-            PortType::Map => "map",
-            PortType::Scalars => "scalars",
-            PortType::Any => "any",
-        }
-    }
-
     /// Whether an output of type `self` may feed an input of type `input`.
     pub fn feeds(self, input: PortType) -> bool {
         input == PortType::Any || self == input
@@ -209,49 +198,6 @@ pub trait Payload: Sized {
     /// As a message body.
     fn into_body(self) -> Body;
 }
-
-/// One line per body variant: its payload type, and (the same name) its port type.
-macro_rules! payload {
-    ($($variant:ident($ty:ty)),* $(,)?) => {
-        impl Body {
-            /// The port type this payload travels on.
-            pub fn port_type(&self) -> PortType {
-                match self { $( Body::$variant(_) => PortType::$variant, )* }
-            }
-        }
-        $(
-        impl Payload for $ty {
-            const PORT: PortType = PortType::$variant;
-            fn of(body: &Body) -> Option<&Self> {
-                match body {
-                    Body::$variant(v) => Some(v),
-                    _ => None,
-                }
-            }
-            fn into_body(self) -> Body {
-                Body::$variant(self)
-            }
-        }
-    )*
-    };
-}
-
-payload!(
-    Image(Image),
-    Depth(DepthImage),
-    CameraInfo(CameraInfo),
-    Keypoints(Keypoints),
-    Tracks(Tracks),
-    Detections(Detections),
-    Mask(SegmentationMask),
-    PointLabels(PointLabels),
-    Pose(Pose),
-    Trajectory(Trajectory),
-    PointCloud(PointCloud),
-    OctreeUpdate(OctreeUpdate),
-    Map(SparseMap),
-    Scalars(Scalars),
-);
 
 /// Any message (ports of type `any`).
 impl Payload for Body {
@@ -289,22 +235,7 @@ impl Message {
         d.f64(self.header.stamp);
         d.str(&self.header.frame_id);
         d.str(self.body.port_type().name());
-        match &self.body {
-            Body::Image(m) => m.digest_into(&mut d),
-            Body::Depth(m) => m.digest_into(&mut d),
-            Body::CameraInfo(m) => m.digest_into(&mut d),
-            Body::Keypoints(m) => m.digest_into(&mut d),
-            Body::Tracks(m) => m.digest_into(&mut d),
-            Body::Detections(m) => m.digest_into(&mut d),
-            Body::Mask(m) => m.digest_into(&mut d),
-            Body::PointLabels(m) => m.digest_into(&mut d),
-            Body::Pose(m) => m.digest_into(&mut d),
-            Body::Trajectory(m) => m.digest_into(&mut d),
-            Body::PointCloud(m) => m.digest_into(&mut d),
-            Body::OctreeUpdate(m) => m.digest_into(&mut d),
-            Body::Map(m) => m.digest_into(&mut d),
-            Body::Scalars(m) => m.digest_into(&mut d),
-        }
+        self.body.digest_into(&mut d);
         d.finish()
     }
 
@@ -338,6 +269,7 @@ impl Message {
             Body::Scalars(m) => {
                 serde_json::Value::Object(m.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect())
             }
+            Body::StereoRig(m) => json!({"baseline_m": m.baseline}),
         }
     }
 }

@@ -2,7 +2,7 @@
 
 use std::sync::Arc;
 
-use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, PixelFormat, Pose, Scalars, SegmentationMask};
+use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, PixelFormat, Pose, SegmentationMask, StereoRig};
 use dynaflow_engine::op::Seeded;
 use dynaflow_engine::op::{Context, Instance, OpError, OpKind, OpSpec, Out, Outputs, Param, ParamType, Params, Source};
 use dynaflow_engine::params;
@@ -60,7 +60,7 @@ const CAMERA_INFO: Out<CameraInfo> = Out::new("camera_info", "pinhole intrinsics
 const GT_POSE: Out<Pose> = Out::ground_truth("gt_pose", "ground-truth world_from_cam");
 const RIGHT: Out<Image> =
     Out::new("right", "RGB8 image of the rectified right camera (with `stereo_baseline` > 0; its own sensor noise)");
-const STEREO: Out<Scalars> = Out::new("stereo", "`baseline_m`: the stereo baseline (with `stereo_baseline` > 0)");
+const STEREO: Out<StereoRig> = Out::new("stereo", "the rig (with `stereo_baseline` > 0)");
 const GT_MASK: Out<SegmentationMask> =
     Out::ground_truth("gt_mask", "ground-truth class (0 static, 1 person) and instance masks");
 
@@ -74,6 +74,7 @@ pub(crate) const SYNTH: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build,
 };
 
@@ -134,7 +135,7 @@ impl Source for SynthSource {
             && let Some(right) = self.generator.right(&f, b)
         {
             let image = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: right };
-            out = out.send(&RIGHT, header.clone(), image).send(&STEREO, header.clone(), Scalars::one("baseline_m", b));
+            out = out.send(&RIGHT, header.clone(), image).send(&STEREO, header.clone(), StereoRig { baseline: b });
         }
         let info = k.clone();
         let mask = SegmentationMask {

@@ -122,6 +122,7 @@ fn data(body: &Body) -> Value {
             "q": tr.poses.iter().map(|p| { let q = p.world_from_cam.rotation.coords; [q.x, q.y, q.z, q.w] }).collect::<Vec<_>>(),
         }),
         Body::Scalars(s) => Value::Object(s.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect()),
+        Body::StereoRig(r) => json!({"baseline_m": r.baseline}),
         Body::PointCloud(c) => json!({"count": c.points.len()}),
         Body::Map(m) => json!({
             "map_id": m.map_id,

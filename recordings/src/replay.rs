@@ -17,7 +17,7 @@ use base64::Engine as _;
 use dynaflow_engine::msg::{
     Body, CameraInfo, DepthImage, Descriptors, Detection, Detections, Header, Image, Isometry3, Keypoint, Keypoints,
     LabelReason, Message, PixelFormat, PointLabel, PointLabels, PortType, Pose, Scalars, SegmentationMask, StampedPose,
-    Track, Tracks, Trajectory,
+    StereoRig, Track, Tracks, Trajectory,
 };
 use dynaflow_engine::op::{
     Context, Instance, OpError, OpKind, OpSpec, Outputs, Param, ParamMap, ParamType, Params, PortSpec, Source,
@@ -41,6 +41,7 @@ const OUTPUTS: &[PortSpec] = &[
     PortSpec::output("pose", PortType::Pose, "pose topic"),
     PortSpec::output("trajectory", PortType::Trajectory, "trajectory topic"),
     PortSpec::output("scalars", PortType::Scalars, "scalars topic"),
+    PortSpec::output("stereo", PortType::StereoRig, "stereo rig topic"),
 ];
 
 /// The `mcap_replay` operator.
@@ -54,6 +55,7 @@ pub const MCAP_REPLAY: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: Some(replayed_ground_truth),
+    map_store: None,
     build,
 };
 
@@ -489,6 +491,7 @@ fn decode_json(ty: PortType, v: &Value) -> Result<Body, String> {
                 .map(|o| o.iter().map(|(k, x)| (Arc::from(k.as_str()), x.as_f64().unwrap_or(f64::NAN))).collect())
                 .unwrap_or_default(),
         }),
+        PortType::StereoRig => Body::StereoRig(StereoRig { baseline: d["baseline_m"].as_f64().unwrap_or(f64::NAN) }),
         other => return Err(format!("replaying {other} is not supported")),
     })
 }

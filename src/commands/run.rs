@@ -26,8 +26,11 @@ fn build_error(loaded: &dynaflow_engine::Loaded, req: &LoadRequest, e: &runtime:
     };
     let spec = loaded.spec.as_ref().and_then(|s| s.nodes.iter().find(|n| &n.id == node));
     let span = spec.map(|n| n.params.iter().find(|(k, _)| &k.text == key).map_or(n.id_span, |(k, _)| k.span));
-    let set = req.overrides.iter().rev().find(|o| &o.node == node && &o.param == key);
-    let from = set.map_or_else(String::new, |o| format!("`--set {}`: ", o.text));
+    // The flag that gave the value: a `--set`, or `--save-map`/`--load-map`/`--localise`.
+    let map_flags =
+        loaded.spec.as_ref().and_then(|s| req.map.overrides(s, &dynaflow::registry()).ok()).unwrap_or_default();
+    let set = req.overrides.iter().chain(&map_flags).rev().find(|o| &o.node == node && &o.param == key);
+    let from = set.map_or_else(String::new, |o| format!("`{}`: ", o.text));
     let d = Diagnostic::error("param-value", span, format!("{from}node `{node}`: param `{key}`: {message}"));
     loaded.source.plain(&d)
 }
@@ -62,53 +65,16 @@ pub fn run(args: &RunArgs) -> u8 {
             }
         },
     };
-    let mut req =
-        LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source };
+    let map = dynaflow_engine::MapRequest {
+        save: args.save_map.clone(),
+        load: args.load_map.clone(),
+        localise: args.localise,
+    };
+    let req =
+        LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source, map };
     let Some(mut loaded) = super::load_and_report(&args.graph, &req) else {
         return EXIT_BAD_INPUT;
     };
-    // `--save-map`, `--load-map`, `--localise`: parameters of the graph's tracker.
-    if args.save_map.is_some() || args.load_map.is_some() || args.localise {
-        let trackers: Vec<String> = loaded
-            .graph
-            .iter()
-            .flat_map(|g| &g.nodes)
-            .filter(|n| !n.disabled && n.op.name == "pnp_track")
-            .map(|n| n.id.to_string())
-            .collect();
-        let [tracker] = trackers.as_slice() else {
-            eprintln!(
-                "error: --save-map, --load-map and --localise need one `pnp_track` node in the graph, it has {} ({}); set its `save_map`, `load_map` and `mapping` params with --set",
-                trackers.len(),
-                trackers.join(", ")
-            );
-            return EXIT_BAD_INPUT;
-        };
-        let abs = |p: &std::path::Path| std::path::absolute(p).unwrap_or_else(|_| p.to_path_buf());
-        let mut sets = Vec::new();
-        if let Some(p) = &args.save_map {
-            sets.push(format!("{tracker}.save_map={}", abs(p).display()));
-        }
-        if let Some(p) = &args.load_map {
-            sets.push(format!("{tracker}.load_map={}", abs(p).display()));
-        }
-        if args.localise {
-            sets.push(format!("{tracker}.mapping=false"));
-        }
-        for s in sets {
-            match Override::parse(&s) {
-                Ok(o) => req.overrides.push(o),
-                Err(e) => {
-                    eprintln!("error: {e}");
-                    return EXIT_BAD_INPUT;
-                }
-            }
-        }
-        let Some(again) = super::load_and_report(&args.graph, &req) else {
-            return EXIT_BAD_INPUT;
-        };
-        loaded = again;
-    }
     // The graph runs; the rest of the load stays for locating a build error.
     let Some(graph) = loaded.graph.take() else {
         return EXIT_BAD_INPUT;
@@ -258,7 +224,8 @@ pub fn run(args: &RunArgs) -> u8 {
     // compared with (as a baseline is).
     let mut reference: Option<(&str, f64)> = None;
     for n in &summary.run.nodes {
-        if let Some(why) = n.report.as_ref().and_then(|r| r.get("not_initialised_because")).and_then(|w| w.as_str()) {
+        let tracker = summary.tracker(&n.node);
+        if let Some(why) = tracker.as_ref().and_then(|t| t.not_initialised_because.as_deref()) {
             say!("`{}` has no trajectory: {why}", n.node);
         }
         let Some(ate) = summary.trackers.get(&n.node) else { continue };
@@ -267,7 +234,7 @@ pub fn run(args: &RunArgs) -> u8 {
             _ => String::new(),
         };
         // Lost frames have no pose (the trajectory leaves them out): say how many.
-        let lost = n.report.as_ref().and_then(|r| r.get("frames")?.get("lost")?.as_u64()).unwrap_or(0);
+        let lost = tracker.as_ref().map_or(0, |t| t.frames.lost);
         let lost = if lost > 0 { format!(", {lost} lost frames left out") } else { String::new() };
         say!(
             "ATE of `{}`{oracle} ({} poses{lost}, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m{versus}",

@@ -188,6 +188,19 @@ impl serde::Serialize for Default {
     }
 }
 
+/// An operator's map parameters, named: what `--save-map FILE`, `--load-map FILE` and
+/// `--localise` set (a path, a path, `false`). The registry's test checks each names a
+/// parameter of the right type.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MapStore {
+    /// The path the map is written to at the end.
+    pub save: &'static str,
+    /// The path of a map to start in.
+    pub load: &'static str,
+    /// The boolean that is `false` in localisation mode.
+    pub mapping: &'static str,
+}
+
 /// A parameter declaration.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct ParamSpec {
@@ -200,6 +213,19 @@ pub struct ParamSpec {
     pub default: Default,
     /// One line for docs.
     pub doc: &'static str,
+}
+
+/// The parameter tables `a` then `b` as one (`N` = both lengths): for operators that share a
+/// common table and add their own (`const P: [ParamSpec; A.len() + B.len()] = concat_params(A, B)`).
+pub const fn concat_params<const N: usize>(a: &[ParamSpec], b: &[ParamSpec]) -> [ParamSpec; N] {
+    assert!(a.len() + b.len() == N && !a.is_empty(), "N must be the sum of the lengths, `a` not empty");
+    let mut out = [a[0]; N];
+    let mut i = 0;
+    while i < N {
+        out[i] = if i < a.len() { a[i] } else { b[i - a.len()] };
+        i += 1;
+    }
+    out
 }
 
 /// A constructed operator.
@@ -243,6 +269,10 @@ pub struct OpSpec {
     /// validation.
     #[serde(skip)]
     pub ground_truth_outputs: Option<fn(&Params) -> Vec<&'static str>>,
+    /// The parameters through which `dynaflow run --save-map/--load-map/--localise` reach
+    /// this operator (a tracker that keeps a map), if it has them.
+    #[serde(skip)]
+    pub map_store: Option<MapStore>,
     /// Constructor from validated parameters.
     #[serde(skip)]
     pub build: fn(&Params) -> Result<Instance, OpError>,

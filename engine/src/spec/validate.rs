@@ -619,7 +619,9 @@ fn check_inputs(
                 span: from.span,
             });
         }
-        if op.kind == OpKind::Transform {
+        // A disabled node does not run: what it must have wired is checked when a variant
+        // enables it (as graphs keep a stereo matcher wired only in their stereo variant).
+        if op.kind == OpKind::Transform && !n.disabled {
             for p in op.inputs.iter().filter(|p| p.wired && !seen_ports.contains(&p.name)) {
                 let producers: Vec<String> = spec
                     .nodes
@@ -638,8 +640,11 @@ fn check_inputs(
                             .map(move |(o, _)| format!("{}.{}", node.id, o.name))
                             .collect::<Vec<_>>()
                     })
-                    .take(3)
                     .collect();
+                // An output of the input's own name first (`right: camera.right`).
+                let mut producers = producers;
+                producers.sort_by_key(|r| !r.ends_with(&format!(".{}", p.name)));
+                producers.truncate(3);
                 let hint = match producers.first() {
                     Some(first) => format!("wire it, e.g. `in: {{ {}: {first} }}`", p.name),
                     None => format!("wire it to an output of type {}", p.ty),

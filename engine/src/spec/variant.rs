@@ -14,7 +14,7 @@ pub struct Override {
     pub param: String,
     /// The value, parsed as YAML (so `3`, `true`, `[1, 2]` and `abc` all work).
     pub value: Yaml,
-    /// The flag as given, for messages.
+    /// The flag as given, for messages (`--set node.param=value`, `--save-map FILE`).
     pub text: String,
 }
 
@@ -28,7 +28,7 @@ impl Override {
             .ok_or_else(|| format!("`--set {text}`: expected `node.param=value` (no `.` in `{path}`)"))?;
         let value =
             yaml::parse(value).map_err(|e| format!("`--set {text}`: value is not valid YAML: {}", e.message))?;
-        Ok(Self { node: node.trim().to_owned(), param: param.trim().to_owned(), value, text: text.to_owned() })
+        Ok(Self { node: node.trim().to_owned(), param: param.trim().to_owned(), value, text: format!("--set {text}") })
     }
 }
 
@@ -117,7 +117,7 @@ impl OverrideOrigins {
         for d in diags {
             if let Some((_, at, text)) = self.0.iter().find(|(m, _, _)| Some(*m) == d.span) {
                 d.span = Some(*at);
-                d.message = format!("`--set {text}`: {}", d.message);
+                d.message = format!("`{text}`: {}", d.message);
             }
         }
     }
@@ -133,7 +133,7 @@ pub fn apply_overrides(spec: &mut GraphSpec, overrides: &[Override]) -> (Vec<Dia
         let known: Vec<String> = spec.nodes.iter().map(|n| n.id.clone()).collect();
         let Some(node) = spec.nodes.iter_mut().find(|n| n.id == o.node) else {
             diags.push(
-                Diagnostic::error("unknown-node", None, format!("`--set {}`: no node `{}`", o.text, o.node))
+                Diagnostic::error("unknown-node", None, format!("`{}`: no node `{}`", o.text, o.node))
                     .with_opt_hint(did_you_mean(&o.node, known.iter().map(String::as_str))),
             );
             continue;

@@ -59,6 +59,7 @@ pub(crate) const IMAGE_FOLDER: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |params: &Params| {
         let c = Config::from_params(params)?;
         open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, None, 1.0)
@@ -75,6 +76,7 @@ pub(crate) const RGBD_FOLDER: OpSpec = OpSpec {
     params: RgbdConfig::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |params: &Params| {
         let c = RgbdConfig::from_params(params)?;
         open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, Some(&c.depth_path), c.depth_factor)

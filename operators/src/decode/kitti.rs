@@ -6,7 +6,7 @@ use std::sync::Arc;
 
 use dynaflow_datasets::kitti::{KittiSequence, Pair as KittiPair, Poses};
 
-use dynaflow_engine::msg::{CameraInfo, Header, Image, Pose, Scalars};
+use dynaflow_engine::msg::{CameraInfo, Header, Image, Pose, StereoRig};
 use dynaflow_engine::op::{Context, Instance, OpError, OpKind, OpSpec, Out, Outputs, Params, Source};
 use dynaflow_engine::{param_enum, params};
 
@@ -34,7 +34,7 @@ const LEFT: Out<Image> = Out::new(
 );
 const RIGHT: Out<Image> = Out::new("right", "right rectified image");
 const CAMERA_INFO: Out<CameraInfo> = Out::new("camera_info", "left camera intrinsics (rectified, no distortion)");
-const STEREO: Out<Scalars> = Out::new("stereo", "`baseline_m`: stereo baseline in metres");
+const STEREO: Out<StereoRig> = Out::new("stereo", "the rig: baseline from `calib.txt`'s P1 (or P3 with P2), metres");
 const GT_POSE: Out<Pose> =
     Out::ground_truth("gt_pose", "ground-truth world_from_cam of the left camera, when poses are available");
 
@@ -48,6 +48,7 @@ pub(crate) const KITTI_ODOMETRY: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build,
 };
 
@@ -80,7 +81,7 @@ impl Source for Kitti {
             .send(&LEFT, header.clone(), f.left)
             .send(&RIGHT, header.clone(), f.right)
             .send(&CAMERA_INFO, header.clone(), f.camera)
-            .send(&STEREO, header.clone(), Scalars::one("baseline_m", self.sequence.baseline));
+            .send(&STEREO, header.clone(), StereoRig { baseline: self.sequence.baseline });
         if let Some(p) = f.gt_pose {
             GT_POSE.push(&mut out, Header { frame_id: "world".into(), ..header }, Pose { world_from_cam: p });
         }

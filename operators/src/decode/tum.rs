@@ -55,6 +55,7 @@ pub(crate) const TUM_RGBD: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build,
 };
 

@@ -47,6 +47,7 @@ pub const LK_FLOW: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         let c = Config::from_params(p)?;
         let lk = LkConfig {

@@ -33,6 +33,7 @@ pub const MATCH_DESCRIPTORS: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         let c = Config::from_params(p)?;
         let config = MatchConfig {

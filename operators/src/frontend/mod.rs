@@ -15,7 +15,7 @@ pub use matching::MATCH_DESCRIPTORS;
 pub use orb::ORB_EXTRACT;
 pub use stereo::STEREO_MATCH;
 
-use dynaflow_engine::msg::{Image, Keypoints, PixelFormat, Scalars};
+use dynaflow_engine::msg::{Image, Keypoints, PixelFormat, StereoRig};
 use dynaflow_engine::op::OpError;
 use dynaflow_vision::GrayImage;
 
@@ -40,10 +40,9 @@ pub(crate) fn orb_descriptors(keypoints: &Keypoints) -> Result<&[u8], OpError> {
     }
 }
 
-/// A stereo rig's baseline (`baseline_m` of the sources' `stereo` port), metres: positive and
-/// finite, or an error saying what is wrong.
-pub(crate) fn stereo_baseline(rig: &Scalars) -> Result<f64, OpError> {
-    let b = rig.get("baseline_m").ok_or_else(|| OpError::Input("`stereo` has no `baseline_m`".into()))?;
+/// A stereo rig's baseline, metres: positive and finite, or an error saying what is wrong.
+pub(crate) fn stereo_baseline(rig: &StereoRig) -> Result<f64, OpError> {
+    let b = rig.baseline;
     if !(b > 0.0 && b.is_finite()) {
         return Err(OpError::Input(format!("the stereo baseline is {b} m; it must be positive")));
     }

@@ -45,6 +45,7 @@ pub const ORB_EXTRACT: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         Ok(Instance::Transform(Box::new(OrbOp(OrbExtractor::new(orb_config(&Config::from_params(p)?))))))
     },

@@ -1,6 +1,6 @@
 //! `stereo_match`.
 
-use dynaflow_engine::msg::{CameraInfo, DepthImage, Image, Keypoints, Scalars};
+use dynaflow_engine::msg::{self, CameraInfo, DepthImage, Image, Keypoints, Scalars};
 use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_vision::orb::{OrbExtractor, OrbKeypoint};
 use dynaflow_vision::stereo::{StereoRig, StereoView, stereo_match};
@@ -12,12 +12,13 @@ use super::orb::{Config, orb_config};
 const KEYPOINTS: In<Keypoints> =
     In::required("keypoints", "the left image's ORB keypoints with descriptors (`orb_extract`)");
 const LEFT: In<Image> = In::required("left", "the left rectified image the keypoints come from");
-// Optional in the graph (a graph can carry a disabled `stereo_match` wired only in its stereo
-// variant, and still read a TUM folder with `--input`); a frame without them is an error.
-const RIGHT: In<Image> =
-    In::optional("right", "the right rectified image, same size (a frame without one is an error)");
+// Must be wired (a disabled `stereo_match`, wired only in a graph's stereo variant so the graph
+// still reads a TUM folder with `--input`, is not checked); a frame without them is an error
+// that says why (a source with no right camera), not a silently skipped frame.
+const RIGHT: In<Image> = In::wired("right", "the right rectified image, same size (a frame without one is an error)");
 const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "the left camera's intrinsics (fx for bf)");
-const STEREO: In<Scalars> = In::optional("stereo", "the rig: `baseline_m` (a frame without it is an error)");
+const STEREO: In<msg::StereoRig> =
+    In::wired("stereo", "the rig, the source's `stereo` (a frame without it is an error)");
 const DEPTH: Out<DepthImage> =
     Out::new("depth", "sparse depth: each matched keypoint's stereo depth at its pixel, metres (0 = none)");
 const STATS: Out<Scalars> = Out::new(
@@ -35,6 +36,7 @@ pub const STEREO_MATCH: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         let config = orb_config(&Config::from_params(p)?);
         Ok(Instance::Transform(Box::new(StereoOp {

@@ -35,6 +35,7 @@ pub const BOX_TO_MASK: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| Ok(Instance::Transform(Box::new(BoxToMask { config: Config::from_params(p)? }))),
 };
 

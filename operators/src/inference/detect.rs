@@ -61,6 +61,7 @@ pub const DETECT: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         let c = Config::from_params(p)?;
         let embedded = c.model.as_os_str().is_empty();

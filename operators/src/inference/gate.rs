@@ -33,6 +33,7 @@ pub const KEYFRAME_GATE: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         Ok(Instance::Transform(Box::new(KeyframeGate {
             config: Config::from_params(p)?,

@@ -65,6 +65,7 @@ pub const SEGMENT: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         let c = Config::from_params(p)?;
         let (segmenter, runner, backend) = load(&c.model, &c.classes, c.input_range, c.backend, c.allow_software)?;

@@ -64,6 +64,7 @@ pub const OCTOMAP: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         let c = Config::from_params(p)?;
         let params = TreeParams {

@@ -46,6 +46,7 @@ pub const LOCAL_MAP: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         Ok(Instance::Transform(Box::new(LocalMap {
             config: Config::from_params(p)?,

@@ -57,6 +57,7 @@ pub const LOOP_CLOSE: OpSpec = OpSpec {
     params: Config::PARAMS,
     cpu_heavy: true,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         let config = Config::from_params(p)?;
         let (vocabulary, name, load_ms) = super::load_vocabulary(&config.vocabulary)?;

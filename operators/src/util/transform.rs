@@ -21,6 +21,7 @@ pub(super) const MASK_STATS: OpSpec = OpSpec {
     params: &[],
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |_| Ok(Instance::Transform(Box::new(MaskStats))),
 };
 
@@ -61,6 +62,7 @@ pub(super) const MASK_IOU: OpSpec = OpSpec {
     params: IouConfig::PARAMS,
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |p: &Params| {
         Ok(Instance::Transform(Box::new(MaskIou {
             config: IouConfig::from_params(p)?,
@@ -152,6 +154,7 @@ pub(super) const LABEL_ACCURACY: OpSpec = OpSpec {
     params: &[],
     cpu_heavy: false,
     ground_truth_outputs: None,
+    map_store: None,
     build: |_| Ok(Instance::Transform(Box::new(LabelAccuracy::default()))),
 };
 
@@ -205,17 +208,18 @@ impl Operator for LabelAccuracy {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
         let c = self.run;
-        ctx.report = Some(serde_json::json!({
-            "frames": self.frames,
-            "precision": c.precision(),
-            "recall": c.recall(),
-            "f1": c.f1(),
-            "tp": c.tp,
-            "fp": c.fp,
-            "fn": c.fn_,
-            "tn": c.tn,
-            "outside": self.outside,
-        }));
+        let report = crate::report::LabelAccuracyReport {
+            frames: self.frames,
+            precision: c.precision(),
+            recall: c.recall(),
+            f1: c.f1(),
+            tp: c.tp,
+            fp: c.fp,
+            fn_: c.fn_,
+            tn: c.tn,
+            outside: self.outside,
+        };
+        ctx.report = Some(crate::report::NodeReport::LabelAccuracy(report).to_json());
         Ok(())
     }
 }

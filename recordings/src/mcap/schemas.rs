@@ -2,8 +2,8 @@
 //! images, depth and masks, which are protobuf (`proto`).
 //!
 //! Foxglove's well-known schema names are used where one fits (images, annotations, poses,
-//! point clouds, calibration, scene updates); `dynaflow.PointLabels` and `dynaflow.Scalars`
-//! are ours. Every message also carries a `dynaflow` object (see `payload`) that Foxglove
+//! point clouds, calibration, scene updates); `dynaflow.PointLabels`, `dynaflow.Scalars` and
+//! `dynaflow.StereoRig` are ours. Every message also carries a `dynaflow` object (see `payload`) that Foxglove
 //! ignores and `dynaflow diff` reads. The schemas below list the fields we write.
 
 use base64::Engine as _;
@@ -33,6 +33,7 @@ pub fn schema_name(ty: PortType, codec: ImageCodec) -> &'static str {
         PortType::PointCloud | PortType::Map => "foxglove.PointCloud",
         PortType::OctreeUpdate => "foxglove.SceneUpdate",
         PortType::PointLabels => "dynaflow.PointLabels",
+        PortType::StereoRig => "dynaflow.StereoRig",
         PortType::Scalars | PortType::Any => "dynaflow.Scalars",
     }
 }
@@ -66,6 +67,9 @@ pub fn schema_text(name: &str) -> String {
             r#""deletions":{{"type":"array"}},"entities":{{"type":"array","items":{{"type":"object","properties":{{"timestamp":{TIME},"frame_id":{{"type":"string"}},"id":{{"type":"string"}},"lifetime":{TIME},"frame_locked":{{"type":"boolean"}},"cubes":{{"type":"array","items":{{"type":"object","properties":{{"pose":{pose},"size":{VEC3},"color":{COLOR}}}}}}}}}}}}}"#
         ),
         "dynaflow.PointLabels" => r#""timestamp":{"type":"object"},"index":{"type":"array","items":{"type":"integer"}},"dynamic":{"type":"array","items":{"type":"boolean"}},"reason":{"type":"array","items":{"type":"string","enum":["static","epipolar","semantic","flow","depth"]}},"score":{"type":"array","items":{"type":"number"}},"at":{"type":"array","items":{"type":"array","items":{"type":"number"}}}"#.replace(r#"{"type":"object"}"#, TIME),
+        "dynaflow.StereoRig" => format!(
+            r#""timestamp":{TIME},"baseline_m":{{"type":"number","description":"distance between the optical centres, metres"}}"#
+        ),
         _ => format!(r#""timestamp":{TIME},"values":{{"type":"object","additionalProperties":{{"type":"number"}}}}"#),
     };
     format!(r#"{{"title":"{name}","type":"object","properties":{{{body},"dynaflow":{DYNAFLOW}}}}}"#)
@@ -196,6 +200,7 @@ pub fn to_json(msg: &Message) -> Result<Vec<u8>, String> {
             "timestamp": ts,
             "values": Value::Object(s.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect()),
         }),
+        Body::StereoRig(r) => json!({"timestamp": ts, "baseline_m": r.baseline}),
         _ => json!({"timestamp": ts}),
     };
     if let Some(obj) = v.as_object_mut() {

@@ -187,6 +187,36 @@ impl RrdSink {
     fn err(&self, e: impl std::fmt::Display) -> SinkError {
         SinkError::new("rerun", format!("{}: {e}", self.target))
     }
+
+    /// Named values as one entity per port, one series per name: a name not seen before on
+    /// this port becomes a new series (its names re-logged); a name missing from a message is
+    /// NaN there (a gap in the plot).
+    fn log_series(
+        &mut self,
+        rec: &rerun::RecordingStream,
+        node: &str,
+        port: &str,
+        path: &str,
+        named: &[(std::sync::Arc<str>, f64)],
+    ) -> rerun::RecordingStreamResult<()> {
+        let entity = format!("metrics/{node}/{port}");
+        let names = self.series.entry(path.to_owned()).or_default();
+        let known = names.len();
+        for (name, _) in named {
+            if !names.contains(name) {
+                names.push(name.clone());
+            }
+        }
+        let values: Vec<f64> =
+            names.iter().map(|n| named.iter().find(|(name, _)| name == n).map_or(f64::NAN, |(_, v)| *v)).collect();
+        if names.len() != known {
+            rec.log_static(
+                entity.as_str(),
+                &rerun::SeriesLines::new().with_names(names.iter().map(|n| n.to_string())),
+            )?;
+        }
+        rec.log(entity, &rerun::Scalars::new(values))
+    }
 }
 
 /// The default layout: the camera image with what tracking decides drawn on it (points in red
@@ -541,27 +571,10 @@ impl Sink for RrdSink {
                 let colors: Vec<rerun::Color> = o.occupied.iter().map(|(_, c)| class_color(*c)).collect();
                 rec.log(world, &rerun::Boxes3D::from_centers_and_half_sizes(centers, [[h, h, h]]).with_colors(colors))
             }
-            Body::Scalars(s) => {
-                // One entity per port, one series per name: a name not seen before on this
-                // port becomes a new series (its names re-logged); a name missing from a
-                // message is NaN there (a gap in the plot).
-                let entity = format!("metrics/{node}/{port}");
-                let names = self.series.entry(path.clone()).or_default();
-                let known = names.len();
-                for (name, _) in &s.values {
-                    if !names.contains(name) {
-                        names.push(name.clone());
-                    }
-                }
-                let values: Vec<f64> = names
-                    .iter()
-                    .map(|n| s.values.iter().find(|(name, _)| name == n).map_or(f64::NAN, |(_, v)| *v))
-                    .collect();
-                if names.len() != known {
-                    let lines = rerun::SeriesLines::new().with_names(names.iter().map(|n| n.to_string()));
-                    rec.log_static(entity.as_str(), &lines).map_err(|e| self.err(e))?;
-                }
-                rec.log(entity, &rerun::Scalars::new(values))
+            Body::Scalars(s) => self.log_series(&rec, node, port, &path, &s.values),
+            // The rig as one series (`baseline_m`), beside the metrics.
+            Body::StereoRig(r) => {
+                self.log_series(&rec, node, port, &path, &[(std::sync::Arc::from("baseline_m"), r.baseline)])
             }
             _ => Ok(()),
         };

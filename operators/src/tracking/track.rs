@@ -1,0 +1,569 @@
+//! `track_rgbd`, `track_stereo`, `track_mono`: one tracker (`dynaflow_slam::Tracker`) behind
+//! three operators, one per sensor, each declaring as required exactly the inputs its sensor
+//! needs, so a miswired graph is refused at validation instead of failing at frame 0.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use dynaflow_engine::msg::{
+    CameraInfo, DepthImage, Header, Keypoints, Message, PointLabels, Pose, Scalars, SegmentationMask, SparseMap,
+    StereoRig, Tracks,
+};
+use dynaflow_engine::op::{
+    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, ParamSpec, Params,
+    concat_params,
+};
+use dynaflow_engine::params;
+use dynaflow_slam::eval::{Align, evaluate};
+use dynaflow_slam::{Feature, Tracker, TrackerConfig};
+use dynaflow_vision::camera::Pinhole;
+use nalgebra::Isometry3;
+use rand_core::Rng;
+
+use super::convert;
+use crate::report::{Ate, FrameStates, MapSaved, NodeReport, Rpe, TrackerReport};
+
+/// What gives keypoints their depth (ORB-SLAM2's three sensor modes): fixed by the operator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sensor {
+    /// A depth camera's image.
+    Rgbd,
+    /// `stereo_match`'s depth and the rig's baseline.
+    Stereo,
+    /// No depth: two-view initialisation, arbitrary scale.
+    Mono,
+}
+
+impl Sensor {
+    /// The name in reports.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Sensor::Rgbd => "rgbd",
+            Sensor::Stereo => "stereo",
+            Sensor::Mono => "mono",
+        }
+    }
+}
+
+params! {
+    /// Every sensor's parameters.
+    struct Common {
+        /// fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30)
+        min_inliers: u64 [6, 100_000] = 30,
+        /// projection search radius, pixels (ORB-SLAM2's motion-model search: 15; widened 3x once)
+        search_radius: f64 [1.0, 200.0] = 15.0,
+        /// P3P RANSAC reprojection threshold, pixels
+        ransac_threshold: f64 [0.1, 100.0] = 3.0,
+        /// lost frames in a row before a new map starts
+        reset_after: u64 [0, 100_000] = 5,
+        /// vocabulary file (`dynaflow vocab train`) for relocalisation in the whole map when tracking is lost (ORB-SLAM2's key-frame database); empty: the embedded default (as `loop_close`'s; use the same file for both)
+        vocabulary: PathBuf = PathBuf::new(),
+        /// write the whole map here at the end of the run (key frames, keypoints, points, the vocabulary's id; `dynaflow run --save-map`)
+        save_map: PathBuf = PathBuf::new(),
+        /// start in this saved map (made with the same vocabulary): the first frames relocalise in it (`dynaflow run --load-map`)
+        load_map: PathBuf = PathBuf::new(),
+        /// false: ORB-SLAM2's localisation mode, with `load_map`: no key frames, the local map follows the camera through the loaded one, a lost camera relocalises again
+        mapping: bool = true,
+        /// a keypoint takes the culling label of the nearest labelled track within this many pixels (dynamic: left out); 10 = `lk_flow`'s `min_distance`, the spacing of the tracked corners, so a label speaks for its neighbourhood as a segment would; 0: only keypoints on a track
+        label_radius: f64 [0.0, 100.0] = 10.0,
+    }
+}
+
+params! {
+    /// A depth camera's parameters (`track_rgbd`).
+    struct DepthCamera {
+        /// virtual baseline, metres: bf = fx x baseline weighs the depth residual (ORB-SLAM2 TUM configs: bf 40 at fx 525); 0 uses pixels only
+        baseline: f64 [0.0, 10.0] = 0.08,
+        /// points closer than this are `close` in the key-frame rule (ORB-SLAM2 ThDepth 40 x baseline)
+        close_depth: f64 [0.1, 1000.0] = 3.2,
+        /// depths beyond this (metres) are not used (Kinect noise grows with the square)
+        max_depth: f64 [0.1, 1000.0] = 6.0,
+    }
+}
+
+const RGBD_PARAMS: [ParamSpec; Common::PARAMS.len() + DepthCamera::PARAMS.len()] =
+    concat_params(Common::PARAMS, DepthCamera::PARAMS);
+
+const KEYPOINTS: In<Keypoints> = In::required("keypoints", "this frame's ORB keypoints with descriptors");
+const CAMERA_INFO: In<CameraInfo> = In::required("camera_info", "intrinsics");
+const DEPTH_CAMERA: In<DepthImage> =
+    In::required("depth", "the depth camera's image, metres, registered to the colour image");
+const STEREO_DEPTH: In<DepthImage> =
+    In::required("depth", "keypoint depth from the rectified pair (`stereo_match.depth`)");
+const RIG: In<StereoRig> =
+    In::required("stereo", "the stereo rig (the source's `stereo`): its baseline gives bf and the close depth");
+const MAP: In<SparseMap> = In::optional("map", "local mapping's refined local map (`delay: 1`, `join: latest`)");
+const LOOP: In<SparseMap> = In::optional(
+    "loop",
+    "`loop_close`'s corrected map (`delay: 1`, `join: latest`): key frames, points and the last pose move with it",
+);
+const MASK: In<SegmentationMask> = In::optional("mask", "pixels of a non-zero class are dynamic");
+const LABELS: In<PointLabels> = In::optional("labels", "culling's labels of `tracks`");
+const TRACKS: In<Tracks> = In::optional(
+    "tracks",
+    "the tracks `labels` index (a keypoint whose nearest labelled track within `label_radius` is dynamic is left out)",
+);
+const GT_POSE: In<Pose> =
+    In::optional("gt_pose", "ground truth, for the ATE in the summary").with_role(InputRole::Evaluation);
+const POSE: Out<Pose> =
+    Out::new("pose", "world_from_cam (the first key frame is the world); none on a frame the tracker lost");
+const KEYFRAME: Out<SparseMap> =
+    Out::new("keyframe", "a new key frame with its observations and new points (to `local_map`)");
+const STATS: Out<Scalars> = Out::new(
+    "stats",
+    "`state` (0 not initialised, 1 new map, 2 tracked, 3 relocalised, 4 lost), `matches`, `inliers`, `map_points`, `map_id`, `keyframe`",
+);
+
+/// The inputs every sensor shares, after its own.
+macro_rules! tracker_inputs {
+    ($($own:expr),*) => {
+        &[KEYPOINTS.spec, $($own,)* CAMERA_INFO.spec, MAP.spec, LOOP.spec, MASK.spec, LABELS.spec, TRACKS.spec, GT_POSE.spec]
+    };
+}
+
+const OUTPUTS: &[dynaflow_engine::op::PortSpec] = &[POSE.spec, KEYFRAME.spec, STATS.spec];
+
+/// What `dynaflow run --save-map/--load-map/--localise` set on a tracker.
+pub const MAP_STORE: dynaflow_engine::op::MapStore =
+    dynaflow_engine::op::MapStore { save: "save_map", load: "load_map", mapping: "mapping" };
+
+/// ORB-SLAM2's RGB-D tracking.
+pub const TRACK_RGBD: OpSpec = OpSpec {
+    name: "track_rgbd",
+    family: "pnp_ba",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/track_rgbd.md")),
+    kind: OpKind::Transform,
+    inputs: tracker_inputs!(DEPTH_CAMERA.spec),
+    outputs: OUTPUTS,
+    params: &RGBD_PARAMS,
+    cpu_heavy: true,
+    ground_truth_outputs: None,
+    map_store: Some(MAP_STORE),
+    build: |p| build(p, Sensor::Rgbd),
+};
+
+/// ORB-SLAM2's stereo tracking.
+pub const TRACK_STEREO: OpSpec = OpSpec {
+    name: "track_stereo",
+    family: "pnp_ba",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/track_stereo.md")),
+    kind: OpKind::Transform,
+    inputs: tracker_inputs!(STEREO_DEPTH.spec, RIG.spec),
+    outputs: OUTPUTS,
+    params: Common::PARAMS,
+    cpu_heavy: true,
+    ground_truth_outputs: None,
+    map_store: Some(MAP_STORE),
+    build: |p| build(p, Sensor::Stereo),
+};
+
+/// ORB-SLAM2's monocular tracking.
+pub const TRACK_MONO: OpSpec = OpSpec {
+    name: "track_mono",
+    family: "pnp_ba",
+    doc: dynaflow_engine::op::doc_line(include_str!("docs/track_mono.md")),
+    kind: OpKind::Transform,
+    inputs: tracker_inputs!(),
+    outputs: OUTPUTS,
+    params: Common::PARAMS,
+    cpu_heavy: true,
+    ground_truth_outputs: None,
+    map_store: Some(MAP_STORE),
+    build: |p| build(p, Sensor::Mono),
+};
+
+/// What `pnp_track` graphs change to.
+pub const PNP_TRACK_MIGRATION: &str = "`pnp_track` is one operator per sensor now: `op: track_rgbd` (what `sensor: rgbd`, the default, was), `op: track_stereo` (wire `depth: stereo.depth` and `stereo: camera.stereo`) or `op: track_mono`; drop the `sensor` param";
+
+/// Where the map will be written, checked before the first frame (as the recorders check their
+/// files): a run must not end with its map lost for a wrong path.
+fn check_save_path(path: &std::path::Path) -> Result<(), OpError> {
+    if path.as_os_str().is_empty() {
+        return Ok(());
+    }
+    let parent = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(std::path::Path::new("."));
+    let problem = if path.is_dir() {
+        Some("is a directory; give a file name".to_owned())
+    } else if !parent.is_dir() {
+        Some(format!("its folder {} does not exist", parent.display()))
+    } else {
+        None
+    };
+    match problem {
+        Some(problem) => {
+            Err(OpError::Config { key: "save_map".into(), message: format!("{}: {problem}", path.display()) })
+        }
+        None => Ok(()),
+    }
+}
+
+fn build(p: &Params, sensor: Sensor) -> Result<Instance, OpError> {
+    let config = Common::from_params(p)?;
+    let depth_camera = if sensor == Sensor::Rgbd { Some(DepthCamera::from_params(p)?) } else { None };
+    let (vocabulary, _, _) = super::load_vocabulary(&config.vocabulary)?;
+    if !config.mapping && config.load_map.as_os_str().is_empty() {
+        return Err(OpError::Config {
+            key: "mapping".into(),
+            message: "`mapping: false` (localisation mode) needs a map to localise in: set `load_map` (or `dynaflow run --load-map FILE`)".into(),
+        });
+    }
+    check_save_path(&config.save_map)?;
+    // Read the map now, so that a bad file stops the run before it starts; the tracker gives
+    // it its camera (`Tracker::use_map`) on the first frame.
+    let loaded = if config.load_map.as_os_str().is_empty() {
+        None
+    } else {
+        let cam = Pinhole { fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 };
+        Some(
+            dynaflow_slam::map_file::load(&config.load_map, cam, 0.0, 0.0, 1.2, vocabulary.clone())
+                .map_err(|e| OpError::Input(e.to_string()))?,
+        )
+    };
+    Ok(Instance::Transform(Box::new(Track {
+        sensor,
+        config,
+        depth_camera,
+        vocabulary,
+        loaded,
+        tracker: None,
+        trajectory: Vec::new(),
+        ground_truth: Vec::new(),
+        counts: [0; 5],
+        last_map: None,
+        last_loop: None,
+        best_usable: 0,
+        frames: 0,
+        first_pose_frame: None,
+    })))
+}
+
+struct Track {
+    sensor: Sensor,
+    config: Common,
+    /// `track_rgbd`'s own parameters.
+    depth_camera: Option<DepthCamera>,
+    /// For relocalisation in the whole map.
+    vocabulary: Arc<dynaflow_slam::bow::Vocabulary>,
+    /// A map to start in (`load_map`), until the first frame gives the camera.
+    loaded: Option<dynaflow_slam::keyframe_map::KeyFrameMap>,
+    tracker: Option<Tracker>,
+    trajectory: Vec<(f64, Isometry3<f64>)>,
+    ground_truth: Vec<(f64, Isometry3<f64>)>,
+    /// Frames per state code.
+    counts: [u64; 5],
+    /// The map batch last applied (a `latest` join may repeat it).
+    last_map: Option<Arc<Message>>,
+    /// The loop correction last applied.
+    last_loop: Option<Arc<Message>>,
+    /// The most keypoints of one frame that a map could start from (static, with a depth up
+    /// to `max_depth`): what the end-of-run message says when no map ever started.
+    best_usable: usize,
+    /// Frames seen, and the index of the first one with a pose (monocular: initialisation).
+    frames: u64,
+    first_pose_frame: Option<u64>,
+}
+
+/// Per keypoint: left out as dynamic? The culling crate's rules: a keypoint on a pixel of a
+/// dynamic class (`mask`), or whose nearest labelled track within `label_radius` is dynamic.
+fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]], label_radius: f32) -> Result<Vec<bool>, OpError> {
+    let mut dynamic = match MASK.get(inputs)? {
+        Some(m) => dynaflow_culling::mask_rule(points, |x, y| {
+            // (The mask's size was checked against the camera's.)
+            x < m.width as usize
+                && y < m.height as usize
+                && m.classes.get(y * m.width as usize + x).is_some_and(|&c| c != 0)
+        })
+        .iter()
+        .map(|d| d.dynamic)
+        .collect(),
+        None => vec![false; points.len()],
+    };
+    if let (Some(l), Some(t)) = (LABELS.get(inputs)?, TRACKS.get(inputs)?) {
+        let labelled: Vec<([f32; 2], bool)> = l
+            .labels
+            .iter()
+            .filter_map(|lab| t.tracks.get(lab.index as usize).map(|tr| (tr.cur, lab.dynamic)))
+            .collect();
+        dynaflow_culling::nearest_track_labels(&labelled, points, label_radius, &mut dynamic);
+    }
+    Ok(dynamic)
+}
+
+impl Track {
+    /// The tracker for this camera, made on the first frame (a loaded map gets its camera
+    /// here; one made with another camera's images is refused, naming the file).
+    fn start(&mut self, ctx: &mut Context, k: &CameraInfo, rig: Option<&StereoRig>) -> Result<Tracker, OpError> {
+        let mut tc = match (self.sensor, rig, &self.depth_camera) {
+            (Sensor::Mono, _, _) => TrackerConfig::monocular(k.fx),
+            (Sensor::Stereo, Some(rig), _) => TrackerConfig::stereo(k.fx, crate::frontend::stereo_baseline(rig)?),
+            (_, _, Some(d)) => TrackerConfig {
+                bf: k.fx * d.baseline,
+                th_depth: d.close_depth,
+                max_depth: d.max_depth,
+                ..TrackerConfig::rgbd(k.fx)
+            },
+            _ => return Err(OpError::Failed("the tracker has no depth configuration".into())),
+        };
+        tc.search_radius = self.config.search_radius;
+        tc.min_inliers = self.config.min_inliers as usize;
+        tc.ransac_threshold = self.config.ransac_threshold;
+        tc.reset_after = self.config.reset_after as u32;
+        let cam = Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
+        let mut tracker = Tracker::new(tc, cam, k.width as usize, k.height as usize, ctx.rng.next_u64())
+            .with_vocabulary(self.vocabulary.clone());
+        if let Some(map) = self.loaded.take() {
+            let outside = map
+                .kfs
+                .values()
+                .flat_map(|k| &k.keypoints)
+                .find(|kp| kp.uv[0] > f64::from(k.width) + 1.0 || kp.uv[1] > f64::from(k.height) + 1.0);
+            if let Some(kp) = outside {
+                return Err(OpError::Input(format!(
+                    "{}: the map holds a keypoint at ({:.0}, {:.0}), outside this run's {}x{} images: it was made with another camera",
+                    self.config.load_map.display(),
+                    kp.uv[0],
+                    kp.uv[1],
+                    k.width,
+                    k.height
+                )));
+            }
+            tracker.use_map(map, self.config.mapping);
+        }
+        Ok(tracker)
+    }
+}
+
+impl Operator for Track {
+    fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
+        let (msg, kp) = KEYPOINTS.require(inputs)?;
+        let (_, k) = CAMERA_INFO.require(inputs)?;
+        let depth = match self.sensor {
+            Sensor::Mono => None,
+            Sensor::Rgbd => Some(DEPTH_CAMERA.require(inputs)?.1),
+            Sensor::Stereo => Some(STEREO_DEPTH.require(inputs)?.1),
+        };
+        let rig = match self.sensor {
+            Sensor::Stereo => Some(RIG.require(inputs)?.1),
+            _ => None,
+        };
+        if let Some(m) = MASK.get(inputs)?
+            && (m.width, m.height) != (k.width, k.height)
+        {
+            return Err(OpError::Input(format!(
+                "`mask` is {}x{} but the camera's images are {}x{}: a mask must cover the image the keypoints come from, pixel for pixel",
+                m.width, m.height, k.width, k.height
+            )));
+        }
+        let descriptors = crate::frontend::orb_descriptors(kp)?;
+        if self.tracker.is_none() {
+            self.tracker = Some(self.start(ctx, k, rig)?);
+        }
+        let Some(tracker) = self.tracker.as_mut() else { return Ok(Outputs::new()) };
+        if let Some(update) = super::fresh(MAP.find(inputs)?, &mut self.last_map) {
+            tracker.apply_map_update(&convert::from_msg(update));
+        }
+        if let Some(correction) = super::fresh(LOOP.find(inputs)?, &mut self.last_loop) {
+            tracker.apply_correction(&convert::from_msg(correction));
+        }
+        let uv: Vec<[f32; 2]> = kp.points.iter().map(|p| [p.x, p.y]).collect();
+        let dynamic = dynamic_keypoints(inputs, &uv, self.config.label_radius as f32)?;
+        let features: Vec<Feature> = kp
+            .points
+            .iter()
+            .zip(descriptors.chunks_exact(32))
+            .zip(&dynamic)
+            .map(|((p, d), &dynamic)| {
+                let z = depth.map_or(0.0, |d| f64::from(d.at_nearest(p.x, p.y)));
+                let mut descriptor = [0u8; 32];
+                descriptor.copy_from_slice(d);
+                Feature {
+                    uv: [f64::from(p.x), f64::from(p.y)],
+                    octave: p.octave,
+                    depth: (z > 0.0 && z.is_finite()).then_some(z),
+                    descriptor,
+                    dynamic,
+                }
+            })
+            .collect();
+        let max_depth = tracker.config().max_depth;
+        let usable = features.iter().filter(|f| !f.dynamic && f.depth.is_some_and(|z| z <= max_depth)).count();
+        self.best_usable = self.best_usable.max(usable);
+        let stamp = msg.header.stamp;
+        let r = tracker.track(stamp, &features);
+        self.counts[r.state.code() as usize] += 1;
+        if r.pose.is_some() && self.first_pose_frame.is_none() {
+            self.first_pose_frame = Some(self.frames);
+        }
+        self.frames += 1;
+        if let Some(gt) = GT_POSE.get(inputs)? {
+            self.ground_truth.push((stamp, gt.world_from_cam));
+        }
+        let header = Header { frame_id: Arc::from("world"), ..msg.header.clone() };
+        let stats = vec![
+            ("state".into(), r.state.code()),
+            ("matches".into(), r.matches as f64),
+            ("inliers".into(), r.inliers as f64),
+            ("map_points".into(), r.map_points as f64),
+            ("map_id".into(), f64::from(r.map_id)),
+            ("keyframe".into(), if r.keyframe.is_some() { 1.0 } else { 0.0 }),
+        ];
+        let mut out = Outputs::new().send(&STATS, header.clone(), Scalars { values: stats });
+        // A lost frame's pose is the motion model's guess, not an estimate: it is left out of
+        // the pose stream and the trajectory, as ORB-SLAM2's SaveTrajectoryTUM and the TUM tools
+        // leave lost frames out (their count is in the report beside the ATE).
+        if let Some(world_from_cam) = r.pose.filter(|_| r.state != dynaflow_slam::TrackState::Lost) {
+            self.trajectory.push((stamp, world_from_cam));
+            out = out.send(&POSE, header.clone(), Pose { world_from_cam });
+        }
+        if let Some(kf) = &r.keyframe {
+            out = out.send(&KEYFRAME, header, convert::to_msg(kf));
+        }
+        Ok(out)
+    }
+
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
+        // The trajectory file first: whatever happens next, the estimate is on disk.
+        let written = self.write_trajectory(ctx);
+        let saved = self.save_map();
+        let [not_initialised, new_map, tracked, relocalised, lost] = self.counts;
+        let mut report = TrackerReport {
+            frames: FrameStates { not_initialised, new_map, tracked, relocalised, lost },
+            maps: self.tracker.as_ref().map_or(0, Tracker::map_id),
+            map_relocalisations: self.tracker.as_ref().map_or(0, Tracker::map_relocalisations),
+            sensor: self.sensor.as_str().to_owned(),
+            first_pose_frame: self.first_pose_frame,
+            ..TrackerReport::default()
+        };
+        if let Some(why) = self.never_initialised_because() {
+            tracing::warn!("`{}`: {why}", ctx.node);
+            report.initialised = Some(false);
+            report.not_initialised_because = Some(why);
+        }
+        // The online estimate (each frame's pose as it was sent) and the final one (rebuilt
+        // from the key frames at the end, as ORB-SLAM2 saves it: local BA's refinements and
+        // loop corrections included).
+        let final_trajectory = self.final_trajectory();
+        if !self.ground_truth.is_empty() {
+            // evo's default tolerance (10 ms); SE(3) alignment as the RGB-D papers report it,
+            // Sim(3) for a single camera (its scale is arbitrary; evo `-as`).
+            let (align, name) = if self.sensor == Sensor::Mono { (Align::Sim3, "sim3") } else { (Align::Se3, "se3") };
+            let score = |poses: &[(f64, Isometry3<f64>)]| -> Option<Result<(Ate, Rpe), String>> {
+                if poses.is_empty() {
+                    return None;
+                }
+                Some(match evaluate(&self.ground_truth, poses, 0.01, align, 1) {
+                    Ok(e) => Ok((Ate::of(&e, name), Rpe::of(&e))),
+                    Err(e) => Err(e.to_string()),
+                })
+            };
+            match score(&self.trajectory) {
+                Some(Ok((a, r))) => (report.ate, report.rpe) = (Some(a), Some(r)),
+                Some(Err(e)) => report.ate_error = Some(e),
+                None => {}
+            }
+            match score(&final_trajectory) {
+                Some(Ok((a, r))) => (report.ate_final, report.rpe_final) = (Some(a), Some(r)),
+                Some(Err(e)) => report.ate_final_error = Some(e),
+                None => {}
+            }
+        }
+        match &saved {
+            Ok(Some((keyframes, points))) => {
+                report.map_saved = Some(MapSaved {
+                    file: self.config.save_map.display().to_string(),
+                    keyframes: *keyframes,
+                    points: *points,
+                });
+            }
+            Ok(None) => {}
+            Err(e) => report.map_saved_error = Some(e.to_string()),
+        }
+        if !self.config.load_map.as_os_str().is_empty() {
+            report.map_loaded = Some(self.config.load_map.display().to_string());
+        }
+        ctx.report = Some(NodeReport::Tracker(Box::new(report)).to_json());
+        written.and(saved.map(|_| ()))
+    }
+}
+
+impl Track {
+    /// Why no frame ever had a pose (`None` when one did).
+    fn never_initialised_because(&self) -> Option<String> {
+        if self.first_pose_frame.is_some() {
+            return None;
+        }
+        let [not_initialised, _, _, _, lost] = self.counts;
+        Some(if self.sensor == Sensor::Mono {
+            let last = self.tracker.as_ref().and_then(Tracker::init_failure).unwrap_or("no frame");
+            format!(
+                "the monocular tracker never initialised in {not_initialised} frames (it needs two views with enough parallax); the last attempt: {last}"
+            )
+        } else if !self.config.load_map.as_os_str().is_empty() {
+            format!(
+                "the camera was never relocalised in the loaded map {}: {lost} frames lost of {}",
+                self.config.load_map.display(),
+                self.frames
+            )
+        } else {
+            // No map ever started: no pose, no ATE. Said here, in the summary and by `run`.
+            let max_depth = self.tracker.as_ref().map_or(0.0, |t| t.config().max_depth);
+            format!(
+                "the tracker never initialised in {not_initialised} frames: at most {} keypoints of a frame had a depth up to max_depth {max_depth} m and no mask or dynamic label; a map needs {}",
+                self.best_usable,
+                TrackerConfig::rgbd(1.0).min_init_points
+            )
+        })
+    }
+
+    /// Write the whole map to `save_map` (if set): its key frames and points.
+    fn save_map(&self) -> Result<Option<(usize, usize)>, OpError> {
+        if self.config.save_map.as_os_str().is_empty() {
+            return Ok(None);
+        }
+        let Some(map) = self.tracker.as_ref().and_then(Tracker::places).filter(|m| !m.kfs.is_empty()) else {
+            return Err(OpError::Failed(format!(
+                "no map to save to {}: the tracker never started one",
+                self.config.save_map.display()
+            )));
+        };
+        let path = &self.config.save_map;
+        dynaflow_engine::files::write_atomic(path, &dynaflow_slam::map_file::encode(map))
+            .map_err(|source| OpError::Io { path: path.clone(), source })?;
+        Ok(Some((map.kfs.len(), map.points.len())))
+    }
+
+    fn final_trajectory(&self) -> Vec<(f64, Isometry3<f64>)> {
+        self.tracker.as_ref().map(Tracker::keyframe_trajectory).unwrap_or_default()
+    }
+
+    /// `<out>/<stem>.<node>.trajectory.txt` (the online estimate), `.final_trajectory.txt`
+    /// (rebuilt from the final key frames, ORB-SLAM2's `SaveTrajectoryTUM`), and with `gt_pose`
+    /// the ground truth of the same frames beside them (`.groundtruth.txt`), all TUM format
+    /// (`dynaflow eval`, `dynaflow bench`).
+    fn write_trajectory(&self, ctx: &Context) -> Result<(), OpError> {
+        let final_trajectory = self.final_trajectory();
+        for (what, poses) in [
+            ("trajectory", &self.trajectory),
+            ("final_trajectory", &final_trajectory),
+            ("groundtruth", &self.ground_truth),
+        ] {
+            // The estimate's file is written even empty (a tracker that never initialised),
+            // so a script finds it; the ground truth only when there is some.
+            if poses.is_empty() && what == "groundtruth" {
+                continue;
+            }
+            let Some(path) = ctx.output_file(&format!("{what}.txt")) else { return Ok(()) };
+            let io = |source| OpError::Io { path: path.clone(), source };
+            let mut f = std::io::BufWriter::new(dynaflow_engine::files::create_new(&path).map_err(io)?);
+            writeln!(f, "# timestamp tx ty tz qx qy qz qw (world_from_cam, dynaflow {what})").map_err(io)?;
+            for (t, p) in poses.iter() {
+                let (v, q) = (p.translation.vector, p.rotation.coords);
+                writeln!(f, "{t:.6} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}", v.x, v.y, v.z, q.x, q.y, q.z, q.w)
+                    .map_err(io)?;
+            }
+            f.flush().map_err(io)?;
+        }
+        Ok(())
+    }
+}

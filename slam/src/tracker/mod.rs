@@ -1,0 +1,417 @@
+//! ORB-SLAM2's tracking of RGB-D, stereo and monocular frames against a local map.
+//!
+//! Per frame ([`tracking`]): predict the pose with a constant-velocity model; project the
+//! local map points and match each to the best keypoint within a search radius (Hamming
+//! distance, ratio test; ORB-SLAM's `SearchByProjection`), widening the radius once when too
+//! few survive; refine by motion-only BA (pixels plus depth as ORB-SLAM2's virtual right
+//! coordinate, Huber, four re-classification rounds). When that still fails ([`relocalise`]),
+//! match descriptors against the whole local map and solve P3P inside RANSAC (the recent key
+//! frames), and with a vocabulary then against every key frame of the map by bag of words
+//! (ORB-SLAM2's `Relocalization`). A frame with too few inliers is *lost*: its pose follows the motion model (the tracking
+//! operators leave it out of the trajectory); after `reset_after` lost frames in a row that show something (at least `min_init_points`
+//! static keypoints) a new map starts at the dead-reckoned pose (so the trajectory stays in one
+//! frame, and the jump is reported). A loaded map ([`Tracker::use_map`]) is localised in
+//! first; with mapping off no key frames are made.
+//!
+//! Key frames ([`keyframe`]) follow ORB-SLAM2's rules (tracked points fall below 75 % of the
+//! reference key frame's, or too few close points are tracked while many are not, or
+//! `max_frames` passed); with depth a key frame creates map points for its unmatched keypoints
+//! (all of them for RGB-D, ORB-SLAM2's close-point rule for stereo), and is handed to local
+//! mapping as a [`SparseMap`] batch, whose triangulation adds the rest. A single camera starts
+//! its map from two views ([`monocular`]). Every observation with a depth is an RGB-D
+//! observation in BA (pixel plus virtual right coordinate), as in ORB-SLAM2.
+
+mod keyframe;
+mod monocular;
+mod relocalise;
+mod tracking;
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::Arc;
+
+use dynaflow_vision::camera::Pinhole;
+use dynaflow_vision::geometry::{
+    PoseObservation, SplitMix64, TwoViewConfig, TwoViewInit, initialise, optimize_pose, p3p_ransac, renormalised,
+};
+use dynaflow_vision::matching::{GridIndex, MatchConfig, match_brute_force, nearest_two};
+use nalgebra::{Isometry3, Point3};
+
+use crate::bow::Vocabulary;
+use crate::keyframe_map::KeyFrameMap;
+use crate::map::{Feature, KeyFrameFeature, KeyFrameInfo, KeyFrameKeypoint, MapPoint, Observation, SparseMap, sigma};
+
+/// Tracking settings (defaults: ORB-SLAM2's for an RGB-D camera, see [`TrackerConfig::rgbd`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TrackerConfig {
+    /// `fx` times the virtual baseline (ORB-SLAM2 `bf`; TUM configs: 40 = 525 px x 7.6 cm).
+    pub bf: f64,
+    /// "Close" depth for the key-frame rule (ORB-SLAM2 `ThDepth` x baseline: 40 x 8 cm = 3.2 m).
+    pub th_depth: f64,
+    /// Depths beyond this are not used at all (Kinect noise grows with the square).
+    pub max_depth: f64,
+    /// ORB pyramid scale factor.
+    pub scale_factor: f64,
+    /// Projection search radius, pixels at level 0 (ORB-SLAM2's motion-model search: 15).
+    pub search_radius: f64,
+    /// Largest Hamming distance of a match (ORB-SLAM `TH_HIGH`).
+    pub max_distance: u32,
+    /// Ratio of best to second-best distance in the projection search.
+    pub ratio: f32,
+    /// Fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30).
+    pub min_inliers: usize,
+    /// P3P RANSAC reprojection threshold, pixels at level 0.
+    pub ransac_threshold: f64,
+    /// Points with depth a frame needs to start a map (ORB-SLAM2 wants 500 keypoints).
+    pub min_init_points: usize,
+    /// A key frame at least this often, frames (ORB-SLAM: the frame rate).
+    pub max_frames: u64,
+    /// Lost frames in a row after which a new map starts.
+    pub reset_after: u32,
+    /// Which of ORB-SLAM2's three sensor modes.
+    pub sensor: Sensor,
+}
+
+/// ORB-SLAM2's sensor modes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Sensor {
+    /// Depth from a depth camera; a key frame creates points for every keypoint with a depth
+    /// up to `max_depth` ([`TrackerConfig::rgbd`]).
+    Rgbd,
+    /// Depth from a rectified pair: every matched depth is used (no `max_depth`), and a key
+    /// frame creates points for its close keypoints, at least the 100 nearest (ORB-SLAM2's
+    /// `CreateNewKeyFrame`; the first key frame takes all) ([`TrackerConfig::stereo`]).
+    Stereo,
+    /// A single camera: no depth; the map starts from two views (ORB-SLAM2's monocular
+    /// initialisation) and local mapping triangulates new points ([`TrackerConfig::monocular`]).
+    Monocular,
+}
+
+impl TrackerConfig {
+    /// ORB-SLAM2's RGB-D settings for focal length `fx` (virtual baseline 8 cm).
+    pub fn rgbd(fx: f64) -> Self {
+        Self {
+            bf: fx * 0.08,
+            th_depth: 40.0 * 0.08,
+            max_depth: 6.0,
+            scale_factor: 1.2,
+            search_radius: 15.0,
+            max_distance: 100,
+            ratio: 0.8,
+            min_inliers: 30,
+            ransac_threshold: 3.0,
+            min_init_points: 100,
+            max_frames: 30,
+            reset_after: 5,
+            sensor: Sensor::Rgbd,
+        }
+    }
+
+    /// ORB-SLAM2's stereo settings for focal length `fx` and a rig `baseline` metres wide: bf
+    /// from the rig, points closer than 40 baselines are close (its `ThDepth`), every matched
+    /// depth is used.
+    pub fn stereo(fx: f64, baseline: f64) -> Self {
+        Self {
+            bf: fx * baseline,
+            th_depth: STEREO_CLOSE_BASELINES * baseline,
+            max_depth: f64::INFINITY,
+            sensor: Sensor::Stereo,
+            ..Self::rgbd(fx)
+        }
+    }
+
+    /// ORB-SLAM2's monocular settings for focal length `fx`: no depth (`bf` 0), a map from
+    /// two views with at least 100 matches (its `Tracking::MonocularInitialization`), key
+    /// frames when tracked points fall below 90 % of the reference key frame's.
+    pub fn monocular(fx: f64) -> Self {
+        Self { bf: 0.0, th_depth: 0.0, max_depth: 0.0, sensor: Sensor::Monocular, ..Self::rgbd(fx) }
+    }
+}
+
+/// ORB-SLAM2's monocular initialisation: matches between the reference and the current
+/// frame needed to try (`SearchForInitialization` < 100 restarts from the current frame).
+pub const MONO_INIT_MATCHES: usize = 100;
+/// ORB-SLAM2's `ThDepth` for stereo cameras: points closer than 40 baselines are close.
+const STEREO_CLOSE_BASELINES: f64 = 40.0;
+/// ORB-SLAM2's `CreateNewKeyFrame` (stereo): at least this many new points, nearest first.
+const STEREO_MIN_NEW_POINTS: usize = 100;
+/// Search window of the initial matching, pixels (ORB-SLAM2: 100).
+const MONO_INIT_WINDOW: f32 = 100.0;
+/// Hamming distance and ratio of the initial matching (ORB-SLAM2: `TH_LOW` 50, 0.9).
+const MONO_INIT_MAX_DISTANCE: u32 = 50;
+const MONO_INIT_RATIO: f32 = 0.9;
+
+/// How a frame was tracked.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrackState {
+    /// No map yet and this frame could not start one (too few points with depth).
+    NotInitialised,
+    /// This frame started a map (the first, or a new one after tracking was lost).
+    NewMap,
+    /// Tracked by projection search from the motion model.
+    Tracked,
+    /// Tracked by descriptor matching and P3P RANSAC against the local map.
+    Relocalised,
+    /// Not tracked: the pose follows the motion model.
+    Lost,
+}
+
+impl TrackState {
+    /// A number for plots: 0 not initialised, 1 new map, 2 tracked, 3 relocalised, 4 lost.
+    pub fn code(self) -> f64 {
+        match self {
+            TrackState::NotInitialised => 0.0,
+            TrackState::NewMap => 1.0,
+            TrackState::Tracked => 2.0,
+            TrackState::Relocalised => 3.0,
+            TrackState::Lost => 4.0,
+        }
+    }
+}
+
+/// What [`Tracker::track`] found for one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackingResult {
+    /// `world_from_cam`, `None` before the first map.
+    pub pose: Option<Isometry3<f64>>,
+    /// Outcome.
+    pub state: TrackState,
+    /// Map points matched to keypoints.
+    pub matches: usize,
+    /// Matches that are inliers after motion-only BA.
+    pub inliers: usize,
+    /// Map points the tracker holds.
+    pub map_points: usize,
+    /// Map number (increments with each new map).
+    pub map_id: u32,
+    /// A new key frame for local mapping.
+    pub keyframe: Option<SparseMap>,
+    /// Per feature: the map point it was matched to as an inlier.
+    pub matched: Vec<Option<u64>>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct TPoint {
+    position: Point3<f64>,
+    descriptor: [u8; 32],
+    first_keyframe: u64,
+}
+
+/// Tracking state across frames.
+#[derive(Debug)]
+pub struct Tracker {
+    config: TrackerConfig,
+    cam: Pinhole,
+    width: f64,
+    height: f64,
+    rng: SplitMix64,
+    map_id: u32,
+    initialised: bool,
+    points: BTreeMap<u64, TPoint>,
+    next_point: u64,
+    next_keyframe: u64,
+    /// `world_from_cam` of the previous frame.
+    last: Option<Isometry3<f64>>,
+    /// `prev_from_cur` of the last tracked motion.
+    velocity: Isometry3<f64>,
+    frames_since_kf: u64,
+    ref_tracked: usize,
+    /// First key frame of the current map.
+    first_keyframe: u64,
+    lost_run: u32,
+    /// Monocular: the reference frame of the initialisation (its stamp and features).
+    init_ref: Option<(f64, Vec<Feature>)>,
+    /// Monocular: why the last initialisation attempt failed.
+    init_failure: Option<String>,
+    /// Every key frame's latest pose (from tracking, then local mapping and loop closing).
+    keyframe_poses: BTreeMap<u64, Isometry3<f64>>,
+    /// Per posed frame: its stamp, reference key frame and `ref_from_frame` (ORB-SLAM2's
+    /// relative frame poses, from which the final trajectory is rebuilt).
+    anchors: Vec<(f64, u64, Isometry3<f64>)>,
+    /// The newest key frame (or the one relocalisation found).
+    reference: Option<u64>,
+    /// With a vocabulary: every key frame and point, for relocalisation in the whole map.
+    places: Option<KeyFrameMap>,
+    relocalisations: usize,
+    /// False: ORB-SLAM2's localisation mode (a loaded map, no key frames).
+    mapping: bool,
+    /// A loaded map the tracker has not yet found itself in.
+    unlocated: bool,
+}
+
+/// The points the key frames `kfs` of the whole map see, as tracking holds its local map.
+fn local_points(places: &KeyFrameMap, kfs: &[u64]) -> BTreeMap<u64, TPoint> {
+    places
+        .points_of(kfs)
+        .into_iter()
+        .filter_map(|id| {
+            let p = places.points.get(&id)?;
+            Some((id, TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe }))
+        })
+        .collect()
+}
+
+/// ORB-SLAM2's relocalisation: BoW matches to try a candidate, inliers after the first BA, and
+/// inliers to accept (`Tracking::Relocalization`: 15, 10, 50).
+const RELOCALISATION_BOW_MATCHES: usize = 15;
+const RELOCALISATION_MIN_BA_INLIERS: usize = 10;
+const RELOCALISATION_INLIERS: usize = 50;
+
+impl Tracker {
+    /// A tracker for images `width` x `height` from camera `cam`; `seed` drives RANSAC.
+    pub fn new(config: TrackerConfig, cam: Pinhole, width: usize, height: usize, seed: u64) -> Self {
+        Self {
+            config,
+            cam,
+            width: width as f64,
+            height: height as f64,
+            rng: SplitMix64::new(seed),
+            map_id: 0,
+            initialised: false,
+            points: BTreeMap::new(),
+            next_point: 0,
+            next_keyframe: 0,
+            last: None,
+            velocity: Isometry3::identity(),
+            frames_since_kf: 0,
+            ref_tracked: 0,
+            first_keyframe: 0,
+            lost_run: 0,
+            init_ref: None,
+            init_failure: None,
+            keyframe_poses: BTreeMap::new(),
+            anchors: Vec::new(),
+            reference: None,
+            places: None,
+            relocalisations: 0,
+            mapping: true,
+            unlocated: false,
+        }
+    }
+
+    /// The whole map kept for relocalisation (with a vocabulary), e.g. to save it.
+    pub fn places(&self) -> Option<&KeyFrameMap> {
+        self.places.as_ref()
+    }
+
+    /// Keep every key frame and point with their words, and relocalise in the whole map when
+    /// tracking is lost (ORB-SLAM2's key-frame database), with this vocabulary.
+    pub fn with_vocabulary(mut self, vocabulary: Arc<Vocabulary>) -> Self {
+        self.places = Some(KeyFrameMap::new(self.cam, self.width, self.height, self.config.scale_factor, vocabulary));
+        self
+    }
+
+    /// The trajectory as ORB-SLAM2 saves it at the end (`SaveTrajectoryTUM`): each frame's pose
+    /// relative to its reference key frame, composed with that key frame's latest pose (refined
+    /// by local mapping, corrected by loop closing). Frames before the first key frame are left
+    /// out.
+    pub fn keyframe_trajectory(&self) -> Vec<(f64, Isometry3<f64>)> {
+        self.anchors
+            .iter()
+            .filter_map(|(t, k, rel)| self.keyframe_poses.get(k).map(|p| (*t, renormalised(&(p * rel)))))
+            .collect()
+    }
+
+    /// Take loop closing's corrected map (ignored if it is of another map): key-frame poses,
+    /// point positions and the points fusion removed. The last pose moves with the newest key
+    /// frame's correction (ORB-SLAM2 re-anchors its last frame to its reference key frame), and
+    /// points loop closing does not know move with the key frame that made them.
+    pub fn apply_correction(&mut self, correction: &SparseMap) {
+        if correction.map_id != self.map_id || !self.initialised {
+            return;
+        }
+        let mut delta: BTreeMap<u64, Isometry3<f64>> = BTreeMap::new();
+        for k in &correction.keyframes {
+            if let Some(old) = self.keyframe_poses.insert(k.id, k.world_from_cam) {
+                delta.insert(k.id, k.world_from_cam * old.inverse());
+            }
+        }
+        let newest = self.reference.and_then(|r| delta.get(&r).copied());
+        if let (Some(d), Some(last)) = (newest, self.last) {
+            self.last = Some(renormalised(&(d * last)));
+        }
+        let corrected: BTreeMap<u64, Point3<f64>> = correction.points.iter().map(|p| (p.id, p.position)).collect();
+        for (id, p) in &mut self.points {
+            if let Some(c) = corrected.get(id) {
+                p.position = *c;
+            } else if let Some(d) = delta.get(&p.first_keyframe).copied().or(newest) {
+                p.position = d * p.position;
+            }
+        }
+        for id in &correction.removed {
+            self.points.remove(id);
+        }
+        if let Some(places) = &mut self.places {
+            places.apply_correction(correction);
+        }
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &TrackerConfig {
+        &self.config
+    }
+
+    /// The current map number.
+    pub fn map_id(&self) -> u32 {
+        self.map_id
+    }
+
+    /// Take local mapping's refined local map (ignored if it is of an older map).
+    pub fn apply_map_update(&mut self, update: &SparseMap) {
+        if update.map_id != self.map_id || !self.initialised {
+            return;
+        }
+        let newest = update.keyframes.iter().map(|k| k.id).max().unwrap_or(0);
+        for k in &update.keyframes {
+            self.keyframe_poses.insert(k.id, k.world_from_cam);
+        }
+        if let Some(places) = &mut self.places
+            && places.map_id == update.map_id
+        {
+            places.apply_refinements(update);
+        }
+        let incoming: BTreeSet<u64> = update.points.iter().map(|p| p.id).collect();
+        for p in &update.points {
+            self.points.insert(
+                p.id,
+                TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe },
+            );
+        }
+        // Keep what local mapping holds in its window, and what it has not seen yet.
+        self.points.retain(|id, p| incoming.contains(id) || p.first_keyframe > newest);
+        for id in &update.removed {
+            self.points.remove(id);
+        }
+        // Monocular: the reference key frame's tracked points as ORB-SLAM2 counts them for its
+        // key-frame rule: those seen by at least 3 key frames (2 while the map has two).
+        if self.config.sensor == Sensor::Monocular && !update.observations.is_empty() {
+            let min_obs = if newest <= self.first_keyframe + 1 { 2 } else { 3 };
+            let seen: BTreeMap<u64, u32> = update.points.iter().map(|p| (p.id, p.observations)).collect();
+            self.ref_tracked = update
+                .observations
+                .iter()
+                .filter(|o| o.keyframe == newest && seen.get(&o.point).is_some_and(|&n| n >= min_obs))
+                .count();
+        }
+    }
+
+    /// Track one frame.
+    pub fn track(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
+        let r = self.track_frame(stamp, features);
+        // Lost frames (a dead-reckoned guess) stay out of the trajectory, as in ORB-SLAM2.
+        if let (Some(pose), Some(k), false) = (r.pose, self.reference, r.state == TrackState::Lost)
+            && let Some(kp) = self.keyframe_poses.get(&k)
+        {
+            self.anchors.push((stamp, k, kp.inverse() * pose));
+        }
+        r
+    }
+}
+
+#[derive(Clone, Debug)]
+struct Fit {
+    world_from_cam: Isometry3<f64>,
+    matches: usize,
+    inliers: usize,
+    matched: Vec<Option<u64>>,
+}
