@@ -1,4 +1,4 @@
-//! What an edge between machines costs (issue 36), side by side with the in-process edge, in
+//! What an edge between machines costs, side by side with the in-process edge, in
 //! one run: one-way latency per message (small scalars, a 640×480 colour image) over zenoh on
 //! loopback (two sessions in this process, so one clock: encoding, TCP, decoding) against the
 //! in-process handoff of an `Arc<Message>` through a tokio channel (what an engine edge does);

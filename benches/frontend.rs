@@ -122,7 +122,13 @@ fn main() {
     // PnP RANSAC + motion-only BA on the real RGB-D pair.
     let (pnp_world, pnp_pixels, pnp_cam) = frontend::ch7_pnp();
     let pnp_ms = median_ms(reps, || {
-        std::hint::black_box(pnp_ransac(&pnp_world, &pnp_pixels, &pnp_cam, 3.0, 500, &mut SplitMix64::new(7)));
+        std::hint::black_box(pnp_ransac(
+            &pnp_world,
+            &pnp_pixels,
+            &pnp_cam,
+            &RansacConfig { threshold: 3.0, max_iterations: 500, ..RansacConfig::default() },
+            &mut SplitMix64::new(7),
+        ));
     });
 
     println!("front-end, single thread, median of {reps} calls; peer: OpenCV (cv2) on the same inputs");

@@ -3,7 +3,7 @@
 //! side by side in one process (best of 3, alternating); prints the time ratio, the bytes per
 //! frame of each file and the largest ports. Then the encodings themselves on the same frames:
 //! the colour JPEG encoders (`image`, `jpeg-encoder`) against raw pixels, and the depth and
-//! mask encodings before issue 15 (16-bit millimetre PNG, 8-bit PNG) against the raw samples
+//! mask encodings the recorders used before (16-bit millimetre PNG, 8-bit PNG) against the raw samples
 //! the recorders store now, each with the MCAP chunk's zstd (level 1).
 //!
 //! It links the `dynaflow` library, so both runs use the CLI's allocator (jemalloc, as
@@ -133,7 +133,7 @@ fn encodings(graph: &std::path::Path, rt: &tokio::runtime::Runtime) {
                 .expect("jpeg");
             out.len()
         }),
-        timed("colour: jpeg-encoder q90 4:4:4", "before issue 35", n, |i| {
+        timed("colour: jpeg-encoder q90 4:4:4", "full chroma", n, |i| {
             encode::jpeg_with(&rgb[i], 90, false).map_or(0, |e| e.bytes.len())
         }),
         timed("colour: jpeg-encoder q90 4:2:0", "recorded (default)", n, |i| {

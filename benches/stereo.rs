@@ -1,5 +1,5 @@
 //! Per-frame cost of ORB-SLAM2's two other sensor modes' front-end steps, single thread, on
-//! the synthetic scene (issue 33): sparse stereo matching of one rectified pair (the left and
+//! the synthetic scene: sparse stereo matching of one rectified pair (the left and
 //! right ORB given; the right image's ORB timed beside it, since the stereo mode pays it on
 //! every frame) and the monocular two-view initialisation (initial matching is the tracker's;
 //! here the H and F RANSAC, model selection, decomposition and triangulation of
@@ -7,7 +7,7 @@
 //!
 //! `cargo bench --bench stereo` (add `-- REPS`, default 30). No peer runs here: OpenCV has no
 //! sparse ORB stereo matcher nor ORB-SLAM2's initialiser; the real ORB-SLAM2 is the
-//! whole-system peer (issue 35's bench script).
+//! whole-system peer (bench script).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 #[path = "common/timing.rs"]

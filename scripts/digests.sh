@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Per-port content digests of every shipped graph and variant, for comparing two builds
-# (issue 30's "identical digests before and after"):
+# ("identical digests before and after"):
 #   scripts/digests.sh BINARY OUTDIR [FRAMES]     # one build's digests, OUTDIR/<graph>[-<variant>].digests
 #   scripts/digests.sh --compare DIR_A DIR_B      # which ports differ, by port name
 # Uses only bash, awk and python3's standard library.

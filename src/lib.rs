@@ -1,6 +1,8 @@
 //! The `dynaflow` package: the CLI binary (`src/main.rs`) and this small library that wires
 //! the crates together, so tests and benches see exactly the operators the CLI sees.
 
+#![warn(missing_docs)]
+
 use dynaflow_engine::op::Registry;
 
 pub mod summary;
@@ -22,7 +24,7 @@ pub fn registry() -> Registry {
 /// 1.20x the run without it) and `malloc_trim` once a second (the free pages between live
 /// blocks of its arenas otherwise stayed resident and grew with the run). jemalloc hands
 /// back unused pages itself, from a background thread, and reuses size classes without that
-/// cost; measured when chosen (git history of docs/benchmarks.md, issue 15's fourth pass). Not on MSVC, which jemalloc does
+/// cost; measured when chosen (docs/recordings.md, "Long runs in bounded memory"). Not on MSVC, which jemalloc does
 /// not build for.
 #[cfg(not(target_env = "msvc"))]
 #[global_allocator]

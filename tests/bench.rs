@@ -1,4 +1,4 @@
-//! `dynaflow bench` (issue 14): every variant of the seed graphs runs end to end on a short
+//! `dynaflow bench`: every variant of the seed graphs runs end to end on a short
 //! synthetic sequence, the tables and plots are written, and a failed run is a row, not the
 //! end of the bench.
 #![allow(clippy::unwrap_used, clippy::panic)]
@@ -111,7 +111,7 @@ fn the_seed_graphs_run_unchanged_on_a_tum_folder() {
     assert!(rows.iter().all(|r| r[3] == "ok" && r[4] == "2"), "{rows:?}");
 }
 
-/// The bench spread as a cluster's array job would spread it (issue 36): `--list` names the
+/// The bench spread as a cluster's array job would spread it: `--list` names the
 /// cells, each `--cell I` runs in its own process into its own folder (two "machines" here),
 /// and `--collect` merges them into the same tables as one `dynaflow bench` (every column but
 /// the wall time per frame, which no two runs share).
@@ -215,7 +215,7 @@ fn cells_run_apart_and_collected_give_the_one_machine_tables() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("this bench has 3"));
 }
 
-/// `--compare` (issue 37): the bench records each run and writes its variants side by side.
+/// `--compare`: the bench records each run and writes its variants side by side.
 #[test]
 fn bench_compare_writes_the_variants_side_by_side() {
     let dir = common::TempDir::new("bench-compare");

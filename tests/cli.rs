@@ -441,7 +441,7 @@ fn constants_table_lists_every_default() {
 
 #[test]
 fn the_libraries_build_without_the_engine_gpu_inference_or_an_async_runtime() {
-    // Issue 30: a user generates or reads a sequence, or culls points, without the engine,
+    // A user generates or reads a sequence, or culls points, without the engine,
     // wgpu, rten or tokio.
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
     for krate in ["dynaflow-datasets", "dynaflow-culling", "dynaflow-msg", "dynaflow-vision"] {
@@ -463,7 +463,7 @@ fn the_libraries_build_without_the_engine_gpu_inference_or_an_async_runtime() {
 
 #[test]
 fn the_summary_is_one_typed_struct_that_reads_back_what_run_wrote() {
-    // Issue 30: `run` writes the summary from `dynaflow::summary::Summary`, `bench` and
+    // `run` writes the summary from `dynaflow::summary::Summary`, `bench` and
     // `eval` read it back as the same struct; nothing is edited or read by key, and reading
     // loses no field (the re-serialised summary equals the file).
     let dir = common::TempDir::new("summary");

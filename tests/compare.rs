@@ -1,4 +1,4 @@
-//! `dynaflow compare` (issue 37): three MG-SLAM variants (the paper's ablation rows S, G and
+//! `dynaflow compare`: three MG-SLAM variants (the paper's ablation rows S, G and
 //! S+G) in one recording that `rerun rrd verify` accepts, every run's entities under its own
 //! root, the blueprint present; what cannot be compared is refused, naming the file.
 #![allow(clippy::unwrap_used, clippy::panic)]

@@ -1,4 +1,4 @@
-//! Dynamic-point culling (issue 10): the rules' graph runs in every variant, its labels are
+//! Dynamic-point culling: the rules' graph runs in every variant, its labels are
 //! reproducible, and on the synthetic scene the labels follow the ground truth the way the
 //! rules promise.
 #![allow(clippy::unwrap_used, clippy::panic)]

@@ -1,4 +1,4 @@
-//! Dependency hygiene (issue 36): the default build compiles no zenoh crate; the `zenoh`
+//! Dependency hygiene: the default build compiles no zenoh crate; the `zenoh`
 //! feature brings it in (so this check can fail). Reads cargo's own dependency tree.
 #![allow(clippy::unwrap_used, clippy::panic)]
 

@@ -1,4 +1,4 @@
-//! Graphs across machines over zenoh (issue 36), as a user runs them: `graphs/mg_slam.yaml`
+//! Graphs across machines over zenoh, as a user runs them: `graphs/mg_slam.yaml`
 //! with its segmenter and detector on a second machine, two `dynaflow run --machine`
 //! processes on loopback. The split run's per-port digests equal the one-process run's, the
 //! merged recordings verify with the peers, and the failure paths say what went wrong: a

@@ -269,7 +269,7 @@ fn the_ate_a_run_prints_on_a_tum_folder_is_evos() {
 
 #[test]
 fn eval_and_infer_refuse_what_evo_and_the_graph_refuse() {
-    // issue 29, defect 8: no RPE pair, a NaN time window, thresholds outside 0..=1.
+    // No RPE pair, a NaN time window, thresholds outside 0..=1.
     let fixtures = common::repo().join("tests/fixtures/slambook2_trajectories");
     let eval = |extra: &[&str]| {
         let out = common::bin()
@@ -299,7 +299,7 @@ fn eval_and_infer_refuse_what_evo_and_the_graph_refuse() {
 
 #[test]
 fn an_official_style_tum_file_with_repeated_stamps_reads_and_evaluates_as_evo() {
-    // issue 29, defect 0: ground truth as the TUM benchmark publishes it (comment lines,
+    // Ground truth as the TUM benchmark publishes it (comment lines,
     // 100 Hz stamps with four decimals, some written twice with two different poses, a gap),
     // an estimate with six decimals at 30 Hz; `dynaflow eval` reads both and equals evo.
     let Some(python) = frontend::python_with("evo", "evo", "eval: TUM file with repeated stamps vs evo") else {
@@ -352,7 +352,7 @@ fn an_official_style_tum_file_with_repeated_stamps_reads_and_evaluates_as_evo() 
 
 #[test]
 fn a_motionless_estimate_under_sim3_is_called_motionless_not_too_few() {
-    // Issue 29 defect 10: `--align sim3` on an estimate that never moves said "50 matched
+    // `--align sim3` on an estimate that never moves said "50 matched
     // poses are too few to align (3 needed)". Now it says why no scale fits and what to use;
     // SE(3) and no alignment still evaluate it (a constant estimate has a well-defined ATE:
     // the ground truth's spread about the point it is moved onto).

@@ -1,4 +1,4 @@
-//! Issue 7's reproductions, one test each: the defects an adversarial pass over the engine
+//! Reproductions of defects, one test each: the defects an adversarial pass over the engine
 //! found (a deadlock, lost delayed frames, YAML bombs, escaping names, …).
 #![allow(clippy::unwrap_used, clippy::panic)]
 
@@ -408,7 +408,7 @@ fn diff_reader_survives_every_flipped_bit() {
     assert!(errors > 0);
 }
 
-// --- issue 28, point 9: quiet wrong input ----------------------------------------------
+// Quiet wrong input ----------------------------------------------
 
 #[test]
 fn a_mask_of_another_size_than_the_image_is_an_error_naming_both() {
@@ -460,7 +460,7 @@ fn box_to_mask_gives_each_listed_class_its_own_id() {
 
 #[test]
 fn a_misspelt_class_name_is_a_located_error_with_a_suggestion() {
-    // issue 29, defect 7: `persn` would switch semantic culling off without a word; issue 30:
+    // `persn` would switch semantic culling off without a word:
     // class lists are typed, so the graph is refused where it names the class, in either the
     // list or the older comma-separated form.
     for (node, wiring) in [

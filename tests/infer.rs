@@ -1,4 +1,4 @@
-//! Inference (issue 12): the ONNX reader, the reference executor and the CPU backend (rten)
+//! Inference: the ONNX reader, the reference executor and the CPU backend (rten)
 //! on both vendored detectors, raw outputs against onnxruntime on real images, YOLOX-nano's
 //! detections on the real Kinect frames, every backend giving the same detections, and
 //! corrupt models or unsupported ops as clear errors.
@@ -464,7 +464,7 @@ fn yolox_finds_the_photo_textured_synthetic_people() {
 
 #[test]
 fn a_detector_of_the_other_family_is_refused_at_load() {
-    // issue 29, defect 1: FastestDet read as YOLOX gave boxes of negative size and scores of
+    // FastestDet read as YOLOX gave boxes of negative size and scores of
     // 229; YOLOX-nano read as FastestDet found nothing. Both are errors naming the model, the
     // decoder and the shapes, on the command line and in a graph.
     let img = frontend::ch7()[0].clone();

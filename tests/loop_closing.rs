@@ -1,4 +1,4 @@
-//! Loop closing and relocalisation (issue 34): on a synthetic walk around the room that
+//! Loop closing and relocalisation: on a synthetic walk around the room that
 //! comes back to its start, static and with walking people, `loop_close` finds the revisit
 //! where the ground truth says the views overlap, never elsewhere, the final trajectory's ATE
 //! drops to at most half of the run without it, and the run stays deterministic with the

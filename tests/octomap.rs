@@ -1,4 +1,4 @@
-//! The OctoMap operator and library (issue 13) against OctoMap itself: the same depth frames
+//! The OctoMap operator and library against OctoMap itself: the same depth frames
 //! and poses (real ICL-NUIM frames, synthetic walking frames) give the same tree as
 //! liboctomap's `insertPointCloud`; OctoMap's tools read our files; people excluded by their
 //! masks leave no ghost voxels in their swept volume.
@@ -362,7 +362,7 @@ fn octree_command_summarises_plots_and_refuses_corrupt_files() {
 
 #[test]
 fn a_resolution_too_fine_for_the_memory_budget_ends_the_run_with_an_error_and_valid_files() {
-    // Issue 29 defect 2: `resolution: 0.001` (inside its documented range) made one frame take
+    // `resolution: 0.001` (inside its documented range) made one frame take
     // gigabytes and three abort on allocation (exit 134, no summary, an MCAP without footer).
     // Now the first frame is refused on the default 4 GiB budget before its nodes are
     // allocated: exit 1, the error says what it needed and what to change, the summary names

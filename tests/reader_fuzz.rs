@@ -1,4 +1,4 @@
-//! Issue 29, done-when 2: the readers (TUM RGB-D, KITTI odometry, image folder, MCAP replay)
+//! The readers (TUM RGB-D, KITTI odometry, image folder, MCAP replay)
 //! against random corruptions of small valid folders and recordings: numeric fields made
 //! NaN, infinite, zero, negative or text, lines deleted, swapped or emptied, files deleted,
 //! truncated, overwritten or resized. Every case ends one of two ways: the run refuses

@@ -402,16 +402,7 @@ fn recordings_made_before_protobuf_images_still_diff_and_replay() {
         "name: old\nnodes:\n  src: {{ op: mcap_replay, params: {{ path: '{}', topics: 'depth=/camera/depth,rgb=/camera/rgb,mask=/camera/gt_mask,keypoints=/orb/keypoints' }} }}\n",
         legacy.display()
     );
-    let sink = dynaflow_engine::sink::MemorySink::default();
-    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
-    let report = rt
-        .block_on(dynaflow_engine::runtime::run(
-            &common::graph(&yaml),
-            Default::default(),
-            vec![Box::new(sink.clone())],
-        ))
-        .unwrap();
-    assert_eq!(report.status, dynaflow_engine::runtime::RunStatus::Completed, "{:?}", report.failures);
+    let sink = run_in_memory(&yaml);
     let depth = sink.port("src", "depth");
     assert_eq!(depth.len(), 3);
     for m in &depth {
@@ -729,7 +720,7 @@ fn rrd_points(path: &Path, entity: &str) -> std::collections::BTreeMap<i64, Vec<
 
 #[test]
 fn every_label_in_the_rrd_is_drawn_at_its_own_track() {
-    // Issue 30: the default graph records five point sets per frame (keypoints, tracks and
+    // The default graph records five point sets per frame (keypoints, tracks and
     // three label sets); a label was drawn at whichever set the recorder saw last. Now each
     // label carries its pixel: read the `.rrd` back and check every label's position against
     // the track it labels (the MCAP of the same run gives the tracks and the labels' indices).
@@ -769,7 +760,7 @@ fn every_label_in_the_rrd_is_drawn_at_its_own_track() {
 
 #[test]
 fn each_pose_stream_is_drawn_through_its_own_camera() {
-    // Issue 30: the recorder gave every pose stream the intrinsics it saw last, whichever
+    // The recorder gave every pose stream the intrinsics it saw last, whichever
     // camera they came from; each pose now takes its own node's camera (or what feeds the
     // node's camera input). Two generators of different sizes, read back from the `.rrd`.
     let dir = common::TempDir::new("rrd-cameras");
@@ -802,4 +793,51 @@ fn each_pose_stream_is_drawn_through_its_own_camera() {
     }
     assert_eq!(seen.get("/world/big/gt_pose"), Some(&[640.0, 480.0]), "{seen:?}");
     assert_eq!(seen.get("/world/small/gt_pose"), Some(&[160.0, 120.0]), "{seen:?}");
+}
+
+#[test]
+fn a_stereo_rig_is_recorded_with_its_own_schema_and_replays_bit_exact() {
+    let dir = common::TempDir::new("stereo_rig");
+    let graph = dir.path().join("rig.yaml");
+    std::fs::write(
+        &graph,
+        "name: rig\nnodes:\n  camera: { op: synth, params: { frames: 3, width: 64, height: 48, people: 0, stereo_baseline: 0.12 } }\n",
+    )
+    .unwrap();
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "mcap", "--out"])
+        .arg(dir.path())
+        .arg(&graph)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    let mcap = dir.path().join("rig.mcap");
+    let recorded = read_mcap(&mcap).unwrap();
+    let rig = &recorded.topics["/camera/stereo"];
+    assert_eq!(rig.schema, "dynaflow.StereoRig", "{}", rig.schema);
+    assert_eq!(rig.frames.len(), 3);
+    let yaml = format!(
+        "name: replay\nnodes:\n  src: {{ op: mcap_replay, params: {{ path: '{}', topics: 'stereo=/camera/stereo' }} }}\n",
+        mcap.display()
+    );
+    let sink = run_in_memory(&yaml);
+    let replayed = sink.port("src", "stereo");
+    assert_eq!(replayed.len(), 3);
+    for m in &replayed {
+        let dynaflow_engine::msg::Body::StereoRig(r) = &m.body else { panic!("{m:?}") };
+        assert_eq!(r.baseline, 0.12);
+        let digest = &rig.frames[&m.header.seq]["digest"];
+        assert_eq!(digest.as_str().unwrap(), format!("{:016x}", m.digest()), "frame {}", m.header.seq);
+    }
+}
+
+/// Run a graph in this process into a memory sink; it must complete.
+fn run_in_memory(yaml: &str) -> dynaflow_engine::sink::MemorySink {
+    let sink = dynaflow_engine::sink::MemorySink::default();
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+    let report = rt
+        .block_on(dynaflow_engine::runtime::run(&common::graph(yaml), Default::default(), vec![Box::new(sink.clone())]))
+        .unwrap();
+    assert_eq!(report.status, dynaflow_engine::runtime::RunStatus::Completed, "{:?}", report.failures);
+    sink
 }

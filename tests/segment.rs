@@ -1,4 +1,4 @@
-//! Segmentation (issue 31): the `segment` operator and `dynaflow segment` on the vendored
+//! Segmentation: the `segment` operator and `dynaflow segment` on the vendored
 //! segmenters, the mask quality docs/benchmarks.md reports (graphs/segmentation.yaml), the
 //! backends (rten, reference, wgpu) agreeing, and wrong models, missing class files and unsupported ops as errors
 //! that name the model, the node and the parameter. The raw outputs against onnxruntime are

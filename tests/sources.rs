@@ -250,7 +250,7 @@ fn input_flag_points_the_default_graph_at_a_folder() {
 
 #[test]
 fn an_image_folder_runs_monocular_and_a_graph_needing_depth_fails_validation() {
-    // An image folder has no depth and no ground truth (issue 33): `--input` unwires the
+    // An image folder has no depth and no ground truth: `--input` unwires the
     // monocular tracker's depth and leaves out the nodes scoring against masks; a culling
     // rule that judges with depth fails validation at its place in the file; the RGB-D
     // tracker says on the first frame what it needs.
@@ -358,7 +358,7 @@ fn kitti_sequence_reads_stereo_calibration_and_poses() {
             .to_string();
     assert!(e.contains("07.txt") && e.contains("1 poses for 3 frames"), "{e}");
 
-    // issue 29, defect 5: each broken file named with its line.
+    // Each broken file named with its line.
     let graph = format!("name: k\nnodes:\n  cam: {{ op: kitti_odometry, params: {{ path: '{}' }} }}\n", seq.display());
     let build_error = |what: &str| run(&graph).map(|_| ()).expect_err(what).to_string();
     // A pose whose 3x3 part is no rotation (a scaled matrix).
@@ -395,7 +395,7 @@ fn kitti_sequence_reads_stereo_calibration_and_poses() {
     assert!(report.failures[0].error.contains("image_1/000001.png: 32x24 but"), "{:?}", report.failures);
 }
 
-// --- issue 29: sizes that change, masks that are missing or of another size --------------
+// Sizes that change, masks that are missing or of another size --------------
 
 /// Write a grey 8-bit (`depth == false`) or 16-bit depth PNG of `w`x`h` to `path`.
 fn png(path: &Path, w: u32, h: u32, depth: bool) {

@@ -82,7 +82,7 @@ fn baseline_meets_the_ate_bounds_on_static_scenes() {
 fn stereo_tracks_static_scenes_within_the_rgbd_bounds() {
     let dir = common::TempDir::new("tracking-stereo");
     // ORB-SLAM2's stereo mode on a rectified pair (12 cm), against the same back-end on the
-    // depth camera, static scene, 300 frames: within 1.5x of RGB-D (issue 33) and within the
+    // depth camera, static scene, 300 frames: within 1.5x of RGB-D and within the
     // RGB-D bounds (1 cm on xyz, 2 cm on the orbit).
     for (motion, bound, ratio) in [("xyz", 0.01, Some(1.5)), ("halfsphere", 0.02, Some(1.5))] {
         let sets = ["camera.people=0", &format!("camera.motion={motion}")];
@@ -181,7 +181,7 @@ fn relative_poses_on_the_slambook2_frames_match_the_given_ones() {
             assert_eq!(tracker.track(0.0, &f[i]).state, TrackState::NewMap);
             let r = tracker.track(1.0, &f[j]);
             let want = gt[i].inverse() * gt[j];
-            let d = want.inverse() * r.pose.unwrap();
+            let d = want.inverse() * r.world_from_cam.unwrap();
             let (t, a) = (d.translation.vector.norm(), d.rotation.angle().to_degrees());
             eprintln!(
                 "{} -> {}: {:?} inliers {} off by {:.1} mm {:.3} deg",
@@ -314,7 +314,7 @@ fn the_readme_example_output_is_what_the_default_graph_prints() {
 
 #[test]
 fn a_tracker_that_never_initialises_says_so_and_fails_its_bench_row() {
-    // issue 29, defect 9: every depth beyond `max_depth` (0.1 m; the scene is 0.45 m or
+    // Every depth beyond `max_depth` (0.1 m; the scene is 0.45 m or
     // farther), so no frame can start a map.
     let dir = common::TempDir::new("tracking-never");
     let o = common::bin()
@@ -372,7 +372,7 @@ fn run_mono(motion: &str, frames: &str, dir: &Path) -> (String, Summary, Vec<(f6
 
 #[test]
 fn monocular_initialises_within_30_frames_and_reports_a_sim3_ate() {
-    // ORB-SLAM2's monocular mode (issue 33): a map from two views (H or F, chosen by score),
+    // ORB-SLAM2's monocular mode: a map from two views (H or F, chosen by score),
     // points triangulated by local mapping, scale arbitrary, so the ATE is Sim(3)-aligned.
     // Bounds: initialisation within the first 30 frames (the issue's); ATE within 2 cm
     // (measured 0.86 cm on xyz and 0.64 cm on the orbit, docs/benchmarks.md).
@@ -410,7 +410,7 @@ fn monocular_initialises_within_30_frames_and_reports_a_sim3_ate() {
 
 #[test]
 fn a_monocular_rotation_without_translation_never_claims_a_pose() {
-    // Degenerate input (issue 33): the rpy motion turns the camera about its centre, so no
+    // Degenerate input: the rpy motion turns the camera about its centre, so no
     // pair of views has parallax; ORB-SLAM2 does not initialise, and neither does this.
     let dir = common::TempDir::new("tracking-mono-rpy");
     let (stdout, summary, est) = run_mono("rpy", "60", dir.path());
@@ -427,7 +427,7 @@ fn a_kitti_sequence_written_by_synth_runs_the_stereo_graphs() {
     // `dynaflow synth --format kitti` writes a stereo sequence in the KITTI odometry layout
     // (seed 11, walking people); `--input` reads it with `kitti_odometry` into the `stereo`
     // variants of orb_baseline, ysag (YSAG-VINS's own setting) and mg_slam. Both culling
-    // graphs keep the >= 80 % ATE improvement of issue 32 on stereo; its mask scoring needs the generator's
+    // graphs keep their >= 80 % ATE improvement over orb_baseline on stereo; its mask scoring needs the generator's
     // masks, which KITTI has not, so that node is left out with a warning.
     let dir = common::TempDir::new("tracking-kitti");
     let root = dir.path().join("kitti");

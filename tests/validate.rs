@@ -75,7 +75,7 @@ fn ill_typed_and_out_of_range_params() {
 
 #[test]
 fn typed_enum_list_map_and_format_params_and_wired_inputs() {
-    // Issue 30: every value of a typed parameter (an enum, each item of a list, each key and
+    // Every value of a typed parameter (an enum, each item of a list, each key and
     // value of a map, a format of its own) is checked where it is written; a rule's wired
     // input must be connected; a retired operator names its replacement; a variant that
     // swaps a node's operator is checked against the new one.
@@ -196,7 +196,7 @@ fn bad_set_override_points_at_the_node() {
 
 #[test]
 fn a_set_value_error_names_the_flag_it_came_from() {
-    // Issue 29 defect 10: a `--set` value's error pointed at the YAML node and read as if the
+    // A `--set` value's error pointed at the YAML node and read as if the
     // file held the value. Now every error on an overridden value names the flag, at the node
     // it overrides: validation errors (range, type, unknown key) and an operator refusing the
     // value when it is built (a misspelt class), which before had no location at all.

@@ -1,4 +1,4 @@
-//! The default graph's recording as a user sees it (issue 37): served by the rerun web viewer
+//! The default graph's recording as a user sees it: served by the rerun web viewer
 //! of the pinned `rerun-sdk` (`rerun --serve-web`, nothing downloaded), opened in headless
 //! Chromium with software rendering (`tests/peers/screenshot.py`), and the screenshot checked:
 //! the viewer loaded (not its loading screen, not a blank frame), the camera image is not

@@ -1,4 +1,4 @@
-//! `dynaflow vocab train` and place recognition with the vocabulary (issue 34's first part):
+//! `dynaflow vocab train` and place recognition with the vocabulary (first part):
 //! trained on one synthetic sequence, it tells frames of another sequence that see the same
 //! place from frames that do not, and its file is refused when damaged.
 #![allow(clippy::unwrap_used, clippy::panic)]

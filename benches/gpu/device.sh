@@ -2,7 +2,7 @@
 # The GPU inference benchmark on the device machine (see prepare.sh): our wgpu executor,
 # rten, onnxruntime and PyTorch (gpu_anchor.py: eager and CUDA graph) side by side in one run
 # on the same frame. Writes $OUT/infer.md (the tables) and $OUT/infer.json. Then the whole
-# `mg_slam` graph (issue 35) on a 300-frame walking xyz folder written on the device, lockstep,
+# `mg_slam` graph on a 300-frame walking xyz folder written on the device, lockstep,
 # recording off, its segmenter on `cpu` and on `wgpu` in turn: $OUT/mg_slam_{cpu,wgpu}.log
 # (frames/s and the per-node table; the device has 16 cores, so the `cpu` row is not the
 # 2-core figure of docs/benchmarks.md).

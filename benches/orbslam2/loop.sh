@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Loop closing next to the real ORB-SLAM2 (issue 34, done-when 6). ORB-SLAM2 (raulmur/ORB_SLAM2,
+# Loop closing next to the real ORB-SLAM2. ORB-SLAM2 (raulmur/ORB_SLAM2,
 # GPLv3; built headless by ../shared/peers/orbslam2/build.sh, never vendored) runs its RGB-D
 # example `rgbd_tum` on a synthetic walk around the room that comes back to its start
 # (`dynaflow synth --motion loop`, 1000 frames, static scene, seed 0, TUM layout); dynaflow runs

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The real ORB-SLAM2 (raulmur/ORB_SLAM2, GPLv3; built headless by ../shared/peers/orbslam2/build.sh,
 # never vendored) in its stereo and monocular modes, next to dynaflow's on the same synthetic
-# frames (issue 33, done-when 6). A benchmark script, not CI: ORB-SLAM2 is multi-threaded and
+# frames. A benchmark script, not CI: ORB-SLAM2 is multi-threaded and
 # not deterministic, so every run is reported.
 #
 #   benches/orbslam2/sensor_modes.sh ORBSLAM_DIR [OUT=/tmp/orbslam2-modes] [RUNS=3]

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Whole-system speed next to the real ORB-SLAM2 (issue 35). On one TUM-layout folder (the walking
+# Whole-system speed next to the real ORB-SLAM2. On one TUM-layout folder (the walking
 # xyz copy of docs/benchmarks.md: `dynaflow synth --motion xyz --people 2 --frames 300 --seed 7`,
 # or any folder given as SEQ), in one run of this script:
 #   - ORB-SLAM2's `rgbd_tum` (raulmur/ORB_SLAM2, GPLv3; built headless by

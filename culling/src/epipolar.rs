@@ -200,6 +200,9 @@ impl EpipolarCull {
         if fit_on.iter().filter(|u| **u).count() < 8 {
             fit_on = vec![true; ids.len()];
         }
+        // One stream per call site: the consecutive pair's F draws from the frame's seed, every
+        // other fit from a stream derived from it by name.
+        let stream = |name: &str| SplitMix64::named(seed, name).next_u64();
         let consecutive = epipolar_distances(prev, cur, &fit_on, &o.ransac, seed);
         let mut decisions = match &consecutive {
             Some((_, d)) => epipolar_fixed(d, o.threshold),
@@ -214,7 +217,9 @@ impl EpipolarCull {
                 LongBaseline::LowParallax => {
                     let ratio = consecutive
                         .as_ref()
-                        .and_then(|(fit, _)| homography_if_selected(prev, cur, &fit_on, fit, seed ^ 2))
+                        .and_then(|(fit, _)| {
+                            homography_if_selected(prev, cur, &fit_on, fit, stream("epipolar/consecutive/homography"))
+                        })
                         .map(|(r, _)| r);
                     homography_ratio_of_pair = ratio;
                     // No F at all is the least parallax there is.
@@ -233,10 +238,11 @@ impl EpipolarCull {
                 let grow = (o.baseline as f64).sqrt();
                 let ransac = RansacConfig { threshold: o.ransac.threshold * grow, ..o.ransac.clone() };
                 let threshold = o.threshold * grow as f32;
-                if let Some((fit_f, d)) = epipolar_distances(&back, &now, &fit, &ransac, seed ^ 1) {
+                if let Some((fit_f, d)) = epipolar_distances(&back, &now, &fit, &ransac, stream("epipolar/long")) {
                     let mut tested = epipolar_fixed(&d, threshold);
                     if o.select_model {
-                        let selected = homography_if_selected(&back, &now, &fit, &fit_f, seed ^ 3);
+                        let selected =
+                            homography_if_selected(&back, &now, &fit, &fit_f, stream("epipolar/long/homography"));
                         long_ratio = selected.as_ref().map(|(r, _)| *r);
                         if let Some((_, Some(h))) = selected {
                             let (b, n) = (to64(&back), to64(&now));
@@ -283,7 +289,8 @@ fn homography_if_selected(
         prev.iter().zip(cur).zip(fit_on).filter(|(_, u)| **u).map(|((a, b), _)| (*a, *b)).unzip();
     let (p1, p2) = (to64(&p1), to64(&p2));
     let quality = vec![1.0; p1.len()];
-    let h = fit_homography_prosac(&p1, &p2, &quality, CHI2_2DOF.sqrt(), 1000, &mut SplitMix64::new(seed))?;
+    let config = RansacConfig { threshold: CHI2_2DOF.sqrt(), local_optimisation: false, ..RansacConfig::default() };
+    let h = fit_homography_prosac(&p1, &p2, &quality, &config, &mut SplitMix64::new(seed))?;
     let ratio = homography_ratio(&h.h, &f.f, &p1, &p2);
     Some((ratio, (ratio > HOMOGRAPHY_RATIO).then_some(h.h)))
 }

@@ -13,7 +13,8 @@ pub fn homography_residuals(
     seed: u64,
 ) -> Option<(HomographyFit, Vec<f32>)> {
     let (p1, p2) = (to64(prev), to64(cur));
-    let fit = fit_homography_prosac(&p1, &p2, quality, threshold, 1000, &mut SplitMix64::new(seed))?;
+    let config = RansacConfig { threshold, local_optimisation: false, ..RansacConfig::default() };
+    let fit = fit_homography_prosac(&p1, &p2, quality, &config, &mut SplitMix64::new(seed))?;
     let r = p1.iter().zip(&p2).map(|(a, b)| transfer_error(&fit.h, *a, *b) as f32).collect();
     Some((fit, r))
 }

@@ -419,7 +419,7 @@ mod tests {
 
     #[test]
     fn messages_say_what_is_wrong_where() {
-        // issue 29, defect 10.
+        // Defect 10.
         let dir = std::env::temp_dir().join(format!("dynaflow-index-msg-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         let file = |name: &str, text: &str| {

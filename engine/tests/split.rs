@@ -1,4 +1,4 @@
-//! A graph split over machines (issue 36), run as two "processes" joined by the in-process
+//! A graph split over machines, run as two "processes" joined by the in-process
 //! loopback wire: the same messages on every port as the whole graph in one process, with
 //! images, key-frame gating (watermarks), a `latest` join and a delayed feedback loop across
 //! the boundary in both directions; and the errors of a bad placement.

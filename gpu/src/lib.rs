@@ -12,6 +12,8 @@
 //!   written in place), pooling (max, average), `resize` (nearest), `pad` (constant),
 //!   `softmax`.
 
+#![warn(missing_docs)]
+
 mod kernels;
 mod model;
 

@@ -13,6 +13,8 @@
 //! - `segment`: segmenter pre- and post-processing: the input contract, class scores resized to
 //!   the frame and decided per pixel, dilation, instances by connected components.
 
+#![warn(missing_docs)]
+
 pub mod detect;
 mod error;
 pub mod onnx;

@@ -1,5 +1,5 @@
 //! A compact, exact binary encoding of a [`Message`]: what a graph edge between two machines
-//! carries (issue 36). Every field of every [`Body`] is written bit for bit (floats by their
+//! carries. Every field of every [`Body`] is written bit for bit (floats by their
 //! bits, instance ids, class names, descriptors), so a decoded message has the digest of the
 //! one encoded and a run split over machines gives the digests of the run in one process.
 //!

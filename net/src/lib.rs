@@ -19,6 +19,8 @@
 //! `CongestionControl::Block` (a full receiver slows the sender: lockstep runs lose nothing)
 //! into a bounded FIFO on the receiving side.
 
+#![warn(missing_docs)]
+
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};

@@ -12,6 +12,8 @@
 //!   as OctoMap does; corrupt or truncated files are errors, never panics.
 //! - [`Error`]: the crate's one error type (parameters, memory budget, files).
 
+#![warn(missing_docs)]
+
 mod error;
 pub mod io;
 pub mod key;

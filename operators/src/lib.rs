@@ -8,6 +8,8 @@
 //! `tracking` (PnP + BA over `dynaflow-slam`), `inference` (detectors over `dynaflow-infer` and
 //! `dynaflow-gpu`), `mapping` (OctoMap over `dynaflow-octomap`).
 
+#![warn(missing_docs)]
+
 pub mod culling;
 pub mod decode;
 mod frontend;

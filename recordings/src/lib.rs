@@ -7,6 +7,8 @@
 //! codecs), `diff` (run comparison), `replay` (the
 //! `mcap_replay` source); [`Error`] is the crate's one error type.
 
+#![warn(missing_docs)]
+
 pub mod diff;
 pub mod encode;
 mod error;

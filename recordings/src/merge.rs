@@ -1,4 +1,4 @@
-//! `dynaflow merge`: the recordings of one run split over machines (issue 36), each machine's
+//! `dynaflow merge`: the recordings of one run split over machines, each machine's
 //! own nodes, joined into one `.rrd` or one MCAP file of the whole run.
 //!
 //! - MCAP: every input's messages interleaved by log time (the frames' sensor time stamps:

@@ -37,18 +37,57 @@ pub type FeatureVector = BTreeMap<u32, Vec<u32>>;
 /// Why a vocabulary cannot be trained, read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum BowError {
+    /// The file could not be read or written.
     #[error("{path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        /// The file.
+        path: String,
+        /// What the system said.
+        source: std::io::Error,
+    },
+    /// No `DFVOCAB` header.
     #[error("{path}: not a dynaflow vocabulary (no `DFVOCAB` header)")]
-    NotAVocabulary { path: String },
+    NotAVocabulary {
+        /// The file.
+        path: String,
+    },
+    /// A format version this build does not read.
     #[error("{path}: vocabulary format version {found}; this build reads version {FORMAT_VERSION}")]
-    Version { path: String, found: u32 },
+    Version {
+        /// The file.
+        path: String,
+        /// Its version.
+        found: u32,
+    },
+    /// Shorter than its header says.
     #[error("{path}: truncated ({len} bytes; the header promises {expected})")]
-    Truncated { path: String, len: usize, expected: usize },
+    Truncated {
+        /// The file.
+        path: String,
+        /// Its length, bytes.
+        len: usize,
+        /// What the header promises, bytes.
+        expected: usize,
+    },
+    /// The checksum does not match.
     #[error("{path}: corrupt (checksum {found:016x}, the file says {expected:016x})")]
-    Checksum { path: String, found: u64, expected: u64 },
+    Checksum {
+        /// The file.
+        path: String,
+        /// The checksum of its contents.
+        found: u64,
+        /// The checksum it stores.
+        expected: u64,
+    },
+    /// Contents that cannot be a vocabulary.
     #[error("{path}: corrupt: {what}")]
-    Corrupt { path: String, what: String },
+    Corrupt {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// Training was given too little.
     #[error("cannot train a vocabulary: {0}")]
     Training(String),
 }
@@ -88,9 +127,13 @@ pub struct Vocabulary {
 /// What [`Vocabulary::train`] saw.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrainingStats {
+    /// Images trained on.
     pub images: usize,
+    /// Descriptors clustered.
     pub descriptors: usize,
+    /// Leaves (words).
     pub words: usize,
+    /// Nodes of the tree.
     pub nodes: usize,
 }
 

@@ -18,6 +18,7 @@ use crate::map::{Feature, KeyFrameInfo, KeyFrameKeypoint, MapPoint, SparseMap, s
 
 /// Hamming distance of a BoW or projection match (ORB-SLAM2 `TH_LOW`) and the BoW ratio.
 pub const MAX_DISTANCE: u32 = 50;
+/// The nearest-to-second distance ratio a BoW match must beat (ORB-SLAM2: 0.75).
 pub const BOW_RATIO: f32 = 0.75;
 /// Shared points that make two key frames covisible (ORB-SLAM2's connections: 15).
 pub const COVISIBILITY_MIN: usize = 15;
@@ -25,8 +26,11 @@ pub const COVISIBILITY_MIN: usize = 15;
 /// A key frame with everything place recognition needs.
 #[derive(Clone, Debug)]
 pub struct PlaceKeyFrame {
+    /// Its id, stamp and pose.
     pub info: KeyFrameInfo,
+    /// Its static keypoints, with the map point each observes.
     pub keypoints: Vec<KeyFrameKeypoint>,
+    /// Its bag of words.
     pub bow: BowVector,
     /// Keypoint indices by vocabulary node (the direct index).
     pub features: FeatureVector,
@@ -39,17 +43,25 @@ pub struct PlaceKeyFrame {
 /// The map.
 #[derive(Debug)]
 pub struct KeyFrameMap {
+    /// The camera.
     pub cam: Pinhole,
+    /// Image width, pixels.
     pub width: f64,
+    /// Image height, pixels.
     pub height: f64,
+    /// ORB's pyramid scale factor (sigma per octave).
     pub scale_factor: f64,
     vocabulary: Arc<Vocabulary>,
     levels_up: usize,
+    /// The map's number (a new map after a loss for good).
     pub map_id: u32,
+    /// Key frames by id.
     pub kfs: BTreeMap<u64, PlaceKeyFrame>,
+    /// Map points by id.
     pub points: BTreeMap<u64, MapPoint>,
     /// Point id -> key frames observing it.
     pub observers: BTreeMap<u64, BTreeSet<u64>>,
+    /// The key-frame database (inverted index of words) for place recognition.
     pub db: KeyFrameDatabase,
 }
 

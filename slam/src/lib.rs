@@ -23,6 +23,8 @@
 //! - `pose_graph`: SE(3) pose-graph optimisation (the essential graph).
 //! - `eval`: trajectory evaluation (association, Umeyama alignment, ATE and RPE) as evo does it.
 
+#![warn(missing_docs)]
+
 pub mod ba;
 pub mod bow;
 pub mod eval;

@@ -34,7 +34,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
 use dynaflow_vision::camera::Pinhole;
-use dynaflow_vision::geometry::{PoseObservation, SplitMix64, optimize_pose};
+use dynaflow_vision::geometry::{Estimator, PoseObservation, RansacConfig, Sampler, SplitMix64, optimize_pose, ransac};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::ba::{BaObservation, BaPose, BaReport, bundle_adjust};
@@ -55,6 +55,7 @@ pub struct LoopConfig {
     pub essential_min: usize,
     /// BoW matches a candidate needs for RANSAC (ORB-SLAM2: 20), and RANSAC inliers (20).
     pub min_bow_matches: usize,
+    /// RANSAC inliers a loop needs (ORB-SLAM2: 20).
     pub min_inliers: usize,
     /// RANSAC iterations (ORB-SLAM2's `Sim3Solver`: 300).
     pub ransac_iterations: usize,
@@ -68,8 +69,9 @@ pub struct LoopConfig {
     pub pose_graph_iterations: usize,
     /// Global bundle adjustment iterations after a loop (ORB-SLAM2: 10; 0: none).
     pub global_ba_iterations: usize,
-    /// Image size, pixels.
+    /// Image width, pixels.
     pub width: f64,
+    /// Image height, pixels.
     pub height: f64,
 }
 
@@ -102,31 +104,39 @@ const FUSION_RADIUS: f64 = 4.0;
 /// A closed loop.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LoopClosure {
-    /// The key frame that closed it and the one it revisits.
+    /// The key frame that closed it.
     pub current: u64,
+    /// The key frame it revisits.
     pub loop_keyframe: u64,
-    /// Their time stamps, seconds.
+    /// The current key frame's stamp, seconds.
     pub current_stamp: f64,
+    /// The revisited key frame's stamp, seconds.
     pub loop_stamp: f64,
-    /// BoW matches, RANSAC inliers, matches after the projection search.
+    /// BoW matches.
     pub bow_matches: usize,
+    /// RANSAC inliers.
     pub inliers: usize,
+    /// Matches after the projection search.
     pub matches: usize,
     /// `loop_from_current` as estimated (SE(3)).
     pub loop_from_current: Isometry3<f64>,
-    /// Translation and rotation (degrees) the loop moved the current key frame by: the drift.
+    /// Translation (metres) the loop moved the current key frame by: the drift.
     pub correction_m: f64,
+    /// Rotation (degrees) it moved it by.
     pub correction_deg: f64,
     /// Points fused (duplicates replaced by the loop side's).
     pub fused: usize,
-    /// Key frames and edges of the essential graph, its cost before and after.
+    /// Key frames of the essential graph.
     pub keyframes: usize,
+    /// Its edges.
     pub edges: usize,
+    /// Its cost before the optimisation.
     pub cost_before: f64,
+    /// And after.
     pub cost_after: f64,
-    /// The global bundle adjustment after the loop (costs, iterations), and its wall time in
-    /// milliseconds (for reports only: never in a message).
+    /// The global bundle adjustment after the loop (costs, iterations).
     pub global_ba: BaReport,
+    /// Its wall time, milliseconds (for reports only: never in a message).
     pub global_ba_ms: f64,
 }
 
@@ -183,7 +193,7 @@ impl LoopCloser {
             config,
             consistency: LoopConsistency::new(),
             since_loop: 0,
-            rng: SplitMix64::new(seed),
+            rng: SplitMix64::named(seed, "loop_closing/se3"),
             fused_observations: Vec::new(),
             fused_removed: Vec::new(),
             loops: Vec::new(),
@@ -295,44 +305,28 @@ impl LoopCloser {
         if pairs.len() < self.config.min_bow_matches {
             return Err(Rejection::BowMatches);
         }
-        let n = pairs.len();
-        let samples: Vec<[usize; 3]> = (0..self.config.ransac_iterations)
-            .map(|_| [self.rng.below(n), self.rng.below(n), self.rng.below(n)])
-            .collect();
-        let inliers_of = |t: &Isometry3<f64>| -> Vec<bool> {
-            let inv = t.inverse();
-            pairs
-                .iter()
-                .map(|(xa, xb, i, j)| {
-                    self.reprojects(t, xa, &b.keypoints[*j]) && self.reprojects(&inv, xb, &a.keypoints[*i])
-                })
-                .collect()
+        // SE(3) between the two key frames' 3-D points by RANSAC (ORB-SLAM2's Sim3Solver with the
+        // scale fixed: 3-point samples, both-way reprojection within the chi-square bound).
+        let estimator = Se3Estimator {
+            pairs: &pairs,
+            agrees: |t: &Isometry3<f64>, k: usize| {
+                let (xa, xb, i, j) = &pairs[k];
+                self.reprojects(t, xa, &b.keypoints[*j]) && self.reprojects(&t.inverse(), xb, &a.keypoints[*i])
+            },
         };
-        let fit = |idx: &[usize]| -> Option<Isometry3<f64>> {
-            let xa: Vec<Vector3<f64>> = idx.iter().map(|&k| pairs[k].0.coords).collect();
-            let xb: Vec<Vector3<f64>> = idx.iter().map(|&k| pairs[k].1.coords).collect();
-            let (r, t, _) = umeyama(&xa, &xb, false)?;
-            let rot = UnitQuaternion::from_matrix(&r);
-            Some(Isometry3::from_parts(Translation3::from(t), rot))
+        let config = RansacConfig {
+            threshold: 1.0,
+            confidence: 0.99,
+            max_iterations: self.config.ransac_iterations,
+            local_optimisation: false,
         };
-        let mut best: Option<(usize, Vec<bool>)> = None;
-        for idx in samples {
-            if idx[0] == idx[1] || idx[1] == idx[2] || idx[0] == idx[2] {
-                continue;
-            }
-            let Some(t) = fit(&idx) else { continue };
-            let inl = inliers_of(&t);
-            let c = inl.iter().filter(|&&x| x).count();
-            if best.as_ref().is_none_or(|b| c > b.0) {
-                best = Some((c, inl));
-            }
-        }
-        let Some((count, inl)) = best else { return Err(Rejection::RansacInliers) };
-        if count < self.config.min_inliers {
+        let mut rng = self.rng.clone();
+        let consensus = ransac(&estimator, &config, Sampler::Uniform, &mut rng);
+        self.rng = rng;
+        let Some(consensus) = consensus.filter(|c| c.count >= self.config.min_inliers) else {
             return Err(Rejection::RansacInliers);
-        }
-        let idx: Vec<usize> = (0..n).filter(|&k| inl[k]).collect();
-        let Some(cand_from_cur) = fit(&idx) else { return Err(Rejection::RansacInliers) };
+        };
+        let (cand_from_cur, count) = (consensus.model, consensus.count);
         // The loop side's points (the candidate and its covisible key frames) projected into
         // the current key frame at the estimated pose; the pose refined on every match.
         let world_from_cur = b.info.world_from_cam * cand_from_cur;
@@ -362,7 +356,7 @@ impl LoopCloser {
             return Err(Rejection::RefinedMatches);
         }
         Ok(Found {
-            world_from_cur: refined.pose.inverse(),
+            world_from_cur: refined.cam_from_world.inverse(),
             bow_matches: matches.len(),
             inliers: count,
             matches: good,
@@ -648,4 +642,39 @@ struct Found {
     inliers: usize,
     matches: Vec<(usize, u64)>,
     group: Vec<u64>,
+}
+
+/// SE(3) from 3-D point pairs as a RANSAC estimator: 3-point samples solved by Umeyama's
+/// method (scale fixed), a pair agreeing when it reprojects both ways (`agrees`: residual 0,
+/// else infinite), Umeyama on all agreeing pairs as refit.
+struct Se3Estimator<'a, F: Fn(&Isometry3<f64>, usize) -> bool> {
+    /// `(x in the current key frame, x in the candidate, keypoint there, keypoint here)`.
+    pairs: &'a [(Point3<f64>, Point3<f64>, usize, usize)],
+    agrees: F,
+}
+
+impl<F: Fn(&Isometry3<f64>, usize) -> bool> Se3Estimator<'_, F> {
+    fn solve(&self, idx: &[usize]) -> Option<Isometry3<f64>> {
+        let xa: Vec<Vector3<f64>> = idx.iter().map(|&k| self.pairs[k].0.coords).collect();
+        let xb: Vec<Vector3<f64>> = idx.iter().map(|&k| self.pairs[k].1.coords).collect();
+        let (r, t, _) = umeyama(&xa, &xb, false)?;
+        Some(Isometry3::from_parts(Translation3::from(t), UnitQuaternion::from_matrix(&r)))
+    }
+}
+
+impl<F: Fn(&Isometry3<f64>, usize) -> bool> Estimator for Se3Estimator<'_, F> {
+    type Model = Isometry3<f64>;
+    const SAMPLE_SIZE: usize = 3;
+    fn len(&self) -> usize {
+        self.pairs.len()
+    }
+    fn fit(&self, sample: &[usize]) -> Vec<Isometry3<f64>> {
+        self.solve(sample).into_iter().collect()
+    }
+    fn residual(&self, t: &Isometry3<f64>, i: usize) -> f64 {
+        if (self.agrees)(t, i) { 0.0 } else { f64::INFINITY }
+    }
+    fn refit(&self, inliers: &[usize]) -> Option<Isometry3<f64>> {
+        self.solve(inliers)
+    }
 }

@@ -37,30 +37,69 @@ const MAX_IMAGE_PX: f64 = 65_536.0;
 /// Why a map file could not be written or read.
 #[derive(Debug, thiserror::Error)]
 pub enum MapFileError {
+    /// The file could not be read or written.
     #[error("{path}: {source}")]
     Io {
+        /// The file.
         path: String,
+        /// What the system said.
         #[source]
         source: std::io::Error,
     },
+    /// No map header.
     #[error("{path}: not a dynaflow map file")]
-    NotAMap { path: String },
+    NotAMap {
+        /// The file.
+        path: String,
+    },
+    /// A format version this build does not read.
     #[error("{path}: map format version {found}, this build reads {MAP_FORMAT_VERSION}")]
-    Version { path: String, found: u32 },
+    Version {
+        /// The file.
+        path: String,
+        /// Its version.
+        found: u32,
+    },
+    /// Contents that cannot be a map.
     #[error("{path}: truncated or corrupt ({what})")]
-    Corrupt { path: String, what: String },
+    Corrupt {
+        /// The file.
+        path: String,
+        /// What is wrong.
+        what: String,
+    },
+    /// The checksum does not match.
     #[error(
         "{path}: checksum {found:016x} does not match the stored {expected:016x} (the file is damaged or truncated)"
     )]
-    Checksum { path: String, found: u64, expected: u64 },
+    Checksum {
+        /// The file.
+        path: String,
+        /// The checksum of its contents.
+        found: u64,
+        /// The checksum it stores.
+        expected: u64,
+    },
+    /// Made with another vocabulary.
     #[error(
         "{path}: the map was built with vocabulary {map}, but this run uses vocabulary {run}: words differ between vocabularies, so its key frames cannot be recognised (load the map with the vocabulary it was saved with)"
     )]
-    Vocabulary { path: String, map: String, run: String },
+    Vocabulary {
+        /// The file.
+        path: String,
+        /// The vocabulary the map was built with.
+        map: String,
+        /// The run's.
+        run: String,
+    },
+    /// No key frame in it.
     #[error(
         "{path}: the map holds no key frame (saved by a run whose tracker never started a map): there is nothing to localise in"
     )]
-    Empty { path: String },
+    Empty {
+        /// The file.
+        path: String,
+    },
 }
 
 /// 64-bit FNV-1a.

@@ -26,8 +26,9 @@ pub struct PoseEdge {
 /// What an optimisation did.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct PoseGraphReport {
-    /// Sum of squared residuals before and after.
+    /// Sum of squared residuals before.
     pub initial_cost: f64,
+    /// And after.
     pub final_cost: f64,
     /// Levenberg-Marquardt iterations run.
     pub iterations: usize,

@@ -100,7 +100,7 @@ impl Slam {
             let update = self.mapper.insert(kf);
             self.tracker.apply_map_update(&update);
         }
-        if let Some(p) = r.pose {
+        if let Some(p) = r.world_from_cam {
             self.est.push((k as f64 / 30.0, p));
             self.gt.push((k as f64 / 30.0, pose(k)));
         }
@@ -212,7 +212,7 @@ fn a_ten_frame_gap_is_bridged_by_relocalisation() {
         }
         if k == 40 {
             assert_eq!(r.state, TrackState::Relocalised, "the jump needs relocalisation");
-            let e = (r.pose.unwrap().translation.vector - fast(40).translation.vector).norm();
+            let e = (r.world_from_cam.unwrap().translation.vector - fast(40).translation.vector).norm();
             assert!(e < 0.01, "relocalised within {e} m");
         }
         slam.states.push(r.state);
@@ -274,7 +274,7 @@ fn mono_run(world: &World, frames: usize, path: impl Fn(usize) -> Isometry3<f64>
             triangulated.push(Some(slam.mapper.last_triangulated() as u64));
             slam.tracker.apply_map_update(&update);
         }
-        if let Some(p) = r.pose {
+        if let Some(p) = r.world_from_cam {
             slam.est.push((k as f64 / 30.0, p));
             slam.gt.push((k as f64 / 30.0, path(k)));
         }

@@ -1,5 +1,5 @@
 //! `dynaflow compare RUN.mcap... [--names a,b,c] --out compare.rrd`: recorded runs (an
-//! ablation's variants) in one rerun recording laid out side by side (issue 37).
+//! ablation's variants) in one rerun recording laid out side by side.
 
 use std::path::PathBuf;
 

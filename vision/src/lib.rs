@@ -16,6 +16,8 @@
 //! No engine, tokio or image-codec dependency (nalgebra for the small linear algebra): a user can call it directly, and the
 //! benchmarks call exactly what dynaflow's operators call.
 
+#![warn(missing_docs)]
+
 pub mod camera;
 pub mod flow;
 pub mod geometry;

@@ -1,4 +1,4 @@
-//! The geometric front-end as a library (issue 9): ORB count and spread, rotation invariance,
+//! The geometric front-end as a library: ORB count and spread, rotation invariance,
 //! inliers and LK accuracy against OpenCV on the same real images, ground-truth flow on the
 //! synthetic scene, degenerate inputs, the fundamental matrix and PnP against OpenCV. The
 //! `frontend` graph end to end is the workspace's `tests/frontend.rs`.
@@ -334,7 +334,7 @@ fn fundamental_ransac_agrees_with_opencv() {
 
 #[test]
 fn pnp_ransac_agrees_with_opencv_on_the_real_rgbd_pair() {
-    use dynaflow_vision::geometry::{SplitMix64, pnp_ransac};
+    use dynaflow_vision::geometry::{RansacConfig, SplitMix64, pnp_ransac};
     let Some(python) = frontend::cv2_python("frontend: PnP RANSAC vs OpenCV") else { return };
     let dir = common::TempDir::new("pnp-cv2");
     let (world, pixels, cam) = frontend::ch7_pnp();
@@ -347,14 +347,21 @@ fn pnp_ransac_agrees_with_opencv_on_the_real_rgbd_pair() {
     let cv = frontend::run_cv2(&python, dir.path(), &job);
     let theirs = &cv["pnp"]["ch7"];
     assert_eq!(theirs["ok"], true);
-    let fit = pnp_ransac(&world, &pixels, &cam, 3.0, 500, &mut SplitMix64::new(7)).unwrap();
+    let fit = pnp_ransac(
+        &world,
+        &pixels,
+        &cam,
+        &RansacConfig { threshold: 3.0, max_iterations: 500, ..RansacConfig::default() },
+        &mut SplitMix64::new(7),
+    )
+    .unwrap();
     let rvec: Vec<f64> = theirs["rvec"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     let tvec: Vec<f64> = theirs["tvec"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
     let cv_pose = nalgebra::Isometry3::from_parts(
         nalgebra::Translation3::new(tvec[0], tvec[1], tvec[2]),
         nalgebra::UnitQuaternion::from_scaled_axis(nalgebra::Vector3::new(rvec[0], rvec[1], rvec[2])),
     );
-    let d = cv_pose.inverse() * fit.pose;
+    let d = cv_pose.inverse() * fit.cam_from_world;
     let (dt, dr) = (d.translation.vector.norm(), d.rotation.angle().to_degrees());
     let ours_n = fit.inliers.iter().filter(|&&i| i).count();
     let cv_n = theirs["inliers"].as_array().unwrap().len();
@@ -362,7 +369,7 @@ fn pnp_ransac_agrees_with_opencv_on_the_real_rgbd_pair() {
         "ch7 PnP: {} correspondences; inliers ours {ours_n}, OpenCV {cv_n}; poses differ by {:.2} mm, {dr:.3} deg; motion {:.1} mm",
         world.len(),
         dt * 1e3,
-        fit.pose.translation.vector.norm() * 1e3
+        fit.cam_from_world.translation.vector.norm() * 1e3
     );
     // The two differ in their consensus sets, so their poses differ within the noise; ours
     // must fit OpenCV's own inliers as well as OpenCV's pose does.
@@ -381,7 +388,7 @@ fn pnp_ransac_agrees_with_opencv_on_the_real_rgbd_pair() {
         e.sort_by(f64::total_cmp);
         e[e.len() / 2]
     };
-    let (ours_e, cv_e) = (median_error(&fit.pose), median_error(&cv_pose));
+    let (ours_e, cv_e) = (median_error(&fit.cam_from_world), median_error(&cv_pose));
     eprintln!("median reprojection error on OpenCV's inliers: ours {ours_e:.3} px, OpenCV {cv_e:.3} px");
     assert!(ours_e <= 1.1 * cv_e + 0.01, "ours {ours_e} px vs OpenCV {cv_e} px");
 }

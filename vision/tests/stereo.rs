@@ -1,4 +1,4 @@
-//! ORB-SLAM2's sparse stereo matching (issue 33) on synthetic rectified pairs: depth against
+//! ORB-SLAM2's sparse stereo matching on synthetic rectified pairs: depth against
 //! the generator's exact disparity, next to OpenCV's StereoSGBM at the same keypoints.
 #![allow(clippy::unwrap_used, clippy::panic)]
 

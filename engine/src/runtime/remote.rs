@@ -1,4 +1,4 @@
-//! Edges between machines (issue 36): a graph whose nodes name `machine:`s runs as one
+//! Edges between machines: a graph whose nodes name `machine:`s runs as one
 //! process per machine, and an edge between two of them travels over a [`Wire`] (zenoh in
 //! `dynaflow-net`; an in-process loopback for tests).
 //!

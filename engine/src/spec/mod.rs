@@ -30,7 +30,7 @@
 //!         queue: { drop_oldest: 4 }        # block (default) | latest | {drop_oldest: N}
 //!         capacity: 4                      # queue length for `block`
 //!     disabled: false
-//! machines:                # optional: the graph spans processes/machines (zenoh; issue 36)
+//! machines:                # optional: the graph spans processes/machines (zenoh)
 //!   robot:  { endpoint: "tcp/127.0.0.1:7447" }   # the first one is every node's default
 //!   server: { endpoint: "tcp/127.0.0.1:7448" }   # (a node says `machine: server`)
 //! variants:                # named patches for ablations

@@ -19,6 +19,7 @@ params! {
 const LABELS_A: In<PointLabels> = In::required("a", "first rule's labels");
 const LABELS_B: In<PointLabels> = In::required("b", "second rule's labels");
 
+/// The `combine_labels` operator (its doc: `dynaflow ops combine_labels`).
 pub const COMBINE_LABELS: OpSpec = OpSpec {
     name: "combine_labels",
     family: "culling",

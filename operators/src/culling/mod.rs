@@ -90,6 +90,7 @@ fn boxes(d: Option<&Detections>) -> Vec<LabelledBox> {
 /// beside this one (`docs/<name>.md`).
 macro_rules! rule_op {
     ($spec:ident, $name:literal, $inputs:expr, $config:ident, $build:expr) => {
+        #[doc = concat!("The `", $name, "` operator (its doc: `dynaflow ops ", $name, "`).")]
         pub const $spec: OpSpec = OpSpec {
             name: $name,
             family: "culling",

@@ -21,6 +21,7 @@ const F_MODEL: Out<Scalars> = Out::new("model", "`f00`..`f22` (x2^T F x1 = 0), `
 const F_LABELS: Out<PointLabels> =
     Out::new("labels", "per track: outlier = dynamic, reason `epipolar`, score = distance");
 
+/// The `fundamental_ransac` operator (its doc: `dynaflow ops fundamental_ransac`).
 pub const FUNDAMENTAL_RANSAC: OpSpec = OpSpec {
     name: "fundamental_ransac",
     family: "epipolar",
@@ -89,6 +90,7 @@ const H_MODEL: Out<Scalars> = Out::new("model", "`h00`..`h22` (p2 ~ H p1), `inli
 const H_LABELS: Out<PointLabels> =
     Out::new("labels", "per track: outlier = dynamic, reason `flow`, score = transfer error (px)");
 
+/// The `homography_prosac` operator (its doc: `dynaflow ops homography_prosac`).
 pub const HOMOGRAPHY_PROSAC: OpSpec = OpSpec {
     name: "homography_prosac",
     family: "epipolar",

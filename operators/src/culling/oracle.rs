@@ -14,6 +14,7 @@ params! {
 const GT_MASK: In<SegmentationMask> = In::required("mask", "ground-truth class and instance mask");
 const ORACLE_DETECTIONS: Out<Detections> = Out::new("detections", "one box per instance (score 1.0)");
 
+/// The `oracle_boxes` operator (its doc: `dynaflow ops oracle_boxes`).
 pub const ORACLE_BOXES: OpSpec = OpSpec {
     name: "oracle_boxes",
     family: "culling",

@@ -37,6 +37,7 @@ const TRACKS: Out<Tracks> = Out::new(
     "tracked points: id, previous and current position, LK error (mean absolute intensity difference)",
 );
 
+/// The `lk_flow` operator (its doc: `dynaflow ops lk_flow`).
 pub const LK_FLOW: OpSpec = OpSpec {
     name: "lk_flow",
     family: "flow",

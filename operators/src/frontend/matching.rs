@@ -23,6 +23,7 @@ const PREVIOUS: In<Keypoints> = In::optional("previous", "the previous frame's k
 const TRACKS: Out<Tracks> =
     Out::new("tracks", "one per match: track id, previous and current position, Hamming distance as `error`");
 
+/// The `match_descriptors` operator (its doc: `dynaflow ops match_descriptors`).
 pub const MATCH_DESCRIPTORS: OpSpec = OpSpec {
     name: "match_descriptors",
     family: "matching",

@@ -35,6 +35,7 @@ const KEYPOINTS: Out<Keypoints> = Out::new(
     "keypoints (level-0 pixels, octave, angle in degrees, FAST response) with 32-byte descriptors",
 );
 
+/// The `orb_extract` operator (its doc: `dynaflow ops orb_extract`).
 pub const ORB_EXTRACT: OpSpec = OpSpec {
     name: "orb_extract",
     family: "orb",

@@ -26,6 +26,7 @@ const STATS: Out<Scalars> = Out::new(
     "`keypoints`, `matched`, `no_candidate`, `no_refinement`, `out_of_range`, `high_cost` (the matcher's rejections)",
 );
 
+/// The `stereo_match` operator (its doc: `dynaflow ops stereo_match`).
 pub const STEREO_MATCH: OpSpec = OpSpec {
     name: "stereo_match",
     family: "stereo",

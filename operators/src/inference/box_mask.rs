@@ -25,6 +25,7 @@ const DEPTH: In<DepthImage> = In::required("depth", "depth in metres, same image
 const MASK: Out<SegmentationMask> =
     Out::new("mask", "class 0 static, k the k-th class of `classes` (named in the mask); instance = box index + 1");
 
+/// The `box_to_mask` operator (its doc: `dynaflow ops box_to_mask`).
 pub const BOX_TO_MASK: OpSpec = OpSpec {
     name: "box_to_mask",
     family: "inference",

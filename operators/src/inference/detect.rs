@@ -18,7 +18,12 @@ pub const COCO_NAMES: &str = include_str!("../../../models/yolox_nano/coco.names
 
 param_enum! {
     /// How a detector's output is decoded (and its input prepared).
-    pub enum DecoderName { Yolox = "yolox", FastestDet = "fastestdet" }
+    pub enum DecoderName {
+        /// YOLOX: per-anchor boxes, objectness times class score.
+        Yolox = "yolox",
+        /// FastestDet: one box per grid cell.
+        FastestDet = "fastestdet",
+    }
 }
 
 params! {
@@ -51,6 +56,7 @@ impl DecoderName {
     }
 }
 
+/// The `detect` operator (its doc: `dynaflow ops detect`).
 pub const DETECT: OpSpec = OpSpec {
     name: "detect",
     family: "inference",

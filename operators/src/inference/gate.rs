@@ -23,6 +23,7 @@ const IMAGE_OUT: Out<Image> = Out::new("image", "the frame, on key segmentation 
 const STATS: Out<Scalars> =
     Out::new("stats", "`infer` (0/1), `rule` (0 skipped, 1 first, 2 relocalised, 3 few_dynamic, 4 keyframe, 5 gap)");
 
+/// The `keyframe_gate` operator (its doc: `dynaflow ops keyframe_gate`).
 pub const KEYFRAME_GATE: OpSpec = OpSpec {
     name: "keyframe_gate",
     family: "inference",

@@ -55,6 +55,7 @@ const MASK: Out<SegmentationMask> = Out::new(
     "class per pixel (the model's class ids and names, 0 = background) at the image's size; instances = connected components",
 );
 
+/// The `segment` operator (its doc: `dynaflow ops segment`).
 pub const SEGMENT: OpSpec = OpSpec {
     name: "segment",
     family: "inference",

@@ -54,6 +54,7 @@ const MAP: Out<OctreeUpdate> = Out::new(
     "every occupied voxel with its class, every `snapshot_every` frames (what the viewer shows as the map)",
 );
 
+/// The `octomap` operator (its doc: `dynaflow ops octomap`).
 pub const OCTOMAP: OpSpec = OpSpec {
     name: "octomap",
     family: "mapping",

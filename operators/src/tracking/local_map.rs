@@ -36,6 +36,7 @@ const STATS: Out<Scalars> = Out::new(
     "`keyframes`, `points`, `window`, `removed`, `triangulated`, `fused` (monocular), `ba_iterations`, `ba_cost_before`, `ba_cost_after` (insertion times: the summary's `report.local_ba_ms`)",
 );
 
+/// The `local_map` operator (its doc: `dynaflow ops local_map`).
 pub const LOCAL_MAP: OpSpec = OpSpec {
     name: "local_map",
     family: "pnp_ba",

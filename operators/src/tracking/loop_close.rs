@@ -47,6 +47,7 @@ const STATS: Out<Scalars> = Out::new(
     "per key frame: `keyframes`, `points`, `loops`, `loop` (1 when this key frame closed one), `loop_keyframe`, `matches`, `correction_m`, `correction_deg`, `fused` (times: the summary's `report`)",
 );
 
+/// The `loop_close` operator (its doc: `dynaflow ops loop_close`).
 pub const LOOP_CLOSE: OpSpec = OpSpec {
     name: "loop_close",
     family: "pnp_ba",

@@ -392,7 +392,7 @@ impl Operator for Track {
         let stamp = msg.header.stamp;
         let r = tracker.track(stamp, &features);
         self.counts[r.state.code() as usize] += 1;
-        if r.pose.is_some() && self.first_pose_frame.is_none() {
+        if r.world_from_cam.is_some() && self.first_pose_frame.is_none() {
             self.first_pose_frame = Some(self.frames);
         }
         self.frames += 1;
@@ -412,7 +412,7 @@ impl Operator for Track {
         // A lost frame's pose is the motion model's guess, not an estimate: it is left out of
         // the pose stream and the trajectory, as ORB-SLAM2's SaveTrajectoryTUM and the TUM tools
         // leave lost frames out (their count is in the report beside the ATE).
-        if let Some(world_from_cam) = r.pose.filter(|_| r.state != dynaflow_slam::TrackState::Lost) {
+        if let Some(world_from_cam) = r.world_from_cam.filter(|_| r.state != dynaflow_slam::TrackState::Lost) {
             self.trajectory.push((stamp, world_from_cam));
             out = out.send(&POSE, header.clone(), Pose { world_from_cam });
         }

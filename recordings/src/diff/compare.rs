@@ -1,5 +1,5 @@
 //! `dynaflow compare`: several recorded runs (an ablation: "semantic only", "geometric only",
-//! both) in one rerun recording laid out for comparison (issue 37). The rerun viewer cannot
+//! both) in one rerun recording laid out for comparison. The rerun viewer cannot
 //! sync timelines across recordings nor keep a layout per recording, so the runs go into one:
 //! each under `/runs/<name>/` on one shared `frame` timeline.
 //!

@@ -144,7 +144,7 @@ impl Tracker {
         let fit = Fit { world_from_cam, matches: 0, inliers: 0, matched: vec![None; features.len()] };
         let keyframe = Some(self.make_keyframe(stamp, features, &fit));
         TrackingResult {
-            pose: Some(world_from_cam),
+            world_from_cam: Some(world_from_cam),
             state,
             matches: 0,
             inliers: 0,

@@ -31,7 +31,8 @@ use std::sync::Arc;
 
 use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{
-    PoseObservation, SplitMix64, TwoViewConfig, TwoViewInit, initialise, optimize_pose, p3p_ransac, renormalised,
+    PoseObservation, RansacConfig, SplitMix64, TwoViewConfig, TwoViewInit, initialise, optimize_pose, p3p_ransac,
+    renormalised,
 };
 use dynaflow_vision::matching::{GridIndex, MatchConfig, match_brute_force, nearest_two};
 use nalgebra::{Isometry3, Point3};
@@ -172,8 +173,8 @@ impl TrackState {
 /// What [`Tracker::track`] found for one frame.
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrackingResult {
-    /// `world_from_cam`, `None` before the first map.
-    pub pose: Option<Isometry3<f64>>,
+    /// The camera's pose, `world_from_cam`; `None` before the first map.
+    pub world_from_cam: Option<Isometry3<f64>>,
     /// Outcome.
     pub state: TrackState,
     /// Map points matched to keypoints.
@@ -197,6 +198,32 @@ struct TPoint {
     first_keyframe: u64,
 }
 
+/// The tracker's random streams, one per call site ([`SplitMix64::named`]).
+#[derive(Debug)]
+struct Streams {
+    /// P3P against the recent key frames' points.
+    relocalise_local: SplitMix64,
+    /// P3P against a key frame found by bag of words.
+    relocalise_map: SplitMix64,
+    /// Monocular two-view initialisation.
+    initialise: SplitMix64,
+}
+
+impl Streams {
+    fn new(seed: u64) -> Self {
+        Self {
+            relocalise_local: SplitMix64::named(seed, "tracker/relocalise/local"),
+            relocalise_map: SplitMix64::named(seed, "tracker/relocalise/map"),
+            initialise: SplitMix64::named(seed, "tracker/initialise"),
+        }
+    }
+}
+
+/// RANSAC for P3P relocalisation: ORB-SLAM2's PnP solver settings (300 iterations, 99 %).
+fn relocalisation_ransac(threshold: f64) -> RansacConfig {
+    RansacConfig { threshold, confidence: 0.99, max_iterations: 300, local_optimisation: false }
+}
+
 /// Tracking state across frames.
 #[derive(Debug)]
 pub struct Tracker {
@@ -204,7 +231,8 @@ pub struct Tracker {
     cam: Pinhole,
     width: f64,
     height: f64,
-    rng: SplitMix64,
+    /// One random stream per call site, each derived from the seed by its name.
+    rng: Streams,
     map_id: u32,
     initialised: bool,
     points: BTreeMap<u64, TPoint>,
@@ -265,7 +293,7 @@ impl Tracker {
             cam,
             width: width as f64,
             height: height as f64,
-            rng: SplitMix64::new(seed),
+            rng: Streams::new(seed),
             map_id: 0,
             initialised: false,
             points: BTreeMap::new(),
@@ -399,7 +427,7 @@ impl Tracker {
     pub fn track(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
         let r = self.track_frame(stamp, features);
         // Lost frames (a dead-reckoned guess) stay out of the trajectory, as in ORB-SLAM2.
-        if let (Some(pose), Some(k), false) = (r.pose, self.reference, r.state == TrackState::Lost)
+        if let (Some(pose), Some(k), false) = (r.world_from_cam, self.reference, r.state == TrackState::Lost)
             && let Some(kp) = self.keyframe_poses.get(&k)
         {
             self.anchors.push((stamp, k, kp.inverse() * pose));

@@ -51,8 +51,8 @@ impl Tracker {
     /// sets the first view's median depth to 1; or why not (fewer than 100 points survive, as
     /// ORB-SLAM2 requires, or no positive median depth).
     pub(super) fn two_view_map(&mut self, p1: &[[f64; 2]], p2: &[[f64; 2]]) -> Result<(TwoViewInit, f64), String> {
-        let init =
-            initialise(p1, p2, &self.cam, &TwoViewConfig::default(), &mut self.rng).map_err(|e| e.to_string())?;
+        let init = initialise(p1, p2, &self.cam, &TwoViewConfig::default(), &mut self.rng.initialise)
+            .map_err(|e| e.to_string())?;
         let mut depths: Vec<f64> = init.points.iter().flatten().map(|p| p.z).collect();
         if depths.len() < MONO_INIT_MATCHES {
             return Err(format!("{} points triangulated; a monocular map needs {MONO_INIT_MATCHES}", depths.len()));
@@ -161,7 +161,7 @@ impl Tracker {
             keypoints: Vec::new(),
         };
         TrackingResult {
-            pose: Some(world_from_c2),
+            world_from_cam: Some(world_from_c2),
             state: TrackState::NewMap,
             matches: matches.len(),
             inliers,

@@ -71,6 +71,7 @@ impl Tracker {
         let descriptors: Vec<[u8; 32]> = static_idx.iter().map(|&i| features[i].descriptor).collect();
         let (bow, index) = places.transform(&descriptors);
         let candidates = places.db.relocalisation_candidates(&bow, &|k| places.covisible(k));
+        let ransac = relocalisation_ransac(self.config.ransac_threshold);
         for (candidate, _) in candidates {
             let Some(kf) = places.kfs.get(&candidate) else { continue };
             let pairs = places.search_frame_by_bow(kf, features, &index, &static_idx);
@@ -83,8 +84,7 @@ impl Tracker {
                 continue;
             }
             let pixels: Vec<[f64; 2]> = pairs.iter().map(|&(i, _)| features[i].uv).collect();
-            let Some((pose, mask)) =
-                p3p_ransac(&world, &pixels, &self.cam, self.config.ransac_threshold, 300, &mut self.rng)
+            let Some((pose, mask)) = p3p_ransac(&world, &pixels, &self.cam, &ransac, &mut self.rng.relocalise_map)
             else {
                 continue;
             };
@@ -138,7 +138,8 @@ impl Tracker {
         let world: Vec<Point3<f64>> =
             pairs.iter().filter_map(|(_, id)| self.points.get(id).map(|p| p.position)).collect();
         let pixels: Vec<[f64; 2]> = pairs.iter().map(|&(i, _)| features[i].uv).collect();
-        let (pose, mask) = p3p_ransac(&world, &pixels, &self.cam, self.config.ransac_threshold, 300, &mut self.rng)?;
+        let ransac = relocalisation_ransac(self.config.ransac_threshold);
+        let (pose, mask) = p3p_ransac(&world, &pixels, &self.cam, &ransac, &mut self.rng.relocalise_local)?;
         let fit = self.optimise(features, &pairs, &pose, Some(mask));
         if fit.inliers < 10 {
             return Some(fit);

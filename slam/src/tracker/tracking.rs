@@ -18,7 +18,7 @@ impl Tracker {
                 self.follow_loaded_map(&f.matched);
             }
             return TrackingResult {
-                pose: Some(f.world_from_cam),
+                world_from_cam: Some(f.world_from_cam),
                 state: TrackState::Relocalised,
                 matches: f.matches,
                 inliers: f.inliers,
@@ -73,7 +73,7 @@ impl Tracker {
                 let keyframe =
                     (self.mapping && self.need_keyframe(features, &f)).then(|| self.make_keyframe(stamp, features, &f));
                 TrackingResult {
-                    pose: Some(f.world_from_cam),
+                    world_from_cam: Some(f.world_from_cam),
                     state,
                     matches: f.matches,
                     inliers: f.inliers,
@@ -178,13 +178,18 @@ impl Tracker {
                 inliers += 1;
             }
         }
-        Fit { world_from_cam: renormalised(&fit.pose.inverse()), matches: pairs.len(), inliers, matched }
+        Fit { world_from_cam: renormalised(&fit.cam_from_world.inverse()), matches: pairs.len(), inliers, matched }
     }
 
     /// The result of a frame that was not tracked.
-    pub(super) fn untracked(&self, pose: Option<Isometry3<f64>>, state: TrackState, features: usize) -> TrackingResult {
+    pub(super) fn untracked(
+        &self,
+        world_from_cam: Option<Isometry3<f64>>,
+        state: TrackState,
+        features: usize,
+    ) -> TrackingResult {
         TrackingResult {
-            pose,
+            world_from_cam,
             state,
             matches: 0,
             inliers: 0,

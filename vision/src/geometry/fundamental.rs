@@ -4,6 +4,7 @@
 use nalgebra::{Matrix3, SMatrix, SymmetricEigen, Vector3};
 
 use super::Mat3;
+use super::ransac::{Estimator, RansacConfig, Sampler, SplitMix64, ransac};
 
 /// Similarity that moves the points' centroid to the origin and their mean distance from it
 /// to sqrt(2). `None` when the points coincide (no scale to normalise).
@@ -174,6 +175,72 @@ pub fn epipolar_error(f: &Mat3, p1: [f64; 2], p2: [f64; 2]) -> f64 {
     d1.max(d2).powi(2)
 }
 
+/// A robustly estimated fundamental matrix.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FundamentalFit {
+    /// F with `x2^T F x1 = 0`, unit Frobenius norm.
+    pub f: Mat3,
+    /// Per correspondence: within the threshold of both epipolar lines.
+    pub inliers: Vec<bool>,
+    /// Samples drawn.
+    pub iterations: usize,
+}
+
+impl FundamentalFit {
+    /// Number of inliers.
+    pub fn inlier_count(&self) -> usize {
+        self.inliers.iter().filter(|&&i| i).count()
+    }
+}
+
+/// F as a RANSAC estimator: 7-point minimal samples (up to three models each), the symmetric
+/// epipolar distance as residual, the normalised 8-point solver as refit.
+pub struct FundamentalEstimator<'a> {
+    /// Points in the first view.
+    pub p1: &'a [[f64; 2]],
+    /// Their correspondences in the second.
+    pub p2: &'a [[f64; 2]],
+}
+
+impl Estimator for FundamentalEstimator<'_> {
+    type Model = Mat3;
+    const SAMPLE_SIZE: usize = 7;
+    fn len(&self) -> usize {
+        self.p1.len()
+    }
+    fn fit(&self, sample: &[usize]) -> Vec<Mat3> {
+        let (mut s1, mut s2) = ([[0.0; 2]; 7], [[0.0; 2]; 7]);
+        for (k, &i) in sample.iter().enumerate().take(7) {
+            (s1[k], s2[k]) = (self.p1[i], self.p2[i]);
+        }
+        seven_point(&s1, &s2)
+    }
+    fn residual(&self, f: &Mat3, i: usize) -> f64 {
+        epipolar_error(f, self.p1[i], self.p2[i])
+    }
+    fn refit(&self, inliers: &[usize]) -> Option<Mat3> {
+        let (a, b): (Vec<[f64; 2]>, Vec<[f64; 2]>) = inliers.iter().map(|&i| (self.p1[i], self.p2[i])).unzip();
+        eight_point(&a, &b)
+    }
+}
+
+/// Estimate F from correspondences `p1[i] <-> p2[i]` by LO-RANSAC ([`ransac`], uniform
+/// samples; `config.threshold` in pixels from both epipolar lines). `None` with fewer than 8
+/// points, a non-finite one, or when no sample gives a model.
+pub fn fit_fundamental(
+    p1: &[[f64; 2]],
+    p2: &[[f64; 2]],
+    config: &RansacConfig,
+    rng: &mut SplitMix64,
+) -> Option<FundamentalFit> {
+    let n = p1.len();
+    if n < 8 || p2.len() != n || p1.iter().chain(p2).any(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        return None;
+    }
+    let c = ransac(&FundamentalEstimator { p1, p2 }, config, Sampler::Uniform, rng)?;
+    Some(FundamentalFit { f: c.model, inliers: c.inliers, iterations: c.iterations })
+}
+
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
@@ -283,5 +350,40 @@ pub(crate) mod tests {
         }
         assert_eq!(real_roots_cubic(0.0, 0.0, 0.0, 1.0), Vec::<f64>::new());
         assert_eq!(real_roots_cubic(1.0, 0.0, 1.0, 0.0).len(), 1);
+    }
+
+    #[test]
+    fn finds_the_inliers_among_outliers_and_is_reproducible() {
+        let (mut p1, mut p2, _) = scene(200, 9);
+        let mut rng = SplitMix64::new(77);
+        // 30 % gross outliers.
+        for p in p2.iter_mut().take(60) {
+            *p = [rng.uniform() * 640.0, rng.uniform() * 480.0];
+        }
+        // Half a pixel of noise on the rest.
+        for p in p1.iter_mut().chain(p2.iter_mut().skip(60)) {
+            p[0] += rng.uniform() - 0.5;
+            p[1] += rng.uniform() - 0.5;
+        }
+        let config = RansacConfig { threshold: 2.0, ..RansacConfig::default() };
+        let fit = fit_fundamental(&p1, &p2, &config, &mut SplitMix64::new(1)).unwrap();
+        let found_good = fit.inliers.iter().skip(60).filter(|&&i| i).count();
+        let found_bad = fit.inliers.iter().take(60).filter(|&&i| i).count();
+        assert!(found_good >= 135, "{found_good} of 140 inliers");
+        assert!(found_bad <= 6, "{found_bad} outliers accepted");
+        assert!(fit.iterations < config.max_iterations, "adaptive stop: {}", fit.iterations);
+        let again = fit_fundamental(&p1, &p2, &config, &mut SplitMix64::new(1)).unwrap();
+        assert_eq!(fit, again);
+    }
+
+    #[test]
+    fn too_few_or_bad_points_give_no_model() {
+        let (p1, p2, _) = scene(7, 2);
+        assert!(fit_fundamental(&p1, &p2, &RansacConfig::default(), &mut SplitMix64::new(0)).is_none());
+        let same = vec![[5.0, 5.0]; 30];
+        assert!(fit_fundamental(&same, &same, &RansacConfig::default(), &mut SplitMix64::new(0)).is_none());
+        let mut bad = scene(20, 2).0;
+        bad[3] = [f64::NAN, 0.0];
+        assert!(fit_fundamental(&bad, &bad, &RansacConfig::default(), &mut SplitMix64::new(0)).is_none());
     }
 }

@@ -6,7 +6,7 @@ use nalgebra::{Matrix3, SMatrix, SymmetricEigen, Vector3};
 
 use super::Mat3;
 use super::fundamental::normaliser;
-use super::ransac::{SplitMix64, needed};
+use super::ransac::{Estimator, RansacConfig, Sampler, SplitMix64, ransac};
 
 /// Where `h` maps `p` (infinite when it maps to the line at infinity).
 pub fn transfer(h: &Mat3, p: [f64; 2]) -> [f64; 2] {
@@ -58,82 +58,49 @@ pub struct HomographyFit {
     pub iterations: usize,
 }
 
-/// PROSAC: `quality[i]` ranks correspondence `i` (higher is better; PSPNet-SLAM's
-/// `1 / (beta * d_min)`). Inliers have a transfer error below `threshold` pixels.
+/// The homography as a RANSAC estimator: 4-point samples, the transfer error as residual,
+/// the normalised DLT on all inliers as refit.
+pub struct HomographyEstimator<'a> {
+    /// Points in the first view.
+    pub p1: &'a [[f64; 2]],
+    /// Their correspondences in the second.
+    pub p2: &'a [[f64; 2]],
+}
+
+impl Estimator for HomographyEstimator<'_> {
+    type Model = Mat3;
+    const SAMPLE_SIZE: usize = 4;
+    fn len(&self) -> usize {
+        self.p1.len()
+    }
+    fn fit(&self, sample: &[usize]) -> Vec<Mat3> {
+        let (a, b): (Vec<[f64; 2]>, Vec<[f64; 2]>) = sample.iter().map(|&i| (self.p1[i], self.p2[i])).unzip();
+        homography_dlt(&a, &b).into_iter().collect()
+    }
+    fn residual(&self, h: &Mat3, i: usize) -> f64 {
+        transfer_error(h, self.p1[i], self.p2[i]).powi(2)
+    }
+    fn refit(&self, inliers: &[usize]) -> Option<Mat3> {
+        let (a, b): (Vec<[f64; 2]>, Vec<[f64; 2]>) = inliers.iter().map(|&i| (self.p1[i], self.p2[i])).unzip();
+        homography_dlt(&a, &b)
+    }
+}
+
+/// PROSAC ([`ransac`] with [`Sampler::prosac`]): `quality[i]` ranks correspondence `i` (higher
+/// is better; PSPNet-SLAM's `1 / (beta * d_min)`). Inliers have a transfer error within
+/// `config.threshold` pixels. `None` with fewer than 4 correspondences or no usable sample.
 pub fn fit_homography_prosac(
     p1: &[[f64; 2]],
     p2: &[[f64; 2]],
     quality: &[f64],
-    threshold: f64,
-    max_iterations: usize,
+    config: &RansacConfig,
     rng: &mut SplitMix64,
 ) -> Option<HomographyFit> {
-    let n = p1.len();
-    const M: usize = 4;
-    if n < M || p2.len() != n || quality.len() != n {
+    if p2.len() != p1.len() || quality.len() != p1.len() {
         return None;
     }
-    let mut order: Vec<usize> = (0..n).collect();
-    order.sort_by(|&a, &b| quality[b].total_cmp(&quality[a]).then(a.cmp(&b)));
-    let count = |h: &Mat3| p1.iter().zip(p2).filter(|(a, b)| transfer_error(h, **a, **b) <= threshold).count();
-    // PROSAC growth schedule: T_n, the expected number of samples drawn from the top n.
-    let t_max = max_iterations.max(1) as f64;
-    let mut t_n = t_max;
-    for i in 0..M {
-        t_n *= (M - i) as f64 / (n - i) as f64;
-    }
-    let (mut subset, mut t_prime, mut t_n_prev) = (M, 1usize, t_n);
-    let mut best: Option<(Mat3, usize)> = None;
-    let mut iterations = 0;
-    let mut limit = max_iterations.max(1);
-    while iterations < limit {
-        iterations += 1;
-        if iterations == t_prime && subset < n {
-            // Grow the pool by the next-best correspondence.
-            let t_next = t_n_prev * (subset + 1) as f64 / (subset + 1 - M) as f64;
-            t_prime += (t_next - t_n_prev).ceil().max(1.0) as usize;
-            t_n_prev = t_next;
-            subset += 1;
-        }
-        // M - 1 points from the top `subset - 1`, plus the `subset`-th (PROSAC's sampling).
-        let mut idx = [0usize; M];
-        idx[M - 1] = order[subset - 1];
-        for k in 0..M - 1 {
-            loop {
-                let i = order[rng.below(subset.saturating_sub(1).max(1))];
-                if !idx[..k].contains(&i) && i != idx[M - 1] {
-                    idx[k] = i;
-                    break;
-                }
-                if subset <= M {
-                    // Only the top M exist: take them in order.
-                    idx[k] = order[k];
-                    break;
-                }
-            }
-        }
-        let s1: Vec<[f64; 2]> = idx.iter().map(|&i| p1[i]).collect();
-        let s2: Vec<[f64; 2]> = idx.iter().map(|&i| p2[i]).collect();
-        let Some(h) = homography_dlt(&s1, &s2) else { continue };
-        let c = count(&h);
-        if best.as_ref().is_none_or(|b| c > b.1) {
-            best = Some((h, c));
-            // RANSAC's stopping rule on the inlier ratio: 99 % confidence that an all-inlier
-            // sample was drawn (PROSAC reaches it sooner: good matches come first).
-            limit = limit.min(needed(c as f64 / n as f64, M, 0.99, limit));
-        }
-    }
-    let (mut h, c) = best?;
-    // Refit on the inliers.
-    let (i1, i2): (Vec<[f64; 2]>, Vec<[f64; 2]>) =
-        p1.iter().zip(p2).filter(|(a, b)| transfer_error(&h, **a, **b) <= threshold).map(|(a, b)| (*a, *b)).unzip();
-    if let Some(g) = homography_dlt(&i1, &i2)
-        && count(&g) >= c
-    {
-        h = g;
-    }
-    let inliers = p1.iter().zip(p2).map(|(a, b)| transfer_error(&h, *a, *b) <= threshold).collect();
-    Some(HomographyFit { h, inliers, iterations })
+    let c = ransac(&HomographyEstimator { p1, p2 }, config, Sampler::prosac(quality), rng)?;
+    Some(HomographyFit { h: c.model, inliers: c.inliers, iterations: c.iterations })
 }
 
 #[cfg(test)]
@@ -159,7 +126,14 @@ mod tests {
             *p = [rng.uniform() * 640.0, rng.uniform() * 480.0];
         }
         let quality: Vec<f64> = (0..100).map(|i| if i < 60 { 1.0 - i as f64 * 1e-3 } else { 0.1 }).collect();
-        let fit = fit_homography_prosac(&p1, &p2, &quality, 1.0, 500, &mut SplitMix64::new(1)).unwrap();
+        let fit = fit_homography_prosac(
+            &p1,
+            &p2,
+            &quality,
+            &RansacConfig { threshold: 1.0, max_iterations: 500, ..RansacConfig::default() },
+            &mut SplitMix64::new(1),
+        )
+        .unwrap();
         assert_eq!(fit.inliers.iter().take(60).filter(|&&i| i).count(), 60);
         assert!(fit.inliers.iter().skip(60).filter(|&&i| i).count() <= 2);
         // Good ones ranked first: found within a few samples.
@@ -173,6 +147,15 @@ mod tests {
         assert!(homography_dlt(&same[..3], &same[..3]).is_none());
         let line: Vec<[f64; 2]> = (0..10).map(|i| [f64::from(i), 2.0 * f64::from(i)]).collect();
         assert!(homography_dlt(&line, &line).is_none_or(|h| h.iter().all(|v| v.is_finite())));
-        assert!(fit_homography_prosac(&same, &same, &[1.0; 10], 1.0, 50, &mut SplitMix64::new(0)).is_none());
+        assert!(
+            fit_homography_prosac(
+                &same,
+                &same,
+                &[1.0; 10],
+                &RansacConfig { threshold: 1.0, max_iterations: 50, ..RansacConfig::default() },
+                &mut SplitMix64::new(0)
+            )
+            .is_none()
+        );
     }
 }

@@ -74,9 +74,8 @@ mod tests {
 
     fn ratio(rotation: Rotation3<f64>, t: Vector3<f64>) -> f64 {
         let (a, b) = pair(rotation, t, 3);
-        let h = fit_homography_prosac(&a, &b, &vec![1.0; a.len()], CHI2_2DOF.sqrt(), 1000, &mut SplitMix64::new(1))
-            .unwrap()
-            .h;
+        let config = RansacConfig { threshold: CHI2_2DOF.sqrt(), local_optimisation: false, ..RansacConfig::default() };
+        let h = fit_homography_prosac(&a, &b, &vec![1.0; a.len()], &config, &mut SplitMix64::new(1)).unwrap().h;
         let f = fit_fundamental(&a, &b, &RansacConfig::default(), &mut SplitMix64::new(2)).unwrap().f;
         homography_ratio(&h, &f, &a, &b)
     }

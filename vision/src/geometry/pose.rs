@@ -9,7 +9,7 @@ use nalgebra::{
 };
 
 use super::p3p::p3p;
-use super::ransac::{SplitMix64, needed};
+use super::ransac::{Estimator, RansacConfig, Sampler, SplitMix64, ransac};
 use crate::camera::Pinhole;
 
 /// Chi-square 95 % quantile for 2 degrees of freedom: ORB-SLAM's inlier test on squared
@@ -130,8 +130,8 @@ pub fn renormalised(pose: &Isometry3<f64>) -> Isometry3<f64> {
 /// Motion-only bundle adjustment result.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseFit {
-    /// `cam_from_world`.
-    pub pose: Isometry3<f64>,
+    /// The camera's pose, `cam_from_world`.
+    pub cam_from_world: Isometry3<f64>,
     /// Per correspondence: reprojection error within the chi-square bound at the end.
     pub inliers: Vec<bool>,
     /// Reprojection error per correspondence, pixels.
@@ -259,7 +259,7 @@ pub fn optimize_pose(
         .iter()
         .map(|o| cam.project(&(pose * o.point)).map_or(f64::INFINITY, |uv| (uv[0] - o.uv[0]).hypot(uv[1] - o.uv[1])))
         .collect();
-    PoseFit { pose, inliers: inlier, errors }
+    PoseFit { cam_from_world: pose, inliers: inlier, errors }
 }
 
 /// Pixel-only observations with one sigma.
@@ -284,86 +284,94 @@ pub fn bearing(cam: &Pinhole, uv: [f64; 2]) -> Vector3<f64> {
     Vector3::new(x, y, 1.0).normalize()
 }
 
-/// RANSAC over minimal P3P samples: three points give up to four poses, a fourth picks
-/// one (as OpenCV's `SOLVEPNP_P3P` does), the consensus counts reprojection errors within
-/// `threshold` pixels; adaptive stopping at 99 % confidence. Returns the best pose
-/// (`cam_from_world`) and its inlier mask, without refinement. `None` with fewer than 4
-/// correspondences or no usable sample.
+/// P3P as a RANSAC estimator: 4-point samples (three solve, the fourth picks among P3P's up
+/// to four poses and must reproject within the threshold), the squared reprojection error as
+/// residual; no refit (motion-only BA follows in [`pnp_ransac`]).
+pub struct P3pEstimator<'a> {
+    /// The points, world frame.
+    pub world: &'a [Point3<f64>],
+    /// Their pixels.
+    pub pixels: &'a [[f64; 2]],
+    /// The camera.
+    pub cam: &'a Pinhole,
+    /// Unit bearings of the pixels.
+    bearings: Vec<Vector3<f64>>,
+    /// The fourth point's test, squared pixels.
+    t2: f64,
+}
+
+impl<'a> P3pEstimator<'a> {
+    /// The estimator for `world[i] <-> pixels[i]`, its fourth-point test at `threshold` pixels.
+    pub fn new(world: &'a [Point3<f64>], pixels: &'a [[f64; 2]], cam: &'a Pinhole, threshold: f64) -> Self {
+        let bearings = pixels.iter().map(|uv| bearing(cam, *uv)).collect();
+        Self { world, pixels, cam, bearings, t2: threshold * threshold }
+    }
+}
+
+impl Estimator for P3pEstimator<'_> {
+    type Model = Isometry3<f64>;
+    const SAMPLE_SIZE: usize = 4;
+    fn len(&self) -> usize {
+        self.world.len()
+    }
+    fn fit(&self, idx: &[usize]) -> Vec<Isometry3<f64>> {
+        let sols = p3p(
+            &[self.world[idx[0]], self.world[idx[1]], self.world[idx[2]]],
+            &[self.bearings[idx[0]], self.bearings[idx[1]], self.bearings[idx[2]]],
+        );
+        let Some(pose) = sols.into_iter().min_by(|a, b| self.residual(a, idx[3]).total_cmp(&self.residual(b, idx[3])))
+        else {
+            return Vec::new();
+        };
+        let e4 = self.residual(&pose, idx[3]);
+        if e4 > self.t2 || e4.is_nan() { Vec::new() } else { vec![pose] }
+    }
+    fn residual(&self, pose: &Isometry3<f64>, i: usize) -> f64 {
+        self.cam.project(&(pose * self.world[i])).map_or(f64::INFINITY, |uv| {
+            let (du, dv) = (uv[0] - self.pixels[i][0], uv[1] - self.pixels[i][1]);
+            du * du + dv * dv
+        })
+    }
+}
+
+/// P3P inside RANSAC ([`ransac`], uniform samples): `cam_from_world` and the inlier mask
+/// (reprojection within `config.threshold` pixels). `None` with fewer than 4 correspondences
+/// or no usable sample.
 pub fn p3p_ransac(
     world: &[Point3<f64>],
     pixels: &[[f64; 2]],
     cam: &Pinhole,
-    threshold: f64,
-    max_iterations: usize,
+    config: &RansacConfig,
     rng: &mut SplitMix64,
 ) -> Option<(Isometry3<f64>, Vec<bool>)> {
-    let n = world.len();
-    if n < 4 || pixels.len() != n {
+    if pixels.len() != world.len() {
         return None;
     }
-    let t2 = threshold * threshold;
-    let error2 = |pose: &Isometry3<f64>, i: usize| {
-        cam.project(&(pose * world[i])).map_or(f64::INFINITY, |uv| {
-            let (du, dv) = (uv[0] - pixels[i][0], uv[1] - pixels[i][1]);
-            du * du + dv * dv
-        })
-    };
-    let bearings: Vec<Vector3<f64>> = pixels.iter().map(|uv| bearing(cam, *uv)).collect();
-    let mut best: Option<(Isometry3<f64>, usize)> = None;
-    let mut limit = max_iterations.max(1);
-    let mut it = 0;
-    while it < limit {
-        it += 1;
-        let mut idx = [0usize; 4];
-        for k in 0..4 {
-            loop {
-                let i = rng.below(n);
-                if !idx[..k].contains(&i) {
-                    idx[k] = i;
-                    break;
-                }
-            }
-        }
-        let sols = p3p(
-            &[world[idx[0]], world[idx[1]], world[idx[2]]],
-            &[bearings[idx[0]], bearings[idx[1]], bearings[idx[2]]],
-        );
-        let Some(pose) = sols.into_iter().min_by(|a, b| error2(a, idx[3]).total_cmp(&error2(b, idx[3]))) else {
-            continue;
-        };
-        let e4 = error2(&pose, idx[3]);
-        if e4 > t2 || e4.is_nan() {
-            continue;
-        }
-        let c = (0..n).filter(|&i| error2(&pose, i) <= t2).count();
-        if best.as_ref().is_none_or(|b| c > b.1) {
-            best = Some((pose, c));
-            limit = limit.min(needed(c as f64 / n as f64, 4, 0.99, limit));
-        }
-    }
-    let (pose, _) = best?;
-    let mask = (0..n).map(|i| error2(&pose, i) <= t2).collect();
-    Some((pose, mask))
+    let c = ransac(&P3pEstimator::new(world, pixels, cam, config.threshold), config, Sampler::Uniform, rng)?;
+    Some((c.model, c.inliers))
 }
 
-/// PnP: [`p3p_ransac`] (reprojection threshold `threshold` pixels), then motion-only BA
+/// PnP: [`p3p_ransac`] (reprojection threshold `config.threshold` pixels), then motion-only BA
 /// started from its consensus. `None` with fewer than 4 correspondences or no usable sample.
 pub fn pnp_ransac(
     world: &[Point3<f64>],
     pixels: &[[f64; 2]],
     cam: &Pinhole,
-    threshold: f64,
-    max_iterations: usize,
+    config: &RansacConfig,
     rng: &mut SplitMix64,
 ) -> Option<PoseFit> {
-    let (pose, mask) = p3p_ransac(world, pixels, cam, threshold, max_iterations, rng)?;
-    let sigma = threshold / CHI2_2DOF_95.sqrt();
+    let (pose, mask) = p3p_ransac(world, pixels, cam, config, rng)?;
+    let sigma = config.threshold / CHI2_2DOF_95.sqrt();
     Some(optimize_pose(&pixel_observations(world, pixels, sigma), cam, 0.0, &pose, Some(mask)))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn pnp_config(threshold: f64, max_iterations: usize) -> RansacConfig {
+        RansacConfig { threshold, max_iterations, ..RansacConfig::default() }
+    }
 
     /// Points, their pixels, the camera and the true `cam_from_world`.
     type Scene = (Vec<Point3<f64>>, Vec<[f64; 2]>, Pinhole, Isometry3<f64>);
@@ -412,15 +420,15 @@ mod tests {
                 uv[1] += rng.uniform() - 0.5;
             }
         }
-        let fit = pnp_ransac(&w, &p, &cam, 3.0, 500, &mut SplitMix64::new(4)).unwrap();
-        let (t, r) = pose_error(&fit.pose, &truth);
+        let fit = pnp_ransac(&w, &p, &cam, &pnp_config(3.0, 500), &mut SplitMix64::new(4)).unwrap();
+        let (t, r) = pose_error(&fit.cam_from_world, &truth);
         assert!(t < 0.01 && r < 0.002, "{t} m, {r} rad");
         assert!(fit.inliers.iter().skip(50).filter(|&&i| i).count() >= 145);
         assert!(fit.inliers.iter().take(50).filter(|&&i| i).count() <= 3);
         // From a perturbed start, BA alone converges to the same pose.
         let start = exp_se3(&Vector6::new(0.05, -0.03, 0.04, 0.02, -0.01, 0.03)) * truth;
         let refined = refine_pose(&w[50..], &p[50..], &cam, &start, 1.0);
-        let (t2, r2) = pose_error(&refined.pose, &truth);
+        let (t2, r2) = pose_error(&refined.cam_from_world, &truth);
         assert!(t2 < 0.01 && r2 < 0.002, "{t2} {r2}");
     }
 
@@ -428,7 +436,7 @@ mod tests {
     fn degenerate_input_gives_no_pose_and_no_panic() {
         let (w, p, cam, _) = scene(10, 3);
         assert!(pnp_dlt(&w[..5], &p[..5], &cam).is_none());
-        assert!(pnp_ransac(&w[..3], &p[..3], &cam, 2.0, 100, &mut SplitMix64::new(0)).is_none());
+        assert!(pnp_ransac(&w[..3], &p[..3], &cam, &pnp_config(2.0, 100), &mut SplitMix64::new(0)).is_none());
         let same = vec![Point3::new(1.0, 1.0, 3.0); 10];
         assert!(pnp_dlt(&same, &p, &cam).is_none());
         let fit = refine_pose(&[], &[], &cam, &Isometry3::identity(), 1.0);

@@ -1,22 +1,31 @@
-//! LO-RANSAC for the fundamental matrix: 7-point minimal samples, an adaptive iteration
-//! count, and a local optimisation (8-point refit on the inliers, repeated while it gains)
-//! whenever a sample beats the best model so far (Chum, Matas & Kittler, DAGM 2003).
-
-use super::Mat3;
-use super::fundamental::{eight_point, epipolar_error, seven_point};
+//! One RANSAC driver for every robust fit in the workspace (the shape kornia-rs uses): an
+//! [`Estimator`] says what a minimal sample is, how a model is fitted from one, how far a
+//! correspondence is from a model, and how a model is refitted on many; a [`Sampler`] draws
+//! the samples (uniform, or PROSAC's best-ranked-first); [`ransac`] runs the loop under one
+//! [`RansacConfig`] and returns the [`Consensus`].
+//!
+//! The loop is MSAC-scored LO-RANSAC (Torr & Zisserman 2000; Chum, Matas & Kittler, DAGM
+//! 2003): a model is better with more inliers, or as many with a smaller summed residual
+//! (each truncated at the threshold); each new best model is refitted on its inliers while
+//! that gains (`local_optimisation`); the iteration count adapts to the best inlier ratio
+//! (the stopping rule for `confidence`); a final refit on all inliers is kept if it is at least
+//! as good. Deterministic from the generator it is given; each call site derives its generator
+//! by name ([`SplitMix64::named`]).
 
 pub use dynaflow_msg::rng::SplitMix64;
 
-/// RANSAC settings; the defaults are OpenCV's `findFundamentalMat(FM_RANSAC)` ones.
+/// RANSAC settings, one type for every estimator; the defaults are OpenCV's
+/// `findFundamentalMat(FM_RANSAC)` ones.
 #[derive(Clone, Debug, PartialEq)]
 pub struct RansacConfig {
-    /// Inlier threshold on the distance to the epipolar lines, pixels.
+    /// Inlier threshold, in the estimator's unit (pixels for every image-space residual).
     pub threshold: f64,
-    /// Probability that at least one sample is all inliers when the loop stops.
+    /// Probability that at least one sample is all inliers when the loop stops early (the
+    /// adaptive stopping rule; 1 runs every iteration).
     pub confidence: f64,
     /// Iterations at most.
     pub max_iterations: usize,
-    /// Refit on the inliers of every new best model.
+    /// Refit on the inliers of every new best model, while that gains (LO-RANSAC).
     pub local_optimisation: bool,
 }
 
@@ -26,48 +35,132 @@ impl Default for RansacConfig {
     }
 }
 
-/// A robustly estimated fundamental matrix.
+/// A model family RANSAC can fit.
+pub trait Estimator {
+    /// The fitted model.
+    type Model: Clone;
+    /// Correspondences in a minimal sample.
+    const SAMPLE_SIZE: usize;
+    /// Correspondences in all.
+    fn len(&self) -> usize;
+    /// Whether there are none.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// The models a minimal sample gives (none when degenerate; the 7-point solver gives up to
+    /// three). `sample` holds [`Estimator::SAMPLE_SIZE`] distinct indices.
+    fn fit(&self, sample: &[usize]) -> Vec<Self::Model>;
+    /// Correspondence `i`'s squared residual under `model`, in the threshold's unit squared
+    /// (an inlier has `residual <= threshold^2`).
+    fn residual(&self, model: &Self::Model, i: usize) -> f64;
+    /// A model fitted on many correspondences (least squares), for local optimisation and the
+    /// final refit; `None` when the estimator has none or it fails.
+    fn refit(&self, _inliers: &[usize]) -> Option<Self::Model> {
+        None
+    }
+}
+
+/// The robust fit: the model, which correspondences agree with it, and how long it took.
 #[derive(Clone, Debug, PartialEq)]
-pub struct FundamentalFit {
-    /// F with `x2^T F x1 = 0`, unit Frobenius norm.
-    pub f: Mat3,
-    /// Per correspondence: within the threshold of both epipolar lines.
+pub struct Consensus<M> {
+    /// The best model.
+    pub model: M,
+    /// Per correspondence: within the threshold.
     pub inliers: Vec<bool>,
+    /// Number of inliers.
+    pub count: usize,
     /// Samples drawn.
     pub iterations: usize,
 }
 
-impl FundamentalFit {
-    /// Number of inliers.
-    pub fn inlier_count(&self) -> usize {
-        self.inliers.iter().filter(|&&i| i).count()
-    }
+/// How samples are drawn.
+#[derive(Clone, Debug)]
+pub enum Sampler {
+    /// Uniformly, `SAMPLE_SIZE` distinct indices.
+    Uniform,
+    /// PROSAC (Chum & Matas, CVPR 2005): from progressively larger sets of the best-ranked
+    /// correspondences, so good matches are tried first.
+    Prosac(Prosac),
 }
 
-/// Inlier count and summed (truncated) error of `f`.
-fn score(f: &Mat3, p1: &[[f64; 2]], p2: &[[f64; 2]], thr2: f64) -> (usize, f64) {
-    let mut n = 0;
-    let mut cost = 0.0;
-    for (a, b) in p1.iter().zip(p2) {
-        let e = epipolar_error(f, *a, *b);
-        if e <= thr2 {
-            n += 1;
-            cost += e;
-        } else {
-            cost += thr2;
+/// PROSAC's ranking and growth schedule.
+#[derive(Clone, Debug)]
+pub struct Prosac {
+    /// Indices, best first.
+    order: Vec<usize>,
+    subset: usize,
+    t_prime: usize,
+    t_n: f64,
+}
+
+impl Sampler {
+    /// PROSAC over `quality` (higher is better; ties keep index order).
+    pub fn prosac(quality: &[f64]) -> Self {
+        let mut order: Vec<usize> = (0..quality.len()).collect();
+        order.sort_by(|&a, &b| quality[b].total_cmp(&quality[a]).then(a.cmp(&b)));
+        Sampler::Prosac(Prosac { order, subset: 0, t_prime: 0, t_n: 0.0 })
+    }
+
+    /// Set up for `n` correspondences, samples of `m`, at most `max_iterations`.
+    fn start(&mut self, n: usize, m: usize, max_iterations: usize) {
+        if let Sampler::Prosac(p) = self {
+            // T_n: the expected number of samples drawn from the top n.
+            let mut t_n = max_iterations.max(1) as f64;
+            for i in 0..m {
+                t_n *= (m - i) as f64 / (n - i) as f64;
+            }
+            (p.subset, p.t_prime, p.t_n) = (m, 1, t_n);
         }
     }
-    (n, cost)
-}
 
-fn inlier_points(f: &Mat3, p1: &[[f64; 2]], p2: &[[f64; 2]], thr2: f64) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) {
-    p1.iter().zip(p2).filter(|(a, b)| epipolar_error(f, **a, **b) <= thr2).map(|(a, b)| (*a, *b)).unzip()
+    /// Draw sample number `iteration` (from 1) into `out` (`m = out.len()` distinct indices).
+    fn draw(&mut self, iteration: usize, n: usize, rng: &mut SplitMix64, out: &mut [usize]) {
+        let m = out.len();
+        match self {
+            Sampler::Uniform => {
+                for k in 0..m {
+                    loop {
+                        let i = rng.below(n);
+                        if !out[..k].contains(&i) {
+                            out[k] = i;
+                            break;
+                        }
+                    }
+                }
+            }
+            Sampler::Prosac(p) => {
+                if iteration == p.t_prime && p.subset < n {
+                    // Grow the pool by the next-best correspondence.
+                    let t_next = p.t_n * (p.subset + 1) as f64 / (p.subset + 1 - m) as f64;
+                    p.t_prime += (t_next - p.t_n).ceil().max(1.0) as usize;
+                    p.t_n = t_next;
+                    p.subset += 1;
+                }
+                // m - 1 points from the top `subset - 1`, plus the `subset`-th.
+                out[m - 1] = p.order[p.subset - 1];
+                for k in 0..m - 1 {
+                    loop {
+                        let i = p.order[rng.below(p.subset.saturating_sub(1).max(1))];
+                        if !out[..k].contains(&i) && i != out[m - 1] {
+                            out[k] = i;
+                            break;
+                        }
+                        if p.subset <= m {
+                            // Only the top m exist: take them in order.
+                            out[k] = p.order[k];
+                            break;
+                        }
+                    }
+                }
+            }
+        }
+    }
 }
 
 /// RANSAC's adaptive stopping rule: iterations needed so that, with inlier ratio `w`, an
 /// all-inlier sample of `sample` points was drawn with probability `confidence` (at most
 /// `cap`; 1 when every point is an inlier).
-pub(super) fn needed(w: f64, sample: usize, confidence: f64, cap: usize) -> usize {
+pub fn needed(w: f64, sample: usize, confidence: f64, cap: usize) -> usize {
     let p_good = w.powi(i32::try_from(sample).unwrap_or(i32::MAX));
     if p_good <= 0.0 {
         return cap;
@@ -79,51 +172,60 @@ pub(super) fn needed(w: f64, sample: usize, confidence: f64, cap: usize) -> usiz
     if n.is_finite() { (n.ceil() as usize).clamp(1, cap) } else { cap }
 }
 
-/// Estimate F from correspondences `p1[i] <-> p2[i]`. `None` with fewer than 8 points or when
-/// no sample gives a model.
-pub fn fit_fundamental(
-    p1: &[[f64; 2]],
-    p2: &[[f64; 2]],
+/// Inlier count and summed truncated residual (MSAC's score) of `model`.
+fn score<E: Estimator>(est: &E, model: &E::Model, thr2: f64) -> (usize, f64) {
+    let mut n = 0;
+    let mut cost = 0.0;
+    for i in 0..est.len() {
+        let e = est.residual(model, i);
+        if e <= thr2 {
+            n += 1;
+            cost += e;
+        } else {
+            cost += thr2;
+        }
+    }
+    (n, cost)
+}
+
+fn inlier_indices<E: Estimator>(est: &E, model: &E::Model, thr2: f64) -> Vec<usize> {
+    (0..est.len()).filter(|&i| est.residual(model, i) <= thr2).collect()
+}
+
+/// The consensus of `est`'s correspondences, or `None` with fewer than a minimal sample or
+/// when no sample gives a model.
+pub fn ransac<E: Estimator>(
+    est: &E,
     config: &RansacConfig,
+    mut sampler: Sampler,
     rng: &mut SplitMix64,
-) -> Option<FundamentalFit> {
-    let n = p1.len();
-    if n < 8 || p2.len() != n || p1.iter().chain(p2).any(|p| !(p[0].is_finite() && p[1].is_finite())) {
+) -> Option<Consensus<E::Model>> {
+    let n = est.len();
+    let m = E::SAMPLE_SIZE;
+    if n < m || m == 0 {
         return None;
     }
     let thr2 = config.threshold * config.threshold;
-    let mut best: Option<(Mat3, usize, f64)> = None;
-    let mut limit = config.max_iterations.max(1);
+    let cap = config.max_iterations.max(1);
+    sampler.start(n, m, cap);
+    let mut best: Option<(E::Model, usize, f64)> = None;
+    let mut limit = cap;
     let mut iterations = 0;
-    let (mut s1, mut s2) = ([[0.0; 2]; 7], [[0.0; 2]; 7]);
-    let mut idx = [0usize; 7];
+    let mut sample = vec![0usize; m];
     while iterations < limit {
         iterations += 1;
-        // Seven distinct indices.
-        for k in 0..7 {
-            loop {
-                let i = rng.below(n);
-                if !idx[..k].contains(&i) {
-                    idx[k] = i;
-                    break;
-                }
-            }
-            s1[k] = p1[idx[k]];
-            s2[k] = p2[idx[k]];
-        }
-        for f in seven_point(&s1, &s2) {
-            let (count, cost) = score(&f, p1, p2, thr2);
-            let better = best.as_ref().is_none_or(|b| count > b.1 || (count == b.1 && cost < b.2));
-            if !better {
+        sampler.draw(iterations, n, rng, &mut sample);
+        for model in est.fit(&sample) {
+            let (count, cost) = score(est, &model, thr2);
+            if !best.as_ref().is_none_or(|b| count > b.1 || (count == b.1 && cost < b.2)) {
                 continue;
             }
-            let mut cand = (f, count, cost);
+            let mut cand = (model, count, cost);
             if config.local_optimisation {
-                // Refit on the inliers while that gains inliers (at most 4 rounds).
+                // Refit on the inliers while that gains (at most 4 rounds).
                 for _ in 0..4 {
-                    let (i1, i2) = inlier_points(&cand.0, p1, p2, thr2);
-                    let Some(g) = eight_point(&i1, &i2) else { break };
-                    let (c, e) = score(&g, p1, p2, thr2);
+                    let Some(g) = est.refit(&inlier_indices(est, &cand.0, thr2)) else { break };
+                    let (c, e) = score(est, &g, thr2);
                     if c > cand.1 || (c == cand.1 && e < cand.2) {
                         cand = (g, c, e);
                     } else {
@@ -131,62 +233,86 @@ pub fn fit_fundamental(
                     }
                 }
             }
-            limit = needed(cand.1 as f64 / n as f64, 7, config.confidence, config.max_iterations.max(1));
+            limit = limit.min(needed(cand.1 as f64 / n as f64, m, config.confidence, cap));
             best = Some(cand);
         }
     }
-    let (mut f, mut count, _) = best?;
-    // Final least-squares refit on all inliers, kept if it is at least as good.
-    let (i1, i2) = inlier_points(&f, p1, p2, thr2);
-    if let Some(g) = eight_point(&i1, &i2) {
-        let (c, _) = score(&g, p1, p2, thr2);
-        if c >= count {
-            f = g;
-            count = c;
-        }
+    let (mut model, count, _) = best?;
+    // A final least-squares refit on all inliers, kept if it is at least as good.
+    if let Some(g) = est.refit(&inlier_indices(est, &model, thr2))
+        && score(est, &g, thr2).0 >= count
+    {
+        model = g;
     }
-    let inliers: Vec<bool> = p1.iter().zip(p2).map(|(a, b)| epipolar_error(&f, *a, *b) <= thr2).collect();
-    debug_assert_eq!(inliers.iter().filter(|&&i| i).count(), count);
-    Some(FundamentalFit { f, inliers, iterations })
+    let inliers: Vec<bool> = (0..n).map(|i| est.residual(&model, i) <= thr2).collect();
+    let count = inliers.iter().filter(|&&i| i).count();
+    Some(Consensus { model, inliers, count, iterations })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::fundamental::tests::scene;
 
-    #[test]
-    fn finds_the_inliers_among_outliers_and_is_reproducible() {
-        let (mut p1, mut p2, _) = scene(200, 9);
-        let mut rng = SplitMix64::new(77);
-        // 30 % gross outliers.
-        for p in p2.iter_mut().take(60) {
-            *p = [rng.uniform() * 640.0, rng.uniform() * 480.0];
+    /// A line `y = a x + b` through 2-point samples: the smallest estimator there is.
+    struct Line<'a>(&'a [[f64; 2]]);
+
+    impl Estimator for Line<'_> {
+        type Model = (f64, f64);
+        const SAMPLE_SIZE: usize = 2;
+        fn len(&self) -> usize {
+            self.0.len()
         }
-        // Half a pixel of noise on the rest.
-        for p in p1.iter_mut().chain(p2.iter_mut().skip(60)) {
-            p[0] += rng.uniform() - 0.5;
-            p[1] += rng.uniform() - 0.5;
+        fn fit(&self, s: &[usize]) -> Vec<(f64, f64)> {
+            let (p, q) = (self.0[s[0]], self.0[s[1]]);
+            if (q[0] - p[0]).abs() < 1e-12 {
+                return Vec::new();
+            }
+            let a = (q[1] - p[1]) / (q[0] - p[0]);
+            vec![(a, p[1] - a * p[0])]
         }
-        let config = RansacConfig { threshold: 2.0, ..RansacConfig::default() };
-        let fit = fit_fundamental(&p1, &p2, &config, &mut SplitMix64::new(1)).unwrap();
-        let found_good = fit.inliers.iter().skip(60).filter(|&&i| i).count();
-        let found_bad = fit.inliers.iter().take(60).filter(|&&i| i).count();
-        assert!(found_good >= 135, "{found_good} of 140 inliers");
-        assert!(found_bad <= 6, "{found_bad} outliers accepted");
-        assert!(fit.iterations < config.max_iterations, "adaptive stop: {}", fit.iterations);
-        let again = fit_fundamental(&p1, &p2, &config, &mut SplitMix64::new(1)).unwrap();
-        assert_eq!(fit, again);
+        fn residual(&self, (a, b): &(f64, f64), i: usize) -> f64 {
+            (self.0[i][1] - a * self.0[i][0] - b).powi(2)
+        }
+    }
+
+    fn points() -> Vec<[f64; 2]> {
+        let mut rng = SplitMix64::new(3);
+        (0..100)
+            .map(|i| {
+                let x = i as f64;
+                // Every fourth point an outlier.
+                if i % 4 == 0 { [x, rng.uniform() * 500.0] } else { [x, 2.0 * x + 1.0 + 0.1 * (rng.uniform() - 0.5)] }
+            })
+            .collect()
     }
 
     #[test]
-    fn too_few_or_bad_points_give_no_model() {
-        let (p1, p2, _) = scene(7, 2);
-        assert!(fit_fundamental(&p1, &p2, &RansacConfig::default(), &mut SplitMix64::new(0)).is_none());
-        let same = vec![[5.0, 5.0]; 30];
-        assert!(fit_fundamental(&same, &same, &RansacConfig::default(), &mut SplitMix64::new(0)).is_none());
-        let mut bad = scene(20, 2).0;
-        bad[3] = [f64::NAN, 0.0];
-        assert!(fit_fundamental(&bad, &bad, &RansacConfig::default(), &mut SplitMix64::new(0)).is_none());
+    fn the_driver_finds_the_line_and_stops_early() {
+        let p = points();
+        let config = RansacConfig { threshold: 0.5, ..RansacConfig::default() };
+        let fit = ransac(&Line(&p), &config, Sampler::Uniform, &mut SplitMix64::named(1, "test")).unwrap();
+        assert!((fit.model.0 - 2.0).abs() < 0.01 && (fit.model.1 - 1.0).abs() < 0.5, "{:?}", fit.model);
+        assert_eq!(fit.count, 75, "the 75 points on the line");
+        assert_eq!(fit.count, fit.inliers.iter().filter(|&&i| i).count());
+        assert!(fit.iterations < 30, "adaptive stop at 75 % inliers: {} iterations", fit.iterations);
+        // PROSAC with the inliers ranked first needs fewer samples still.
+        let quality: Vec<f64> = (0..100).map(|i| if i % 4 == 0 { 0.0 } else { 1.0 }).collect();
+        let pro = ransac(&Line(&p), &config, Sampler::prosac(&quality), &mut SplitMix64::named(1, "test")).unwrap();
+        assert_eq!(pro.count, 75);
+        assert!(pro.iterations <= fit.iterations, "{} vs {}", pro.iterations, fit.iterations);
+    }
+
+    #[test]
+    fn too_few_points_give_no_consensus() {
+        let p = [[0.0, 1.0]];
+        assert!(ransac(&Line(&p), &RansacConfig::default(), Sampler::Uniform, &mut SplitMix64::new(0)).is_none());
+    }
+
+    #[test]
+    fn the_stopping_rule_follows_the_inlier_ratio() {
+        // 50 % inliers, 7-point samples, 99 %: log(0.01) / log(1 - 0.5^7) = 587.2.
+        assert_eq!(needed(0.5, 7, 0.99, 10_000), 588);
+        assert_eq!(needed(1.0, 7, 0.99, 10_000), 1);
+        assert_eq!(needed(0.0, 7, 0.99, 500), 500);
     }
 }

@@ -42,7 +42,9 @@ impl Default for TwoViewConfig {
 /// Which model the pair was reconstructed from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum TwoViewModel {
+    /// A homography (a planar scene or a rotation).
     Homography,
+    /// A fundamental matrix.
     Fundamental,
 }
 
@@ -53,8 +55,9 @@ pub struct TwoViewInit {
     pub cam2_from_cam1: Isometry3<f64>,
     /// Per match: its point in the first camera's frame, if triangulated with parallax.
     pub points: Vec<Option<Point3<f64>>>,
-    /// The model it came from and `R_H`.
+    /// The model it came from.
     pub model: TwoViewModel,
+    /// `R_H`, the homography's share of the two scores (ORB-SLAM2's model selection).
     pub ratio: f64,
     /// The scene's parallax, degrees (the 50th largest of the points', as ORB-SLAM2).
     pub parallax_deg: f64,
@@ -63,18 +66,47 @@ pub struct TwoViewInit {
 /// Why two views do not initialise.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 pub enum InitFailure {
+    /// Too few matches to try.
     #[error("{matches} matches; initialisation needs at least {needed}")]
-    TooFewMatches { matches: usize, needed: usize },
+    TooFewMatches {
+        /// Matches given.
+        matches: usize,
+        /// Matches needed.
+        needed: usize,
+    },
+    /// Neither model could be fitted.
     #[error("neither a homography nor a fundamental matrix fits the matches")]
     NoModel,
+    /// The best hypothesis triangulates too few points.
     #[error(
         "the best motion hypothesis ({model:?}) triangulates {good} of {inliers} inliers ({needed} needed): not enough parallax or too many outliers"
     )]
-    TooFewPoints { model: TwoViewModel, good: usize, inliers: usize, needed: usize },
+    TooFewPoints {
+        /// The model chosen.
+        model: TwoViewModel,
+        /// Points triangulated in front of both cameras with parallax.
+        good: usize,
+        /// The model's inliers.
+        inliers: usize,
+        /// Points needed.
+        needed: usize,
+    },
+    /// Several hypotheses explain the matches about as well.
     #[error("{model:?}: {similar} motion hypotheses explain the matches about as well: ambiguous")]
-    Ambiguous { model: TwoViewModel, similar: usize },
+    Ambiguous {
+        /// The model chosen.
+        model: TwoViewModel,
+        /// Hypotheses about as good as the best.
+        similar: usize,
+    },
+    /// Too little parallax.
     #[error("parallax {parallax_deg:.2} deg is below {min_deg} deg (the camera barely translated)")]
-    LowParallax { parallax_deg: f64, min_deg: f64 },
+    LowParallax {
+        /// The scene's parallax, degrees.
+        parallax_deg: f64,
+        /// The least accepted, degrees.
+        min_deg: f64,
+    },
 }
 
 fn k_matrix(cam: &Pinhole) -> Mat3 {
@@ -256,7 +288,8 @@ pub fn initialise(
     };
     let f = fit_fundamental(p1, p2, &rc, rng).map(|f| f.f);
     let quality = vec![1.0; p1.len()];
-    let h = fit_homography_prosac(p1, p2, &quality, (CHI2_2DOF * s2).sqrt(), config.max_iterations, rng).map(|h| h.h);
+    let rh = RansacConfig { threshold: (CHI2_2DOF * s2).sqrt(), local_optimisation: false, ..rc };
+    let h = fit_homography_prosac(p1, p2, &quality, &rh, rng).map(|h| h.h);
     let (sh, sf) = (
         h.as_ref().map_or(0.0, |h| homography_score(h, p1, p2)),
         f.as_ref().map_or(0.0, |f| fundamental_score(f, p1, p2)),
