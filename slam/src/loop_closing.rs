@@ -309,9 +309,9 @@ impl LoopCloser {
         // scale fixed: 3-point samples, both-way reprojection within the chi-square bound).
         let estimator = Se3Estimator {
             pairs: &pairs,
-            agrees: |t: &Isometry3<f64>, k: usize| {
+            agrees: |(t, inv): &Se3, k: usize| {
                 let (xa, xb, i, j) = &pairs[k];
-                self.reprojects(t, xa, &b.keypoints[*j]) && self.reprojects(&t.inverse(), xb, &a.keypoints[*i])
+                self.reprojects(t, xa, &b.keypoints[*j]) && self.reprojects(inv, xb, &a.keypoints[*i])
             },
         };
         let config = RansacConfig {
@@ -326,7 +326,7 @@ impl LoopCloser {
         let Some(consensus) = consensus.filter(|c| c.count >= self.config.min_inliers) else {
             return Err(Rejection::RansacInliers);
         };
-        let (cand_from_cur, count) = (consensus.model, consensus.count);
+        let (cand_from_cur, count) = (consensus.model.0, consensus.count);
         // The loop side's points (the candidate and its covisible key frames) projected into
         // the current key frame at the estimated pose; the pose refined on every match.
         let world_from_cur = b.info.world_from_cam * cand_from_cur;
@@ -647,34 +647,39 @@ struct Found {
 /// SE(3) from 3-D point pairs as a RANSAC estimator: 3-point samples solved by Umeyama's
 /// method (scale fixed), a pair agreeing when it reprojects both ways (`agrees`: residual 0,
 /// else infinite), Umeyama on all agreeing pairs as refit.
-struct Se3Estimator<'a, F: Fn(&Isometry3<f64>, usize) -> bool> {
+/// A transform and its inverse (each pair is checked both ways, so the inverse is computed once
+/// per model, not once per pair).
+type Se3 = (Isometry3<f64>, Isometry3<f64>);
+
+struct Se3Estimator<'a, F: Fn(&Se3, usize) -> bool> {
     /// `(x in the current key frame, x in the candidate, keypoint there, keypoint here)`.
     pairs: &'a [(Point3<f64>, Point3<f64>, usize, usize)],
     agrees: F,
 }
 
-impl<F: Fn(&Isometry3<f64>, usize) -> bool> Se3Estimator<'_, F> {
-    fn solve(&self, idx: &[usize]) -> Option<Isometry3<f64>> {
+impl<F: Fn(&Se3, usize) -> bool> Se3Estimator<'_, F> {
+    fn solve(&self, idx: &[usize]) -> Option<Se3> {
         let xa: Vec<Vector3<f64>> = idx.iter().map(|&k| self.pairs[k].0.coords).collect();
         let xb: Vec<Vector3<f64>> = idx.iter().map(|&k| self.pairs[k].1.coords).collect();
         let (r, t, _) = umeyama(&xa, &xb, false)?;
-        Some(Isometry3::from_parts(Translation3::from(t), UnitQuaternion::from_matrix(&r)))
+        let t = Isometry3::from_parts(Translation3::from(t), UnitQuaternion::from_matrix(&r));
+        Some((t, t.inverse()))
     }
 }
 
-impl<F: Fn(&Isometry3<f64>, usize) -> bool> Estimator for Se3Estimator<'_, F> {
-    type Model = Isometry3<f64>;
+impl<F: Fn(&Se3, usize) -> bool> Estimator for Se3Estimator<'_, F> {
+    type Model = Se3;
     const SAMPLE_SIZE: usize = 3;
     fn len(&self) -> usize {
         self.pairs.len()
     }
-    fn fit(&self, sample: &[usize]) -> Vec<Isometry3<f64>> {
+    fn fit(&self, sample: &[usize]) -> Vec<Se3> {
         self.solve(sample).into_iter().collect()
     }
-    fn residual(&self, t: &Isometry3<f64>, i: usize) -> f64 {
+    fn residual(&self, t: &Se3, i: usize) -> f64 {
         if (self.agrees)(t, i) { 0.0 } else { f64::INFINITY }
     }
-    fn refit(&self, inliers: &[usize]) -> Option<Isometry3<f64>> {
+    fn refit(&self, inliers: &[usize]) -> Option<Se3> {
         self.solve(inliers)
     }
 }
