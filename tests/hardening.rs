@@ -374,20 +374,11 @@ fn lockstep_feedback_with_block_queues_is_unchanged() {
 #[test]
 fn diff_reader_survives_every_flipped_bit() {
     let dir = common::TempDir::new("flip");
-    let graph = dir.path().join("small.yaml");
-    std::fs::write(
-        &graph,
+    let path = common::record_mcap(
+        dir.path(),
+        "small",
         "name: small\nnodes:\n  cam: { op: testing.test_pattern, params: { frames: 10, width: 4, height: 4 } }\n",
-    )
-    .unwrap();
-    let out = common::bin()
-        .args(["run", "--no-progress", "--record", "mcap", "--out"])
-        .arg(dir.path())
-        .arg(&graph)
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
-    let path = dir.path().join("small.mcap");
+    );
     let good = std::fs::read(&path).unwrap();
     assert_eq!(dynaflow_recordings::diff::read_mcap_bytes(&path, &good).unwrap().topics.len(), 2);
     // Every bit of the file, one at a time: lengths, chunk headers, compressed data, CRCs.

@@ -798,20 +798,11 @@ fn each_pose_stream_is_drawn_through_its_own_camera() {
 #[test]
 fn a_stereo_rig_is_recorded_with_its_own_schema_and_replays_bit_exact() {
     let dir = common::TempDir::new("stereo_rig");
-    let graph = dir.path().join("rig.yaml");
-    std::fs::write(
-        &graph,
+    let mcap = common::record_mcap(
+        dir.path(),
+        "rig",
         "name: rig\nnodes:\n  camera: { op: synth, params: { frames: 3, width: 64, height: 48, people: 0, stereo_baseline: 0.12 } }\n",
-    )
-    .unwrap();
-    let out = common::bin()
-        .args(["run", "--no-progress", "--record", "mcap", "--out"])
-        .arg(dir.path())
-        .arg(&graph)
-        .output()
-        .unwrap();
-    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
-    let mcap = dir.path().join("rig.mcap");
+    );
     let recorded = read_mcap(&mcap).unwrap();
     let rig = &recorded.topics["/camera/stereo"];
     assert_eq!(rig.schema, "dynaflow.StereoRig", "{}", rig.schema);

@@ -36,6 +36,16 @@ pub fn bin() -> std::process::Command {
     std::process::Command::new(env!("CARGO_BIN_EXE_dynaflow"))
 }
 
+/// Write `yaml` (a graph named `name`) to `dir/<name>.yaml`, run it with `--record mcap` into
+/// `dir` (it must exit 0), and return the recording, `dir/<name>.mcap`.
+pub fn record_mcap(dir: &Path, name: &str, yaml: &str) -> PathBuf {
+    let graph = dir.join(format!("{name}.yaml"));
+    std::fs::write(&graph, yaml).unwrap();
+    let out = bin().args(["run", "--no-progress", "--record", "mcap", "--out"]).arg(dir).arg(&graph).output().unwrap();
+    assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
+    dir.join(format!("{name}.mcap"))
+}
+
 /// The summary a run wrote (`dynaflow::summary::Summary`, the type `run` writes and `bench`
 /// reads); panics naming the file if it is missing or not one.
 pub fn summary(path: &Path) -> dynaflow::summary::Summary {
