@@ -30,7 +30,7 @@ use dynaflow_vision::matching::{MatchConfig, match_brute_force};
 use dynaflow_vision::orb::{OrbConfig, OrbExtractor};
 use dynaflow_vision::stereo::{StereoView, stereo_match};
 
-fn xy(k: &dynaflow_vision::orb::OrbKeypoint) -> [f64; 2] {
+fn xy(k: &dynaflow_vision::orb::Keypoint) -> [f64; 2] {
     [f64::from(k.x), f64::from(k.y)]
 }
 
@@ -74,7 +74,7 @@ fn main() {
         let m = match_brute_force(&f2.descriptors, &f1.descriptors, None, &config);
         let p1: Vec<[f64; 2]> = m.iter().map(|m| xy(&f1.keypoints[m.train as usize])).collect();
         let p2: Vec<[f64; 2]> = m.iter().map(|m| xy(&f2.keypoints[m.query as usize])).collect();
-        let cam = Pinhole { fx: i.fx, fy: i.fy, cx: i.cx, cy: i.cy };
+        let cam = Pinhole::from(&i);
         let mut outcome = String::new();
         let ms = median_ms(reps, || {
             let r = initialise(&p1, &p2, &cam, &TwoViewConfig::default(), &mut SplitMix64::new(7));

@@ -5,32 +5,11 @@ use std::collections::BTreeMap;
 use std::path::Path;
 
 use dynaflow_engine::runtime::RunReport;
-pub use dynaflow_operators::report::{LabelAccuracyReport, NodeReport, TrackerReport};
-
-/// A tracker's absolute trajectory error, as the tracker reports it (its node named).
-#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Ate {
-    /// The tracker node (set on the summary's top-level `ate`, the first tracker's).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub node: Option<String>,
-    /// Root mean square error, metres.
-    pub rmse: f64,
-    /// Mean, metres.
-    pub mean: f64,
-    /// Median, metres.
-    pub median: f64,
-    /// Standard deviation, metres.
-    pub std: f64,
-    /// Poses matched with ground truth.
-    #[serde(default)]
-    pub pairs: u64,
-    /// The alignment (`se3`, `sim3`, `none`).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub align: Option<String>,
-    /// Whatever else the tracker put there.
-    #[serde(flatten)]
-    pub more: serde_json::Map<String, serde_json::Value>,
-}
+pub use dynaflow_engine::sink::PortDigest;
+pub use dynaflow_operators::report::{
+    Ate, GateReport, InferenceReport, LabelAccuracyReport, LocalMappingReport, LoopClosingReport, LoopReport,
+    MaskAccuracyReport, NodeReport, OctomapReport, ReportKind, TrackerReport,
+};
 
 /// Everything a run wrote about itself.
 #[derive(Clone, Debug, serde::Serialize, serde::Deserialize)]
@@ -44,9 +23,9 @@ pub struct Summary {
     /// Every tracker's ATE, by node.
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub trackers: BTreeMap<String, Ate>,
-    /// Per-port content digests (`--digest`).
+    /// Per-port content digests (`--digest`), by `node/port`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub digests: Option<serde_json::Value>,
+    pub digests: Option<BTreeMap<String, PortDigest>>,
 }
 
 impl Summary {
@@ -67,7 +46,7 @@ impl Summary {
                 let Some(NodeReport::Tracker(t)) = n.report.as_ref().and_then(NodeReport::from_json) else {
                     return None;
                 };
-                Some((n.node.clone(), serde_json::from_value(serde_json::to_value(t.ate?).ok()?).ok()?))
+                Some((n.node.clone(), t.ate?))
             })
             .collect();
         let ate = run.nodes.iter().find_map(|n| {
@@ -90,9 +69,14 @@ impl Summary {
         dynaflow_engine::files::write_atomic(path, (text + "\n").as_bytes())
     }
 
-    /// What the operator of node `node` reported, if anything.
-    pub fn node_report(&self, node: &str) -> Option<&serde_json::Value> {
-        self.run.nodes.iter().find(|n| n.node == node)?.report.as_ref()
+    /// What the operator of node `node` reported, typed (`None` without a report of a known kind).
+    pub fn report(&self, node: &str) -> Option<NodeReport> {
+        NodeReport::from_json(self.run.nodes.iter().find(|n| n.node == node)?.report.as_ref()?)
+    }
+
+    /// Node `node`'s report if it is of kind `T`: `summary.report_as::<LoopClosingReport>("closing")`.
+    pub fn report_as<T: ReportKind>(&self, node: &str) -> Option<T> {
+        T::from_report(self.report(node)?)
     }
 
     /// Every node's typed report, by node, in graph order (reports of no known kind left out).
@@ -102,9 +86,6 @@ impl Summary {
 
     /// The tracker report of node `node`.
     pub fn tracker(&self, node: &str) -> Option<TrackerReport> {
-        match NodeReport::from_json(self.node_report(node)?)? {
-            NodeReport::Tracker(t) => Some(*t),
-            _ => None,
-        }
+        self.report_as(node)
     }
 }

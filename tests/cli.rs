@@ -34,7 +34,7 @@ fn default_graph_runs_and_writes_summary_and_log() {
         assert!(raw["nodes"][0].get(key).is_some(), "summary lacks {key}");
     }
     let digests = summary.digests.clone().unwrap();
-    assert_eq!(digests["detector/value"]["count"], 60);
+    assert_eq!(digests["detector/value"].count, 60);
     let log = std::fs::read_to_string(dir.path().join("engine_smoke.messages.jsonl")).unwrap();
     let lines: Vec<serde_json::Value> = log.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
     assert_eq!(lines.first().unwrap()["kind"], "run");

@@ -5,8 +5,10 @@
 
 mod common;
 
+use dynaflow::summary::PortDigest;
+
 /// Run a variant with `--digest`; its per-port digests.
-fn run(variant: &str, out: &std::path::Path, record: &str) -> serde_json::Value {
+fn run(variant: &str, out: &std::path::Path, record: &str) -> std::collections::BTreeMap<String, PortDigest> {
     let o = common::bin()
         .args(["run", "--no-progress", "--digest", "--frames", "6", "--variant", variant, "--record", record, "--out"])
         .arg(out)
@@ -47,7 +49,7 @@ fn every_variant_runs_reproducibly_and_does_what_it_is_for() {
         let a = run(variant, &dir.path().join("a"), "mcap");
         let b = run(variant, &dir.path().join("b"), "none");
         let labels = &a["cull/labels"];
-        assert_eq!(labels["count"], 6, "{variant}: one label set per frame: {labels}");
+        assert_eq!(labels.count, 6, "{variant}: one label set per frame: {labels:?}");
         assert_eq!(labels, &b["cull/labels"], "{variant}: labels differ between two runs");
         assert_eq!(a["fundamental/model"], b["fundamental/model"]);
         assert_eq!(a["homography/model"], b["homography/model"]);

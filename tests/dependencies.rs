@@ -30,3 +30,43 @@ fn the_default_build_has_no_zenoh_crate_and_the_feature_adds_it() {
     let with = tree(&["--features", "zenoh"]);
     assert!(with.iter().any(|c| c == "zenoh") && with.iter().any(|c| c == "dynaflow-net"), "{with:?}");
 }
+
+/// Each workspace crate's normal dependencies on other workspace crates, from `cargo metadata`.
+fn workspace_edges() -> std::collections::BTreeMap<String, Vec<String>> {
+    let out = std::process::Command::new(env!("CARGO"))
+        .current_dir(common::repo())
+        .args(["metadata", "--offline", "--locked", "--no-deps", "--format-version", "1"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "cargo metadata: {}", String::from_utf8_lossy(&out.stderr));
+    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let mut edges = std::collections::BTreeMap::new();
+    for p in meta["packages"].as_array().unwrap() {
+        let mut deps: Vec<String> = p["dependencies"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|d| d["kind"].is_null())
+            .filter_map(|d| d["name"].as_str()?.strip_prefix("dynaflow-").map(str::to_owned))
+            .collect();
+        deps.sort();
+        edges.insert(p["name"].as_str().unwrap().to_owned(), deps);
+    }
+    edges
+}
+
+#[test]
+fn the_crate_table_in_the_architecture_doc_is_the_dependency_graph() {
+    let doc = std::fs::read_to_string(common::repo().join("docs/architecture.md")).unwrap();
+    let section = doc.split("### Who may depend on whom").nth(1).unwrap();
+    let mut documented = std::collections::BTreeMap::new();
+    for row in section.lines().filter(|l| l.starts_with("| `dynaflow")) {
+        let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+        let name = cells[1].trim_matches('`').to_owned();
+        let mut deps: Vec<String> =
+            if cells[2] == "none" { vec![] } else { cells[2].split(", ").map(str::to_owned).collect() };
+        deps.sort();
+        documented.insert(name, deps);
+    }
+    assert_eq!(documented, workspace_edges(), "docs/architecture.md's crate table against cargo metadata");
+}

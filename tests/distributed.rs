@@ -7,9 +7,12 @@
 #![cfg(feature = "zenoh")]
 #![allow(clippy::unwrap_used, clippy::panic)]
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
+
+use dynaflow::summary::PortDigest;
 
 mod common;
 
@@ -55,13 +58,12 @@ fn text(o: &Output) -> String {
     format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
 }
 
-fn digests(summary: &Path) -> serde_json::Map<String, serde_json::Value> {
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(summary).unwrap()).unwrap();
-    v["digests"].as_object().unwrap().clone()
+fn digests(summary: &Path) -> BTreeMap<String, PortDigest> {
+    common::summary(summary).digests.unwrap()
 }
 
 /// The per-port digests of shipped graph `name` run whole in one process for `frames` frames.
-fn one_process_digests(name: &str, frames: &str, out: &Path) -> serde_json::Map<String, serde_json::Value> {
+fn one_process_digests(name: &str, frames: &str, out: &Path) -> BTreeMap<String, PortDigest> {
     let o = common::bin()
         .arg("run")
         .arg(common::repo().join(format!("graphs/{name}.yaml")))
@@ -220,11 +222,9 @@ fn a_machine_killed_mid_run_ends_the_other_with_an_error_and_valid_recordings() 
     let log = text(&robot);
     assert_eq!(robot.status.code(), Some(1), "{log}");
     assert!(log.contains("machine `server`") && log.contains("is gone"), "{log}");
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.path().join("robot/mg_slam.robot.summary.json")).unwrap())
-            .unwrap();
-    assert_eq!(summary["status"], "failed", "{summary}");
-    let frames = summary["frames"].as_u64().unwrap();
+    let summary = common::summary(&dir.path().join("robot/mg_slam.robot.summary.json"));
+    assert_eq!(summary.run.status, dynaflow_engine::runtime::RunStatus::Failed, "{summary:?}");
+    let frames = summary.run.frames;
     assert!(frames > 0 && frames < 300, "stopped mid-run: {frames} frames");
     peers_accept(&dir.path().join("robot/mg_slam.robot.rrd"), &dir.path().join("robot/mg_slam.robot.mcap"));
 }

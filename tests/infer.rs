@@ -11,6 +11,7 @@ mod frontend;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use dynaflow::summary::GateReport;
 use dynaflow_infer::Error;
 use dynaflow_infer::detect::{decode_yolox, letterbox_bgr, nms};
 use dynaflow_infer::onnx::{load, parse};
@@ -321,14 +322,14 @@ fn detector_gate_graph_runs_and_reports_its_gate() {
         .unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     let s = common::summary(&dir.path().join("detector_gate.summary.json"));
-    let gate = s.node_report("gate").unwrap();
-    let rules = gate["rules"].as_object().unwrap();
-    let rule = |k: &str| rules[k].as_u64().unwrap();
-    assert_eq!(rules.values().map(|v| v.as_u64().unwrap()).sum::<u64>(), 8);
-    assert_eq!(gate["frames"], 8);
+    let gate = s.report_as::<GateReport>("gate").unwrap();
+    let rules = &gate.rules;
+    let rule = |k: &str| rules[k];
+    assert_eq!(rules.values().sum::<u64>(), 8);
+    assert_eq!(gate.frames, 8);
     // The gate both skips and infers, and not only by its clock: the tracker's key frames and
     // relocalisations and the culling's dynamic count (its feedback inputs) open it too.
-    let inferred = gate["inferred"].as_u64().unwrap();
+    let inferred = gate.inferred;
     assert!(rule("skipped") > 0 && inferred > 1, "{rules:?}");
     assert_eq!(inferred, 8 - rule("skipped"));
     assert!(rule("keyframe") + rule("relocalised") + rule("few_dynamic") > 0, "no feedback rule fired: {rules:?}");

@@ -10,6 +10,8 @@ mod common;
 
 use std::path::Path;
 
+use dynaflow::summary::{LocalMappingReport, LoopClosingReport};
+
 /// `loop` motion: one round is 30 s, 900 frames; 1000 frames revisit the first 100.
 const FRAMES: &str = "1000";
 
@@ -61,11 +63,11 @@ fn ground_truth(path: &Path) -> Vec<(f64, nalgebra::Isometry3<f64>)> {
 /// Checks one loop-closing run against its run without: loops only where the views overlap,
 /// the first soon after the true revisit, and the final ATE at most half.
 fn check(with: &dynaflow::summary::Summary, without: &dynaflow::summary::Summary, gt: &Path, what: &str) -> String {
-    let report = with.node_report("closing").unwrap();
-    let loops = report["loops"].as_array().unwrap();
-    assert!(!loops.is_empty(), "{what}: no loop closed: {report}");
-    assert_eq!(report["false_loops"].as_u64(), Some(0), "{what}: {report}");
-    assert!(loops.iter().all(|l| l["ground_truth_overlap"] == true), "{what}: {report}");
+    let report = with.report_as::<LoopClosingReport>("closing").unwrap();
+    let loops = &report.loops;
+    assert!(!loops.is_empty(), "{what}: no loop closed: {report:?}");
+    assert_eq!(report.false_loops, Some(0), "{what}: {report:?}");
+    assert!(loops.iter().all(|l| l.ground_truth_overlap == Some(true)), "{what}: {report:?}");
     // The true revisit: the first frame whose view overlaps a view of more than half a round
     // earlier (the same criterion as `false_loops`: axes within 30 degrees, centres within 1 m).
     let gt = ground_truth(gt);
@@ -79,9 +81,9 @@ fn check(with: &dynaflow::summary::Summary, without: &dynaflow::summary::Summary
         .find(|(i, (_, p))| gt[..i.saturating_sub(450)].iter().any(|(_, q)| overlap(p, q)))
         .map(|(_, g)| g.0)
         .unwrap();
-    let keyframes = report["keyframes"].as_f64().unwrap();
+    let keyframes = report.keyframes as f64;
     let seconds_per_keyframe = (gt.last().unwrap().0 - gt[0].0) / keyframes;
-    let first = loops[0]["stamp"].as_f64().unwrap();
+    let first = loops[0].stamp;
     let late = (first - revisit) / seconds_per_keyframe;
     assert!(
         late <= 5.0,
@@ -91,7 +93,7 @@ fn check(with: &dynaflow::summary::Summary, without: &dynaflow::summary::Summary
     assert!(a <= 0.5 * b, "{what}: final ATE with loop closing {a:.4} m, without {b:.4} m");
     format!(
         "{what}: loop at {first:.2} s ({late:.1} key frames after the revisit at {revisit:.2} s), corrected by {:.3} m; final ATE {:.2} cm vs {:.2} cm without ({:.2}x); online ATE {:.2} cm",
-        loops[0]["correction_m"].as_f64().unwrap(),
+        loops[0].correction_m,
         a * 100.0,
         b * 100.0,
         a / b,
@@ -180,7 +182,7 @@ fn a_saved_map_is_reused_in_localisation_mode_and_a_bad_file_is_refused() {
     assert_eq!(track.first_pose_frame, Some(0), "{track:?}");
     assert_eq!((f.lost, f.new_map), (0, 0), "{track:?}");
     assert_eq!(f.tracked + f.relocalised, 300, "{track:?}");
-    assert_eq!(b.node_report("mapping").unwrap()["keyframes"], 0, "mapping is off");
+    assert_eq!(b.report_as::<LocalMappingReport>("mapping").unwrap().keyframes, 0, "mapping is off");
     let (ate_a, ate_b) = (a.ate.as_ref().unwrap().rmse, b.ate.as_ref().unwrap().rmse);
     assert!(ate_b <= 0.02, "localised in the saved map: ATE {ate_b} (mapping run {ate_a})");
     println!(

@@ -141,8 +141,8 @@ fn every_recorder_reports_its_messages_and_file() {
     assert!(jsonl.path.as_deref().is_some_and(|p| p.ends_with("engine_smoke.messages.jsonl")));
     let digest = &summary.run.recorders["digest"];
     let digests = summary.digests.unwrap();
-    for (port, d) in digests.as_object().unwrap() {
-        assert_eq!(digest.ports[port].messages, d["count"].as_u64().unwrap(), "{port}");
+    for (port, d) in &digests {
+        assert_eq!(digest.ports[port].messages, d.count, "{port}");
     }
     assert!(digest.ports.values().map(|p| p.messages).sum::<u64>() > 0);
 }

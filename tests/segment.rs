@@ -100,10 +100,13 @@ fn mask_quality_on_the_synthetic_scene_is_what_the_benchmarks_say() {
     let documented = documented_ious();
     assert_eq!(documented.len(), 5, "one row per mask source: {documented:?}");
     for (node, [iou, precision, recall]) in documented {
-        let r = summary.node_report(&node).unwrap_or_else(|| panic!("no report of {node}"));
-        assert_eq!(r["frames"], 60, "{node}");
-        for (key, want) in [("iou", iou), ("precision", precision), ("recall", recall)] {
-            let got = r[key].as_f64().unwrap();
+        let r = summary
+            .report_as::<dynaflow::summary::MaskAccuracyReport>(&node)
+            .unwrap_or_else(|| panic!("no mask accuracy report of {node}"));
+        assert_eq!(r.frames, 60, "{node}");
+        for (key, got, want) in
+            [("iou", r.iou, iou), ("precision", r.precision, precision), ("recall", r.recall, recall)]
+        {
             assert!((got - want).abs() <= 0.0005, "{node} {key}: the run gives {got:.3}, docs/benchmarks.md {want}");
         }
         // Every mask source finds people on this scene (none is empty or everywhere).

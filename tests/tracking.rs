@@ -68,7 +68,7 @@ fn baseline_meets_the_ate_bounds_on_static_scenes() {
         assert!(rmse <= bound, "{variant}: ATE RMSE {rmse} m > {bound} m");
         // The summary's ATE is the same evaluation of the same poses.
         assert!((reported - rmse).abs() < 1e-6, "{reported} vs {rmse}");
-        assert_eq!(ate.align.as_deref(), Some("se3"));
+        assert_eq!(ate.align, "se3");
         assert_eq!(ate.node.as_deref(), Some("track"));
         let track = summary.tracker("track").unwrap();
         assert_eq!(track.frames.lost, 0, "{variant}");
@@ -230,7 +230,7 @@ fn baseline_is_deterministic_in_lockstep_and_runs_in_realtime() {
     let digests = |sub: &str| baseline_summary(&["--digest", "--frames", "40"], &dir.path().join(sub)).digests.unwrap();
     let (a, b) = (digests("a"), digests("b"));
     for port in ["track/pose", "track/keyframe", "track/stats", "mapping/points", "mapping/stats"] {
-        assert!(a[port]["count"].as_u64().unwrap() > 0, "{port}: {a}");
+        assert!(a[port].count > 0, "{port}: {a:?}");
     }
     assert_eq!(a, b, "two lockstep runs differ");
     // The stereo and monocular modes too, on the static scene (the monocular map starts at
@@ -242,7 +242,7 @@ fn baseline_is_deterministic_in_lockstep_and_runs_in_realtime() {
             baseline_summary(&extra, &out).digests.unwrap()
         };
         let (a, b) = (digests("a"), digests("b"));
-        assert!(a["mapping/points"]["count"].as_u64().unwrap() > 0, "{variant}: {a}");
+        assert!(a["mapping/points"].count > 0, "{variant}: {a:?}");
         assert_eq!(a, b, "{variant}: two lockstep runs differ");
     }
 
@@ -387,7 +387,7 @@ fn monocular_initialises_within_30_frames_and_reports_a_sim3_ate() {
         // Every frame from the initialisation on has a pose, none before.
         assert_eq!(est.len() as u64, 300 - first, "{motion}");
         let ate = summary.ate.clone().unwrap();
-        assert_eq!(ate.align.as_deref(), Some("sim3"), "{stdout}");
+        assert_eq!(ate.align, "sim3", "{stdout}");
         // The summary's ATE is evo's Sim(3) evaluation of the trajectory file.
         let gt_dir = dir.path().join(format!("gt-{motion}"));
         let o = common::bin()
@@ -403,8 +403,8 @@ fn monocular_initialises_within_30_frames_and_reports_a_sim3_ate() {
         assert!(e.ate.rmse <= 0.02, "{motion}: mono ATE {} m > 2 cm", e.ate.rmse);
         // Local mapping triangulated the points tracking went on with: the map outgrew the
         // initial two-view map.
-        let mapping = summary.node_report("mapping").unwrap();
-        assert!(mapping["keyframes"].as_u64().unwrap() >= 3, "{mapping}");
+        let mapping = summary.report_as::<dynaflow::summary::LocalMappingReport>("mapping").unwrap();
+        assert!(mapping.keyframes >= 3, "{mapping:?}");
     }
 }
 

@@ -276,18 +276,23 @@ pub struct DigestSink {
     pub ports: Arc<Mutex<BTreeMap<String, (u64, u64)>>>,
 }
 
+/// One port's messages and their digest, as the run summary's `digests` lists them.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct PortDigest {
+    /// Messages on the port.
+    pub count: u64,
+    /// Their order-sensitive content digest, 16 hex digits.
+    pub digest: String,
+}
+
 impl DigestSink {
-    /// A snapshot as JSON (`{"node/port": {"count": n, "digest": "hex"}}`).
-    pub fn to_json(&self) -> serde_json::Value {
+    /// A snapshot, by `node/port`.
+    pub fn snapshot(&self) -> BTreeMap<String, PortDigest> {
         let ports = self.ports.lock().unwrap_or_else(PoisonError::into_inner);
-        serde_json::Value::Object(
-            ports
-                .iter()
-                .map(|(k, (count, digest))| {
-                    (k.clone(), serde_json::json!({"count": count, "digest": format!("{digest:016x}")}))
-                })
-                .collect(),
-        )
+        ports
+            .iter()
+            .map(|(k, (count, digest))| (k.clone(), PortDigest { count: *count, digest: format!("{digest:016x}") }))
+            .collect()
     }
 }
 

@@ -239,10 +239,10 @@ pub struct Model {
     pub outputs: Vec<ValueInfo>,
 }
 
-use dynaflow_msg::wire::{Reader, Value};
+use dynaflow_base::wire::{Reader, Value};
 
-impl From<dynaflow_msg::wire::WireError> for Error {
-    fn from(e: dynaflow_msg::wire::WireError) -> Self {
+impl From<dynaflow_base::wire::WireError> for Error {
+    fn from(e: dynaflow_base::wire::WireError) -> Self {
         bad(e.0)
     }
 }

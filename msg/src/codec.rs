@@ -5,13 +5,14 @@
 //!
 //! Layout, little-endian: a version byte ([`VERSION`]), the header (`seq` u64, `stamp` f64,
 //! `frame_id` string), the body's [`PortType`] tag (u8) and its fields. A string is a u32 byte
-//! count and UTF-8; a sequence is a u64 count and its items. Decoding checks every count
+//! count and UTF-8; a sequence is a u64 count and its items; an optional value a flag byte (0, or
+//! 1 and the value). Decoding checks every count
 //! against the bytes left before allocating, so corrupt or truncated input is an error, never
 //! a panic or a huge allocation.
 
 use std::sync::Arc;
 
-use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Point3, Quaternion, Translation3, UnitQuaternion};
 
 use crate::{
     Body, CameraInfo, DepthImage, Descriptors, Detection, Detections, Header, Image, Isometry3, Keypoint, Keypoints,
@@ -21,7 +22,7 @@ use crate::{
 };
 
 /// The encoding's version byte; a reader refuses any other.
-pub const VERSION: u8 = 1;
+pub const VERSION: u8 = 2;
 
 /// Why bytes do not decode to a message.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -109,6 +110,15 @@ impl W {
     }
     fn f64(&mut self, v: f64) {
         self.u64(v.to_bits());
+    }
+    fn opt_f64(&mut self, v: Option<f64>) {
+        match v {
+            None => self.u8(0),
+            Some(v) => {
+                self.u8(1);
+                self.f64(v);
+            }
+        }
     }
     fn f32s(&mut self, v: &[f32]) {
         for x in v {
@@ -278,8 +288,8 @@ fn map(w: &mut W, m: &SparseMap) {
     w.len(m.points.len());
     for p in &m.points {
         w.u64(p.id);
-        for v in p.position {
-            w.f64(v);
+        for v in p.position.coords.iter() {
+            w.f64(*v);
         }
         w.0.extend_from_slice(&p.descriptor);
         w.u32(p.observations);
@@ -291,7 +301,7 @@ fn map(w: &mut W, m: &SparseMap) {
         w.u64(o.point);
         w.f64(o.uv[0]);
         w.f64(o.uv[1]);
-        w.f64(o.depth);
+        w.opt_f64(o.depth);
         w.u8(o.octave);
     }
     w.len(m.removed.len());
@@ -312,7 +322,7 @@ fn map(w: &mut W, m: &SparseMap) {
         w.f64(k.uv[0]);
         w.f64(k.uv[1]);
         w.u8(k.octave);
-        w.f64(k.depth);
+        w.opt_f64(k.depth);
         w.0.extend_from_slice(&k.descriptor);
         match k.point {
             None => w.u8(0),
@@ -392,6 +402,9 @@ impl<'a> R<'a> {
             1 => Ok(true),
             v => Err(CodecError(format!("flag byte {v} at byte {}", self.pos - 1))),
         }
+    }
+    fn opt_f64(&mut self) -> Result<Option<f64>, CodecError> {
+        Ok(if self.flag()? { Some(self.f64()?) } else { None })
     }
     fn bytes(&mut self) -> Result<Vec<u8>, CodecError> {
         let n = self.len(1)?;
@@ -562,16 +575,16 @@ fn read_map(r: &mut R<'_>) -> Result<SparseMap, CodecError> {
     let mut points = Vec::with_capacity(n);
     for _ in 0..n {
         let id = r.u64()?;
-        let position = [r.f64()?, r.f64()?, r.f64()?];
+        let position = Point3::new(r.f64()?, r.f64()?, r.f64()?);
         let descriptor = r.array::<32>()?;
         points.push(MapPoint { id, position, descriptor, observations: r.u32()?, first_keyframe: r.u64()? });
     }
-    let n = r.len(41)?;
+    let n = r.len(34)?;
     let mut observations = Vec::with_capacity(n);
     for _ in 0..n {
         let (keyframe, point) = (r.u64()?, r.u64()?);
         let uv = [r.f64()?, r.f64()?];
-        observations.push(MapObservation { keyframe, point, uv, depth: r.f64()?, octave: r.u8()? });
+        observations.push(MapObservation { keyframe, point, uv, depth: r.opt_f64()?, octave: r.u8()? });
     }
     let n = r.len(8)?;
     let removed = (0..n).map(|_| r.u64()).collect::<Result<_, _>>()?;
@@ -582,13 +595,13 @@ fn read_map(r: &mut R<'_>) -> Result<SparseMap, CodecError> {
         let uv = [r.f64()?, r.f64()?];
         features.push(MapFeature { keyframe, uv, octave: r.u8()?, descriptor: r.array::<32>()? });
     }
-    let n = r.len(66)?;
+    let n = r.len(59)?;
     let mut keypoints = Vec::with_capacity(n);
     for _ in 0..n {
         let keyframe = r.u64()?;
         let uv = [r.f64()?, r.f64()?];
         let octave = r.u8()?;
-        let depth = r.f64()?;
+        let depth = r.opt_f64()?;
         let descriptor = r.array::<32>()?;
         let point = if r.flag()? { Some(r.u64()?) } else { None };
         keypoints.push(MapKeypoint { keyframe, uv, octave, depth, descriptor, point });
@@ -672,19 +685,19 @@ mod tests {
                 keyframes: vec![MapKeyFrame { id: 1, stamp: 0.5, world_from_cam: iso(0.3) }],
                 points: vec![MapPoint {
                     id: 5,
-                    position: [1.0, 2.0, 3.0],
+                    position: Point3::new(1.0, 2.0, 3.0),
                     descriptor: desc,
                     observations: 3,
                     first_keyframe: 1,
                 }],
-                observations: vec![MapObservation { keyframe: 1, point: 5, uv: [1.0, 2.0], depth: 0.0, octave: 1 }],
+                observations: vec![MapObservation { keyframe: 1, point: 5, uv: [1.0, 2.0], depth: None, octave: 1 }],
                 removed: vec![4, 6],
                 features: vec![MapFeature { keyframe: 1, uv: [3.0, 4.0], octave: 0, descriptor: desc }],
                 keypoints: vec![MapKeypoint {
                     keyframe: 1,
                     uv: [5.0, 6.0],
                     octave: 2,
-                    depth: 1.5,
+                    depth: Some(1.5),
                     descriptor: desc,
                     point: Some(5),
                 }],
@@ -736,6 +749,7 @@ mod tests {
         let at = 1 + 8 + 8 + 4 + 1 + 1 + 8;
         huge[at..at + 8].copy_from_slice(&(1u64 << 60).to_le_bytes());
         assert!(decode(&huge).unwrap_err().0.contains("more than"), "no allocation of a corrupt count");
-        assert!(decode(&[2]).unwrap_err().0.contains("version 2"));
+        let other = VERSION + 1;
+        assert!(decode(&[other]).unwrap_err().0.contains(&format!("version {other}")));
     }
 }

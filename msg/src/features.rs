@@ -11,7 +11,7 @@ pub struct Keypoint {
     pub y: f32,
     /// Diameter of the meaningful neighbourhood.
     pub size: f32,
-    /// Orientation in degrees, `-1` if not computed.
+    /// Orientation in degrees, `[0, 360)`; `-1` if not computed.
     pub angle: f32,
     /// Detector response.
     pub response: f32,

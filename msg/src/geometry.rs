@@ -1,7 +1,7 @@
 //! Poses, trajectories, point clouds and octree updates. Transforms are named
 //! `world_from_cam`: applied to a point in the camera frame they give it in the world frame.
 
-pub use nalgebra::Isometry3;
+pub use nalgebra::{Isometry3, Point3};
 
 use super::Digest;
 
@@ -124,7 +124,7 @@ pub struct MapPoint {
     /// Unique within a run.
     pub id: u64,
     /// World position, metres.
-    pub position: [f64; 3],
+    pub position: Point3<f64>,
     /// 256-bit ORB descriptor.
     pub descriptor: [u8; 32],
     /// Key frames observing it.
@@ -140,11 +140,11 @@ pub struct MapObservation {
     pub keyframe: u64,
     /// Map point id.
     pub point: u64,
-    /// Pixel.
+    /// Pixel (level-0 coordinates).
     pub uv: [f64; 2],
-    /// Measured depth in metres (0: none).
-    pub depth: f64,
-    /// Pyramid level.
+    /// Measured depth in metres (RGB-D or stereo), if any.
+    pub depth: Option<f64>,
+    /// Pyramid level (sets its sigma: `scale^octave`).
     pub octave: u8,
 }
 
@@ -170,8 +170,8 @@ pub struct MapKeypoint {
     pub uv: [f64; 2],
     /// Pyramid level.
     pub octave: u8,
-    /// Measured depth in metres (0: none).
-    pub depth: f64,
+    /// Measured depth in metres, if any.
+    pub depth: Option<f64>,
     /// 256-bit ORB descriptor.
     pub descriptor: [u8; 32],
     /// The map point it observes.
@@ -211,8 +211,8 @@ impl SparseMap {
         d.u64(self.points.len() as u64);
         for p in &self.points {
             d.u64(p.id);
-            for v in p.position {
-                d.f64(v);
+            for v in p.position.coords.iter() {
+                d.f64(*v);
             }
             d.bytes(&p.descriptor);
             d.u64(u64::from(p.observations));
@@ -222,7 +222,8 @@ impl SparseMap {
         for o in &self.observations {
             d.u64(o.keyframe);
             d.u64(o.point);
-            for v in [o.uv[0], o.uv[1], o.depth] {
+            // No depth is digested as 0 (what depth images write for "no measurement").
+            for v in [o.uv[0], o.uv[1], o.depth.unwrap_or(0.0)] {
                 d.f64(v);
             }
             d.bytes(&[o.octave]);
@@ -242,7 +243,7 @@ impl SparseMap {
         d.u64(self.keypoints.len() as u64);
         for k in &self.keypoints {
             d.u64(k.keyframe);
-            for v in [k.uv[0], k.uv[1], k.depth] {
+            for v in [k.uv[0], k.uv[1], k.depth.unwrap_or(0.0)] {
                 d.f64(v);
             }
             d.bytes(&[k.octave]);

@@ -17,10 +17,8 @@ mod digest;
 mod features;
 mod geometry;
 mod image;
-pub mod rng;
 mod scalar;
 mod semantic;
-pub mod wire;
 
 use std::fmt;
 use std::sync::Arc;
@@ -28,7 +26,7 @@ use std::sync::Arc;
 pub use digest::{DIGEST_SCHEME, Digest};
 pub use features::{Descriptors, Keypoint, Keypoints, LabelReason, PointLabel, PointLabels, Track, Tracks};
 pub use geometry::{
-    Isometry3, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, OctreeUpdate, PointCloud, Pose,
+    Isometry3, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, OctreeUpdate, Point3, PointCloud, Pose,
     SparseMap, StampedPose, Trajectory,
 };
 pub use image::{CameraInfo, DepthImage, Image, PixelFormat, StereoRig};

@@ -2,6 +2,8 @@
 //! `run`, `bench`, `compare` and the tests through `dynaflow::summary` (never by JSON key).
 //! Each report carries its `kind`, so a reader knows its type without knowing the operator.
 
+use std::collections::BTreeMap;
+
 use serde::{Deserialize, Serialize};
 
 /// A node's report, by kind.
@@ -10,8 +12,59 @@ use serde::{Deserialize, Serialize};
 pub enum NodeReport {
     /// `track_rgbd`, `track_stereo`, `track_mono`.
     Tracker(Box<TrackerReport>),
+    /// `local_map`.
+    LocalMapping(LocalMappingReport),
+    /// `loop_close`.
+    LoopClosing(Box<LoopClosingReport>),
     /// `label_accuracy`.
     LabelAccuracy(LabelAccuracyReport),
+    /// `mask_iou`.
+    MaskAccuracy(MaskAccuracyReport),
+    /// `keyframe_gate`.
+    Gate(GateReport),
+    /// `octomap`.
+    Octomap(OctomapReport),
+    /// `detect`, `segment`: the executor that ran the model.
+    Inference(InferenceReport),
+}
+
+/// Typed access to one kind of report: `Summary::report_as::<LoopClosingReport>("closing")`.
+pub trait ReportKind: Sized {
+    /// This kind's report, if `r` is one.
+    fn from_report(r: NodeReport) -> Option<Self>;
+}
+
+macro_rules! report_kinds {
+    ($($variant:ident($ty:ty) $(boxed $boxed:tt)?),* $(,)?) => {$(
+        impl ReportKind for $ty {
+            fn from_report(r: NodeReport) -> Option<Self> {
+                match r {
+                    NodeReport::$variant(x) => Some(report_kinds!(@unbox x $($boxed)?)),
+                    _ => None,
+                }
+            }
+        }
+        impl From<$ty> for NodeReport {
+            fn from(x: $ty) -> Self {
+                NodeReport::$variant(report_kinds!(@box x $($boxed)?))
+            }
+        }
+    )*};
+    (@unbox $x:ident) => { $x };
+    (@unbox $x:ident $b:tt) => { *$x };
+    (@box $x:ident) => { $x };
+    (@box $x:ident $b:tt) => { Box::new($x) };
+}
+
+report_kinds! {
+    Tracker(TrackerReport) boxed _,
+    LocalMapping(LocalMappingReport),
+    LoopClosing(LoopClosingReport) boxed _,
+    LabelAccuracy(LabelAccuracyReport),
+    MaskAccuracy(MaskAccuracyReport),
+    Gate(GateReport),
+    Octomap(OctomapReport),
+    Inference(InferenceReport),
 }
 
 impl NodeReport {
@@ -24,6 +77,185 @@ impl NodeReport {
     pub fn from_json(v: &serde_json::Value) -> Option<Self> {
         serde_json::from_value(v.clone()).ok()
     }
+}
+
+/// Wall times of one step, milliseconds: count, mean, median, p95, max (nearest rank).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct Timing {
+    /// Samples.
+    pub count: usize,
+    /// Mean.
+    pub mean: f64,
+    /// Median.
+    pub median: f64,
+    /// 95th percentile.
+    pub p95: f64,
+    /// Largest.
+    pub max: f64,
+}
+
+impl Timing {
+    /// The statistics of `ms`.
+    pub fn of(ms: &[f64]) -> Self {
+        let mut t = ms.to_vec();
+        t.sort_by(f64::total_cmp);
+        let q = |p: f64| t.get(((t.len() as f64 - 1.0) * p).round() as usize).copied().unwrap_or(0.0);
+        let mean = if t.is_empty() { 0.0 } else { t.iter().sum::<f64>() / t.len() as f64 };
+        Self { count: t.len(), mean, median: q(0.5), p95: q(0.95), max: q(1.0) }
+    }
+}
+
+/// Local mapping at the end of the run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LocalMappingReport {
+    /// Key frames in the map (0 when mapping is off).
+    pub keyframes: usize,
+    /// Map points.
+    pub points: usize,
+    /// Local BA per key frame.
+    pub local_ba_ms: Timing,
+}
+
+/// The place-recognition vocabulary loop closing ran with.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct VocabularyReport {
+    /// Its file (`embedded default` for the built-in one).
+    pub file: String,
+    /// Its content id.
+    pub id: String,
+    /// Its words.
+    pub words: usize,
+    /// Loading time.
+    pub load_ms: f64,
+}
+
+/// The global BA after a loop correction.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct GlobalBaReport {
+    /// Levenberg-Marquardt iterations.
+    pub iterations: usize,
+    /// Cost before.
+    pub cost_before: f64,
+    /// Cost after.
+    pub cost_after: f64,
+    /// Wall time.
+    pub ms: f64,
+}
+
+/// One closed loop.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LoopReport {
+    /// Whether the two key frames' views overlap in the ground truth (`None` without it).
+    /// An oracle: scored after the fact, never used for a decision.
+    pub ground_truth_overlap: Option<bool>,
+    /// The key frame that closed the loop.
+    pub keyframe: u64,
+    /// The key frame it closed with.
+    pub loop_keyframe: u64,
+    /// The current key frame's stamp, seconds.
+    pub stamp: f64,
+    /// The loop key frame's stamp.
+    pub loop_stamp: f64,
+    /// Bag-of-words matches of the candidate.
+    pub bow_matches: usize,
+    /// SE(3) RANSAC inliers.
+    pub inliers: usize,
+    /// Matches after guided search.
+    pub matches: usize,
+    /// Translation of the correction at the current key frame, metres.
+    pub correction_m: f64,
+    /// Its rotation, degrees.
+    pub correction_deg: f64,
+    /// Map points fused.
+    pub fused: usize,
+    /// Key frames in the essential graph.
+    pub keyframes: usize,
+    /// Its edges.
+    pub edges: usize,
+    /// Pose-graph cost before.
+    pub graph_cost_before: f64,
+    /// Pose-graph cost after.
+    pub graph_cost_after: f64,
+    /// The global BA that followed.
+    pub global_ba: GlobalBaReport,
+}
+
+/// Loop closing over the run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct LoopClosingReport {
+    /// The vocabulary.
+    pub vocabulary: VocabularyReport,
+    /// Key frames in the map.
+    pub keyframes: usize,
+    /// The loops closed, in order.
+    pub loops: Vec<LoopReport>,
+    /// Loops whose views do not overlap in the ground truth (`None` without it; an oracle).
+    pub false_loops: Option<usize>,
+    /// Candidates rejected, by reason (`None` before the first key frame).
+    pub rejected_candidates: Option<BTreeMap<String, usize>>,
+    /// Detection per key frame.
+    pub detection_ms: Timing,
+    /// Each loop correction.
+    pub loop_correction_ms: Timing,
+    /// Why loop closing refused to run, if it did.
+    pub refused: Option<String>,
+}
+
+/// Mask IoU against a reference, pooled over the run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MaskAccuracyReport {
+    /// Frames scored.
+    pub frames: u64,
+    /// Pooled intersection over union.
+    pub iou: f64,
+    /// Pooled precision.
+    pub precision: f64,
+    /// Pooled recall.
+    pub recall: f64,
+    /// Mean of the per-frame IoUs.
+    pub mean_frame_iou: f64,
+}
+
+/// The key-frame gate: how often each rule let the detector run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct GateReport {
+    /// Frames seen.
+    pub frames: u64,
+    /// Frames passed to inference.
+    pub inferred: u64,
+    /// `inferred / frames`.
+    pub inferred_share: f64,
+    /// Frames per deciding rule (the first is "skipped").
+    pub rules: BTreeMap<String, u64>,
+}
+
+/// The occupancy map at the end of the run.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct OctomapReport {
+    /// Frames inserted.
+    pub frames: u64,
+    /// Insertion per frame.
+    pub insert_ms: Timing,
+    /// Tree nodes.
+    pub nodes: usize,
+    /// Leaves.
+    pub leaves: usize,
+    /// Occupied leaves.
+    pub occupied_leaves: usize,
+    /// Memory of the tree.
+    pub memory_bytes: usize,
+    /// Depth pixels left out as dynamic.
+    pub dynamic_pixels_skipped: u64,
+    /// The `.ot` and `.bt` files written.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub files: Vec<String>,
+}
+
+/// The executor that ran a model (`rten`, `reference`, `gpu`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct InferenceReport {
+    /// The backend.
+    pub backend: String,
 }
 
 /// Precision and recall of culling labels against a reference mask, pooled over the run.
@@ -67,7 +299,11 @@ pub struct FrameStates {
 
 /// Absolute trajectory error, metres.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
 pub struct Ate {
+    /// The tracker node (on the summary's ATEs; a tracker's own report leaves it out).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub node: Option<String>,
     /// Root mean square error.
     pub rmse: f64,
     /// Mean.
@@ -90,6 +326,7 @@ impl Ate {
     /// From an evaluation.
     pub fn of(e: &dynaflow_slam::eval::Evaluation, align: &str) -> Self {
         Self {
+            node: None,
             rmse: e.ate.rmse,
             mean: e.ate.mean,
             median: e.ate.median,

@@ -1,13 +1,15 @@
 //! The `synth` source operator: streams generated frames straight into a graph.
 
-use std::sync::Arc;
+use std::path::Path;
 
 use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, PixelFormat, Pose, SegmentationMask, StereoRig};
 use dynaflow_engine::op::Seeded;
-use dynaflow_engine::op::{Context, Instance, OpError, OpKind, OpSpec, Out, Outputs, Param, ParamType, Params, Source};
+use dynaflow_engine::op::{Instance, OpError, OpKind, OpSpec, Out, Outputs, Param, ParamType, Params};
 use dynaflow_engine::params;
 
-use dynaflow_datasets::synth::{Generator, Motion, PeopleMode, SynthConfig, scaled_fr3};
+use dynaflow_datasets::synth::{Frame, Generator, Motion, PeopleMode, SynthConfig, scaled_fr3};
+
+use crate::decode::{Frames, OnError, SequenceSource, ground_truth_pose};
 
 /// The camera motion as a parameter (the generator's names).
 #[derive(Clone, Copy, Debug)]
@@ -93,43 +95,49 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         blur: c.blur,
         kidnap: (c.kidnap > 0).then_some(c.kidnap),
     };
-    Ok(Instance::Source(Box::new(SynthSource {
+    let frames = Synth {
         generator: Generator::new(config),
         seeded: c.seed.0.is_some(),
         frames: c.frames,
         stereo_baseline: (c.stereo_baseline > 0.0).then_some(c.stereo_baseline),
-        frame_id: "camera".into(),
-    })))
+    };
+    Ok(Instance::Source(Box::new(SequenceSource::new(frames, Path::new("synth"), OnError::Fail))))
 }
 
-struct SynthSource {
+struct Synth {
     generator: Generator,
     /// Whether the graph gave `seed`; otherwise the node's seed is used.
     seeded: bool,
     frames: u64,
     /// The right camera's baseline, metres.
     stereo_baseline: Option<f64>,
-    frame_id: Arc<str>,
 }
 
-impl Source for SynthSource {
-    fn start(&mut self, ctx: &mut Context) -> Result<(), OpError> {
-        if !self.seeded {
-            let mut config = self.generator.config().clone();
-            config.seed = ctx.seed;
-            self.generator = Generator::new(config);
-        }
-        Ok(())
+impl Frames for Synth {
+    type Frame = Frame;
+
+    fn len(&self) -> u64 {
+        self.frames
     }
 
-    fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
-        if seq >= self.frames {
-            return Ok(None);
+    fn read(&mut self, i: u64) -> Result<Option<Frame>, dynaflow_datasets::Error> {
+        Ok((i < self.frames).then(|| self.generator.frame(i, false)))
+    }
+
+    fn stamp(f: &Frame) -> f64 {
+        f.stamp
+    }
+
+    fn start(&mut self, seed: u64) {
+        if !self.seeded {
+            let mut config = self.generator.config().clone();
+            config.seed = seed;
+            self.generator = Generator::new(config);
         }
-        let f = self.generator.frame(seq, false);
+    }
+
+    fn emit(&self, f: Frame, header: Header) -> Outputs {
         let k = &self.generator.config().intrinsics;
-        let header = Header { seq, stamp: f.stamp, frame_id: self.frame_id.clone() };
-        let world = Header { frame_id: "world".into(), ..header.clone() };
         let mut out = Outputs::new();
         if let Some(b) = self.stereo_baseline
             && let Some(right) = self.generator.right(&f, b)
@@ -137,7 +145,6 @@ impl Source for SynthSource {
             let image = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: right };
             out = out.send(&RIGHT, header.clone(), image).send(&STEREO, header.clone(), StereoRig { baseline: b });
         }
-        let info = k.clone();
         let mask = SegmentationMask {
             width: k.width,
             height: k.height,
@@ -145,20 +152,12 @@ impl Source for SynthSource {
             instances: Some(f.instance),
             class_names: vec!["static".into(), "person".into()],
         };
-        Ok(Some(
-            out.send(
-                &RGB,
-                header.clone(),
-                Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: f.rgb },
-            )
+        let rgb = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: f.rgb };
+        let mut out = out
+            .send(&RGB, header.clone(), rgb)
             .send(&DEPTH, header.clone(), DepthImage { width: k.width, height: k.height, data: f.depth })
-            .send(&CAMERA_INFO, header.clone(), info)
-            .send(&GT_POSE, world, Pose { world_from_cam: f.world_from_cam })
-            .send(&GT_MASK, header, mask),
-        ))
-    }
-
-    fn len_hint(&self) -> Option<u64> {
-        Some(self.frames)
+            .send(&CAMERA_INFO, header.clone(), k.clone());
+        ground_truth_pose(&mut out, &GT_POSE, &header, Pose { world_from_cam: f.world_from_cam });
+        out.send(&GT_MASK, header, mask)
     }
 }

@@ -14,7 +14,7 @@ use nalgebra::{Isometry3, Point3};
 
 use crate::bow::{BowVector, Descriptor, FeatureVector, Vocabulary};
 use crate::keyframe_db::KeyFrameDatabase;
-use crate::map::{Feature, KeyFrameInfo, KeyFrameKeypoint, MapPoint, SparseMap, sigma};
+use crate::map::{Feature, MapKeyFrame, MapKeypoint, MapPoint, SparseMap, sigma};
 
 /// Hamming distance of a BoW or projection match (ORB-SLAM2 `TH_LOW`) and the BoW ratio.
 pub const MAX_DISTANCE: u32 = 50;
@@ -27,9 +27,9 @@ pub const COVISIBILITY_MIN: usize = 15;
 #[derive(Clone, Debug)]
 pub struct PlaceKeyFrame {
     /// Its id, stamp and pose.
-    pub info: KeyFrameInfo,
+    pub info: MapKeyFrame,
     /// Its static keypoints, with the map point each observes.
-    pub keypoints: Vec<KeyFrameKeypoint>,
+    pub keypoints: Vec<MapKeypoint>,
     /// Its bag of words.
     pub bow: BowVector,
     /// Keypoint indices by vocabulary node (the direct index).
@@ -151,11 +151,11 @@ impl KeyFrameMap {
         if self.kfs.contains_key(&id) {
             return None;
         }
-        let keypoints: Vec<KeyFrameKeypoint> = batch
+        let keypoints: Vec<MapKeypoint> = batch
             .keypoints
             .iter()
             .filter(|k| k.keyframe == id)
-            .map(|k| KeyFrameKeypoint { point: k.point.filter(|p| self.points.contains_key(p)), ..*k })
+            .map(|k| MapKeypoint { point: k.point.filter(|p| self.points.contains_key(p)), ..*k })
             .collect();
         for p in keypoints.iter().filter_map(|k| k.point) {
             self.observers.entry(p).or_default().insert(id);
@@ -259,7 +259,7 @@ impl KeyFrameMap {
     /// (Hamming <= 50), one point per keypoint (the closest descriptor wins).
     pub fn search_by_projection(
         &self,
-        keypoints: &[KeyFrameKeypoint],
+        keypoints: &[MapKeypoint],
         world_from_cam: &Isometry3<f64>,
         points: &[u64],
         radius: f64,
@@ -294,7 +294,7 @@ impl KeyFrameMap {
     }
 
     /// A point's position in key frame `kf`'s camera.
-    pub fn point_in(&self, kf: &PlaceKeyFrame, kp: &KeyFrameKeypoint) -> Option<Point3<f64>> {
+    pub fn point_in(&self, kf: &PlaceKeyFrame, kp: &MapKeypoint) -> Option<Point3<f64>> {
         let p = self.points.get(&kp.point?)?;
         Some(kf.info.world_from_cam.inverse() * p.position)
     }

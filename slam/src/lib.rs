@@ -38,5 +38,5 @@ pub mod pose_graph;
 pub mod tracker;
 
 pub use local_map::{LocalMapConfig, LocalMapper};
-pub use map::{Feature, KeyFrameFeature, KeyFrameInfo, KeyFrameKeypoint, MapPoint, Observation, SparseMap};
+pub use map::{Feature, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, SparseMap};
 pub use tracker::{Sensor, TrackState, Tracker, TrackerConfig, TrackingResult};

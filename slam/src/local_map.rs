@@ -26,7 +26,7 @@ use crate::ba::{BaObservation, BaPose, BaReport, bundle_adjust, chi2, chi2_bound
 use dynaflow_vision::geometry::{CHI2_1DOF, CHI2_2DOF, triangulate};
 use dynaflow_vision::matching::hamming;
 
-use crate::map::{KeyFrameFeature, KeyFrameInfo, MapPoint, Observation, SparseMap, sigma};
+use crate::map::{MapFeature, MapKeyFrame, MapObservation, MapPoint, SparseMap, sigma};
 
 /// Local-mapping settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -80,10 +80,10 @@ const TRIANGULATION_RATIO: f32 = 0.6;
 
 #[derive(Clone, Debug)]
 struct Kf {
-    info: KeyFrameInfo,
-    obs: Vec<Observation>,
+    info: MapKeyFrame,
+    obs: Vec<MapObservation>,
     /// Monocular: keypoints no point explains yet (triangulation candidates).
-    features: Vec<KeyFrameFeature>,
+    features: Vec<MapFeature>,
 }
 
 #[derive(Clone, Debug)]
@@ -533,7 +533,7 @@ impl LocalMapper {
                 let point =
                     MapPoint { id: pid, position: x, descriptor: f1.descriptor, observations: 2, first_keyframe: id };
                 self.points.insert(pid, Mp { point, kfs: vec![id, nb], weight: 2 });
-                let obs = |kf: u64, f: &KeyFrameFeature| Observation {
+                let obs = |kf: u64, f: &MapFeature| MapObservation {
                     keyframe: kf,
                     point: pid,
                     uv: f.uv,
@@ -688,7 +688,7 @@ impl LocalMapper {
                 Some((_, None, i)) => {
                     let Some(k) = self.kfs.get_mut(&kf) else { continue };
                     let f = k.features.swap_remove(i);
-                    k.obs.push(Observation { keyframe: kf, point: pid, uv: f.uv, depth: None, octave: f.octave });
+                    k.obs.push(MapObservation { keyframe: kf, point: pid, uv: f.uv, depth: None, octave: f.octave });
                     if let Some(mp) = self.points.get_mut(&pid) {
                         mp.kfs.push(kf);
                         mp.weight += 1;

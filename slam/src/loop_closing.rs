@@ -42,7 +42,7 @@ use crate::bow::{BowVector, Vocabulary, score};
 use crate::eval::umeyama;
 use crate::keyframe_db::LoopConsistency;
 use crate::keyframe_map::KeyFrameMap;
-use crate::map::{KeyFrameInfo, KeyFrameKeypoint, Observation, SparseMap, sigma};
+use crate::map::{MapKeyFrame, MapKeypoint, MapObservation, SparseMap, sigma};
 use crate::pose_graph::{PoseEdge, optimise};
 
 /// Loop-closing settings (ORB-SLAM2's values).
@@ -150,7 +150,7 @@ pub struct LoopCloser {
     since_loop: usize,
     rng: SplitMix64,
     /// Observations added and points removed by the last loop's fusion.
-    fused_observations: Vec<Observation>,
+    fused_observations: Vec<MapObservation>,
     fused_removed: Vec<u64>,
     loops: Vec<LoopClosure>,
     /// Candidates accepted by the consistency check whose geometry failed, by [`Rejection`].
@@ -222,7 +222,7 @@ impl LoopCloser {
     }
 
     /// Every key frame's pose.
-    pub fn keyframe_poses(&self) -> impl Iterator<Item = &KeyFrameInfo> {
+    pub fn keyframe_poses(&self) -> impl Iterator<Item = &MapKeyFrame> {
         self.map.kfs.values().map(|k| &k.info)
     }
 
@@ -278,7 +278,7 @@ impl LoopCloser {
         None
     }
 
-    fn reprojects(&self, pose: &Isometry3<f64>, x: &Point3<f64>, kp: &KeyFrameKeypoint) -> bool {
+    fn reprojects(&self, pose: &Isometry3<f64>, x: &Point3<f64>, kp: &MapKeypoint) -> bool {
         let Some(uv) = self.map.cam.project(&(pose * x)) else { return false };
         let s = sigma(self.config.scale_factor, kp.octave);
         let (du, dv) = (uv[0] - kp.uv[0], uv[1] - kp.uv[1]);
@@ -586,7 +586,7 @@ impl LoopCloser {
                     if kpj.point == Some(q) {
                         kpj.point = if sees_p { None } else { Some(p) };
                         if !sees_p {
-                            self.fused_observations.push(Observation {
+                            self.fused_observations.push(MapObservation {
                                 keyframe: h,
                                 point: p,
                                 uv: kpj.uv,
@@ -607,7 +607,7 @@ impl LoopCloser {
                 hk.keypoints[i].point = Some(p);
             }
             self.map.observers.entry(p).or_default().insert(kf);
-            self.fused_observations.push(Observation {
+            self.fused_observations.push(MapObservation {
                 keyframe: kf,
                 point: p,
                 uv: kp.uv,

@@ -18,7 +18,7 @@ use nalgebra::{Isometry3, Point3, Quaternion, Translation3, UnitQuaternion};
 
 use crate::bow::Vocabulary;
 use crate::keyframe_map::KeyFrameMap;
-use crate::map::{KeyFrameInfo, KeyFrameKeypoint, MapPoint, SparseMap};
+use crate::map::{MapKeyFrame, MapKeypoint, MapPoint, SparseMap};
 
 const MAGIC: &[u8; 8] = b"DFMAP\0\0\0";
 /// Version of the layout written.
@@ -290,7 +290,7 @@ pub fn load(
         let nkp = r.u32("a key frame's keypoints")? as usize;
         let mut kf = SparseMap {
             map_id,
-            keyframes: vec![KeyFrameInfo { id, stamp, world_from_cam: pose }],
+            keyframes: vec![MapKeyFrame { id, stamp, world_from_cam: pose }],
             ..SparseMap::default()
         };
         for _ in 0..nkp {
@@ -313,7 +313,7 @@ pub fn load(
                     "key frame {id}: a keypoint of point {point}, which the map does not hold"
                 )));
             }
-            kf.keypoints.push(KeyFrameKeypoint {
+            kf.keypoints.push(MapKeypoint {
                 keyframe: id,
                 uv,
                 octave,

@@ -8,7 +8,7 @@ use dynaflow::summary::Summary;
 use dynaflow_engine::files::RunFiles;
 use dynaflow_engine::runtime::{self, RunOptions, RunStatus};
 use dynaflow_engine::sink::{DigestSink, Sink};
-use dynaflow_engine::spec::Override;
+use dynaflow_engine::spec::{Override, ResolvedGraph};
 use dynaflow_engine::{LoadRequest, SourceOverride};
 use dynaflow_recordings::mcap::DEFAULT_FLUSH_INTERVAL;
 use dynaflow_recordings::{EncodeCache, ImageCodec, LiveSink, McapSink, MessageLog, RrdSink};
@@ -35,43 +35,13 @@ fn build_error(loaded: &dynaflow_engine::Loaded, req: &LoadRequest, e: &runtime:
     loaded.source.plain(&d)
 }
 
+/// `dynaflow run`: load the graph, check where this process's share runs, open the
+/// recorders, run, print the results, write the summary; the exit status says how it ended.
 pub fn run(args: &RunArgs) -> u8 {
-    let mut overrides = Vec::new();
-    for s in &args.set {
-        match Override::parse(s) {
-            Ok(o) => overrides.push(o),
-            Err(e) => {
-                eprintln!("error: {e}");
-                return EXIT_BAD_INPUT;
-            }
-        }
-    }
-    let source = match &args.input {
-        None => None,
-        // Relative to the working directory, as typed (graph params resolve against the graph
-        // file's folder, so the source gets an absolute path).
-        Some(dir) => match dynaflow_operators::decode::detect_layout(
-            &std::path::absolute(dir).unwrap_or_else(|_| dir.clone()),
-            args.intrinsics.as_deref(),
-        ) {
-            Ok(layout) => Some(SourceOverride {
-                op: layout.op.to_owned(),
-                params: layout.params.into_iter().map(|(k, v)| (k.to_owned(), v)).collect(),
-                origin: format!("--input {}", dir.display()),
-            }),
-            Err(e) => {
-                eprintln!("error: {e}");
-                return EXIT_BAD_INPUT;
-            }
-        },
+    let req = match load_request(args) {
+        Ok(r) => r,
+        Err(e) => return bad_input(&e),
     };
-    let map = dynaflow_engine::MapRequest {
-        save: args.save_map.clone(),
-        load: args.load_map.clone(),
-        localise: args.localise,
-    };
-    let req =
-        LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source, map };
     let Some(mut loaded) = super::load_and_report(&args.graph, &req) else {
         return EXIT_BAD_INPUT;
     };
@@ -80,176 +50,38 @@ pub fn run(args: &RunArgs) -> u8 {
         return EXIT_BAD_INPUT;
     };
     if let Err(e) = std::fs::create_dir_all(&args.out) {
-        eprintln!("error: cannot create output folder {}: {e}", args.out.display());
-        return EXIT_BAD_INPUT;
+        return bad_input(&format!("cannot create output folder {}: {e}", args.out.display()));
     }
     let mut files = RunFiles::new(&args.out, &graph.name, graph.variant.as_deref());
-    if let Some(m) = &args.machine {
-        if graph.machines.is_empty() {
-            eprintln!(
-                "error: `--machine {m}`: the graph has no `machines:`, so it runs in one process (leave out --machine)"
-            );
-            return EXIT_BAD_INPUT;
-        }
-        if !graph.machines.iter().any(|(n, _)| &**n == m) {
-            let names: Vec<&str> = graph.machines.iter().map(|(n, _)| &**n).collect();
-            eprintln!("error: `--machine {m}`: the graph has no such machine (its machines: {})", names.join(", "));
-            return EXIT_BAD_INPUT;
-        }
-        if !(args.peer_timeout.is_finite() && args.peer_timeout > 0.0) {
-            eprintln!("error: `--peer-timeout {}`: give a positive number of seconds", args.peer_timeout);
-            return EXIT_BAD_INPUT;
-        }
-        if args.require_tls
-            && let Some((name, endpoint)) = graph.machines.iter().find(|(_, e)| !e.starts_with("tls/"))
-        {
-            eprintln!(
-                "error: `--require-tls`: machine `{name}` listens on `{endpoint}`, plain TCP that anyone who reaches the port can join; write the endpoints `tls/HOST:PORT` and give `--tls DIR`"
-            );
-            return EXIT_BAD_INPUT;
-        }
-        // Each machine's own summary and recordings: `<stem>.<machine>.*`.
-        files.stem = format!("{}.{m}", files.stem);
-    } else if graph.machines.len() > 1 {
-        tracing::info!(
-            "the graph places its nodes on {} machines; all of them run in this process (`--machine NAME` runs one machine's share)",
-            graph.machines.len()
-        );
+    if let Err(e) = this_machine(&graph, args, &mut files) {
+        return bad_input(&e);
     }
-
-    // Each recorder once: two sinks on one file would interleave into a corrupt file.
-    let mut recorders: Vec<&str> = Vec::new();
-    for r in args.record.iter().map(|r| r.trim()) {
-        if recorders.contains(&r) {
-            eprintln!("error: `--record {}` names `{r}` twice; each recorder writes one file", args.record.join(","));
-            return EXIT_BAD_INPUT;
-        }
-        recorders.push(r);
-    }
-    if recorders.contains(&"none") && recorders.len() > 1 {
-        eprintln!("error: `--record none` cannot be combined with other recorders");
-        return EXIT_BAD_INPUT;
-    }
-
-    let codec = ImageCodec::from_name(&args.image_format).unwrap_or(ImageCodec::Jpeg(90));
-    let live_url = live_stream(args);
-    let image_recorders =
-        args.record.iter().filter(|r| matches!(r.trim(), "rrd" | "mcap")).count() + usize::from(live_url.is_some());
-    let cache = EncodeCache::new(image_recorders);
-    let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
-    for r in &args.record {
-        match r.trim() {
-            "jsonl" => sinks.push(Box::new(MessageLog::new(files.run_file("messages.jsonl")))),
-            "rrd" => {
-                sinks.push(Box::new(RrdSink::new(files.run_file("rrd")).with_codec(codec).with_cache(cache.clone())))
-            }
-            "mcap" => sinks.push(Box::new(
-                McapSink::new(files.run_file("mcap"))
-                    .with_codec(codec)
-                    .with_cache(cache.clone())
-                    .with_chunking(args.mcap_chunk_kib.saturating_mul(1024), DEFAULT_FLUSH_INTERVAL),
-            )),
-            "none" | "" => {}
-            other => {
-                eprintln!("error: unknown recorder `{other}` (available: rrd, mcap, jsonl, none)");
-                return EXIT_BAD_INPUT;
-            }
-        }
-    }
-    if let Some(url) = live_url {
-        sinks.push(Box::new(LiveSink::new(url).with_codec(codec).with_cache(cache.clone())));
-    }
-    let digest = DigestSink::default();
-    if args.digest {
-        sinks.push(Box::new(digest.clone()));
-    }
-
-    let options = RunOptions {
-        realtime: args.realtime,
-        max_frames: args.frames,
-        out_dir: Some(args.out.clone()),
-        ..RunOptions::default()
+    let (sinks, digest) = match recorders(args, &files) {
+        Ok(r) => r,
+        Err(e) => return bad_input(&e),
     };
-    let rt = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
-        Ok(rt) => rt,
-        Err(e) => {
-            eprintln!("error: cannot start the async runtime: {e}");
+    let report = match execute(&graph, args, sinks) {
+        Ok(r) => r,
+        Err(Failed::Start(e)) => {
+            eprintln!("error: {e}");
             return EXIT_FAILED;
         }
-    };
-    let show_progress = !args.no_progress && std::io::stderr().is_terminal();
-    let result = rt.block_on(async {
-        // A second signal aborts at once: the CLI owns the exit code (130, as a shell reports
-        // a SIGINT).
-        runtime::stop_on_signals(options.stop.clone(), || std::process::exit(i32::from(EXIT_INTERRUPTED)));
-        let progress = show_progress.then(|| spawn_progress(&options));
-        let mut options = options.clone();
-        let wire = match join_machines(&graph, args).await {
-            Ok(w) => w,
-            Err(e) => return Err(runtime::RunError::Remote(e)),
-        };
-        options.placement = wire.as_ref().map(|(p, _)| p.clone());
-        let result = runtime::run(&graph, options, sinks).await;
-        if let Some((_, finish)) = wire {
-            finish.await;
-        }
-        if let Some((bar, task)) = progress {
-            task.abort();
-            bar.finish_and_clear();
-        }
-        result
-    });
-    // An operator cancelled after a stop may still be inside a blocking call; do not wait
-    // for it, the recordings are closed already.
-    rt.shutdown_timeout(Duration::from_millis(500));
-    let report = match result {
-        Ok(r) => r,
-        Err(e) => {
+        Err(Failed::Run(e)) => {
             eprintln!("{}", build_error(&loaded, &req, &e));
             return EXIT_BAD_INPUT;
         }
     };
     say!("{}", report.table());
-    let oracle = if let Some(uses) = &report.oracle {
+    let oracle = report.oracle.as_ref().map(|uses| {
         say!(
             "(oracle) this run decides with ground truth ({}): its results are a bound, not a system's",
             uses.join("; ")
         );
-        " (oracle)"
-    } else {
-        ""
-    };
+    });
     let mut summary = Summary::of(report);
-    // Print each tracker's ATE, the first in graph order the reference the others are
-    // compared with (as a baseline is).
-    let mut reference: Option<(&str, f64)> = None;
-    for n in &summary.run.nodes {
-        let tracker = summary.tracker(&n.node);
-        if let Some(why) = tracker.as_ref().and_then(|t| t.not_initialised_because.as_deref()) {
-            say!("`{}` has no trajectory: {why}", n.node);
-        }
-        let Some(ate) = summary.trackers.get(&n.node) else { continue };
-        let versus = match reference {
-            Some((name, r)) if r > 0.0 => format!(" ({:+.1} % vs `{name}`)", 100.0 * (ate.rmse / r - 1.0)),
-            _ => String::new(),
-        };
-        // Lost frames have no pose (the trajectory leaves them out): say how many.
-        let lost = tracker.as_ref().map_or(0, |t| t.frames.lost);
-        let lost = if lost > 0 { format!(", {lost} lost frames left out") } else { String::new() };
-        say!(
-            "ATE of `{}`{oracle} ({} poses{lost}, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m{versus}",
-            n.node,
-            ate.pairs,
-            ate.align.as_deref().unwrap_or("se3"),
-            ate.rmse,
-            ate.mean,
-            ate.median,
-            ate.std
-        );
-        reference.get_or_insert((&n.node, ate.rmse));
-    }
+    print_trajectory_errors(&summary, if oracle.is_some() { " (oracle)" } else { "" });
     if args.digest {
-        summary.digests = Some(digest.to_json());
+        summary.digests = Some(digest.snapshot());
     }
     recording_costs(&summary.run.recorders);
     let path = files.summary();
@@ -271,13 +103,211 @@ pub fn run(args: &RunArgs) -> u8 {
     }
 }
 
+fn bad_input(e: &str) -> u8 {
+    eprintln!("error: {e}");
+    EXIT_BAD_INPUT
+}
+
+/// What the flags ask of the graph's load: `--set`, `--input`, `--variant`, `--seed` and the
+/// map flags.
+fn load_request(args: &RunArgs) -> Result<LoadRequest, String> {
+    let overrides = args.set.iter().map(|s| Override::parse(s).map_err(|e| e.to_string())).collect::<Result<_, _>>()?;
+    let source = match &args.input {
+        None => None,
+        // Relative to the working directory, as typed (graph params resolve against the graph
+        // file's folder, so the source gets an absolute path).
+        Some(dir) => {
+            let layout = dynaflow_operators::decode::detect_layout(
+                &std::path::absolute(dir).unwrap_or_else(|_| dir.clone()),
+                args.intrinsics.as_deref(),
+            )
+            .map_err(|e| e.to_string())?;
+            Some(SourceOverride {
+                op: layout.op.to_owned(),
+                params: layout.params.into_iter().map(|(k, v)| (k.to_owned(), v)).collect(),
+                origin: format!("--input {}", dir.display()),
+            })
+        }
+    };
+    let map = dynaflow_engine::MapRequest {
+        save: args.save_map.clone(),
+        load: args.load_map.clone(),
+        localise: args.localise,
+    };
+    Ok(LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source, map })
+}
+
+/// With `--machine NAME`: the machine exists, the link settings are sane, and this machine's
+/// files are `<stem>.<machine>.*`.
+fn this_machine(graph: &ResolvedGraph, args: &RunArgs, files: &mut RunFiles) -> Result<(), String> {
+    let Some(m) = &args.machine else {
+        if graph.machines.len() > 1 {
+            tracing::info!(
+                "the graph places its nodes on {} machines; all of them run in this process (`--machine NAME` runs one machine's share)",
+                graph.machines.len()
+            );
+        }
+        return Ok(());
+    };
+    if graph.machines.is_empty() {
+        return Err(format!(
+            "`--machine {m}`: the graph has no `machines:`, so it runs in one process (leave out --machine)"
+        ));
+    }
+    if !graph.machines.iter().any(|(n, _)| &**n == m) {
+        let names: Vec<&str> = graph.machines.iter().map(|(n, _)| &**n).collect();
+        return Err(format!("`--machine {m}`: the graph has no such machine (its machines: {})", names.join(", ")));
+    }
+    if !(args.peer_timeout.is_finite() && args.peer_timeout > 0.0) {
+        return Err(format!("`--peer-timeout {}`: give a positive number of seconds", args.peer_timeout));
+    }
+    if args.require_tls
+        && let Some((name, endpoint)) = graph.machines.iter().find(|(_, e)| !e.starts_with("tls/"))
+    {
+        return Err(format!(
+            "`--require-tls`: machine `{name}` listens on `{endpoint}`, plain TCP that anyone who reaches the port can join; write the endpoints `tls/HOST:PORT` and give `--tls DIR`"
+        ));
+    }
+    files.stem = format!("{}.{m}", files.stem);
+    Ok(())
+}
+
+/// The recorders `--record` names (each once), the live stream, and the digest sink (a sink
+/// only with `--digest`; its snapshot goes into the summary).
+fn recorders(args: &RunArgs, files: &RunFiles) -> Result<(Vec<Box<dyn Sink>>, DigestSink), String> {
+    // Each recorder once: two sinks on one file would interleave into a corrupt file.
+    let mut names: Vec<&str> = Vec::new();
+    for r in args.record.iter().map(|r| r.trim()) {
+        if names.contains(&r) {
+            return Err(format!(
+                "`--record {}` names `{r}` twice; each recorder writes one file",
+                args.record.join(",")
+            ));
+        }
+        names.push(r);
+    }
+    if names.contains(&"none") && names.len() > 1 {
+        return Err("`--record none` cannot be combined with other recorders".into());
+    }
+    let codec = ImageCodec::from_name(&args.image_format).unwrap_or(ImageCodec::Jpeg(90));
+    let live_url = live_stream(args);
+    let image_recorders =
+        names.iter().filter(|r| matches!(**r, "rrd" | "mcap")).count() + usize::from(live_url.is_some());
+    let cache = EncodeCache::new(image_recorders);
+    let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
+    for r in names {
+        match r {
+            "jsonl" => sinks.push(Box::new(MessageLog::new(files.run_file("messages.jsonl")))),
+            "rrd" => {
+                sinks.push(Box::new(RrdSink::new(files.run_file("rrd")).with_codec(codec).with_cache(cache.clone())))
+            }
+            "mcap" => sinks.push(Box::new(
+                McapSink::new(files.run_file("mcap"))
+                    .with_codec(codec)
+                    .with_cache(cache.clone())
+                    .with_chunking(args.mcap_chunk_kib.saturating_mul(1024), DEFAULT_FLUSH_INTERVAL),
+            )),
+            "none" | "" => {}
+            other => return Err(format!("unknown recorder `{other}` (available: rrd, mcap, jsonl, none)")),
+        }
+    }
+    if let Some(url) = live_url {
+        sinks.push(Box::new(LiveSink::new(url).with_codec(codec).with_cache(cache.clone())));
+    }
+    let digest = DigestSink::default();
+    if args.digest {
+        sinks.push(Box::new(digest.clone()));
+    }
+    Ok((sinks, digest))
+}
+
+/// Why [`execute`] has no report.
+enum Failed {
+    /// The async runtime did not start.
+    Start(String),
+    /// The graph did not build or the machines did not join.
+    Run(runtime::RunError),
+}
+
+/// Runs the graph on a tokio runtime: signals stop it (a second aborts), a progress bar on a
+/// terminal, this machine joined to the others with `--machine`.
+fn execute(graph: &ResolvedGraph, args: &RunArgs, sinks: Vec<Box<dyn Sink>>) -> Result<runtime::RunReport, Failed> {
+    let options = RunOptions {
+        realtime: args.realtime,
+        max_frames: args.frames,
+        out_dir: Some(args.out.clone()),
+        ..RunOptions::default()
+    };
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .map_err(|e| Failed::Start(format!("cannot start the async runtime: {e}")))?;
+    let show_progress = !args.no_progress && std::io::stderr().is_terminal();
+    let result = rt.block_on(async {
+        // A second signal aborts at once: the CLI owns the exit code (130, as a shell reports
+        // a SIGINT).
+        runtime::stop_on_signals(options.stop.clone(), || std::process::exit(i32::from(EXIT_INTERRUPTED)));
+        let progress = show_progress.then(|| spawn_progress(&options));
+        let mut options = options.clone();
+        let wire = match join_machines(graph, args).await {
+            Ok(w) => w,
+            Err(e) => return Err(runtime::RunError::Remote(e)),
+        };
+        options.placement = wire.as_ref().map(|(p, _)| p.clone());
+        let result = runtime::run(graph, options, sinks).await;
+        if let Some((_, finish)) = wire {
+            finish.await;
+        }
+        if let Some((bar, task)) = progress {
+            task.abort();
+            bar.finish_and_clear();
+        }
+        result
+    });
+    // An operator cancelled after a stop may still be inside a blocking call; do not wait
+    // for it, the recordings are closed already.
+    rt.shutdown_timeout(Duration::from_millis(500));
+    result.map_err(Failed::Run)
+}
+
+/// Each tracker's ATE, the first in graph order the reference the others are compared with
+/// (as a baseline is); a tracker with no trajectory says why.
+fn print_trajectory_errors(summary: &Summary, oracle: &str) {
+    let mut reference: Option<(&str, f64)> = None;
+    for n in &summary.run.nodes {
+        let tracker = summary.tracker(&n.node);
+        if let Some(why) = tracker.as_ref().and_then(|t| t.not_initialised_because.as_deref()) {
+            say!("`{}` has no trajectory: {why}", n.node);
+        }
+        let Some(ate) = summary.trackers.get(&n.node) else { continue };
+        let versus = match reference {
+            Some((name, r)) if r > 0.0 => format!(" ({:+.1} % vs `{name}`)", 100.0 * (ate.rmse / r - 1.0)),
+            _ => String::new(),
+        };
+        // Lost frames have no pose (the trajectory leaves them out): say how many.
+        let lost = tracker.as_ref().map_or(0, |t| t.frames.lost);
+        let lost = if lost > 0 { format!(", {lost} lost frames left out") } else { String::new() };
+        say!(
+            "ATE of `{}`{oracle} ({} poses{lost}, {} aligned): rmse {:.4} m, mean {:.4} m, median {:.4} m, std {:.4} m{versus}",
+            n.node,
+            ate.pairs,
+            ate.align,
+            ate.rmse,
+            ate.mean,
+            ate.median,
+            ate.std
+        );
+        reference.get_or_insert((&n.node, ate.rmse));
+    }
+}
+
 /// What joins this process to the other machines of a split run: the placement the runtime
 /// uses and what to await once the run is over (the session's orderly end).
 type Joined = (runtime::remote::Placement, std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>);
 
 /// `--machine NAME`: open this machine's zenoh session (`None` without `--machine`).
 #[cfg(feature = "zenoh")]
-async fn join_machines(graph: &dynaflow_engine::spec::ResolvedGraph, args: &RunArgs) -> Result<Option<Joined>, String> {
+async fn join_machines(graph: &ResolvedGraph, args: &RunArgs) -> Result<Option<Joined>, String> {
     let Some(m) = &args.machine else { return Ok(None) };
     let timeout = Duration::from_secs_f64(args.peer_timeout);
     let tls = args.tls.as_ref().map(|dir| dynaflow_net::Tls { dir: dir.clone() });

@@ -41,6 +41,14 @@ impl Pinhole {
     }
 }
 
+impl From<&dynaflow_msg::CameraInfo> for Pinhole {
+    /// The projection of a camera-info message (its distortion is applied separately, by
+    /// [`distort`] and [`undistort`] on normalised coordinates).
+    fn from(k: &dynaflow_msg::CameraInfo) -> Self {
+        Self::new(k.fx, k.fy, k.cx, k.cy)
+    }
+}
+
 /// Brown-Conrady distortion of normalised coordinates, OpenCV's model and coefficient order
 /// `[k1, k2, p1, p2, k3]`.
 pub fn distort(k: &[f64; 5], xn: [f64; 2]) -> [f64; 2] {

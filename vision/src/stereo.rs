@@ -14,7 +14,7 @@
 
 use crate::image::GrayImage;
 use crate::matching::hamming;
-use crate::orb::OrbKeypoint;
+use crate::orb::Keypoint;
 
 /// ORB-SLAM2's `ORBmatcher::TH_HIGH`.
 pub const TH_HIGH: u32 = 100;
@@ -31,7 +31,7 @@ const SEARCH: i64 = 5;
 #[derive(Clone, Copy, Debug)]
 pub struct StereoView<'a> {
     /// Keypoints.
-    pub keypoints: &'a [OrbKeypoint],
+    pub keypoints: &'a [Keypoint],
     /// One descriptor per keypoint.
     pub descriptors: &'a [[u8; 32]],
     /// Pyramid levels, level 0 the full image.

@@ -46,12 +46,23 @@ pub enum OpError {
     /// Input data is unusable (wrong size, corrupt, …).
     #[error("bad input: {0}")]
     Input(String),
+    /// A library refused this operator's input (a file, a model, a map, a frame): its typed
+    /// error kept whole (displayed as itself, its `source()` chain intact, downcastable).
+    #[error(transparent)]
+    Library(Box<dyn std::error::Error + Send + Sync + 'static>),
     /// The operator emitted on a port it did not declare, or with the wrong type.
     #[error("operator bug: {0}")]
     Contract(String),
     /// Anything else.
     #[error("{0}")]
     Failed(String),
+}
+
+impl OpError {
+    /// A library's error, kept as it is: `.map_err(OpError::library)`.
+    pub fn library(e: impl std::error::Error + Send + Sync + 'static) -> Self {
+        Self::Library(Box::new(e))
+    }
 }
 
 /// Per-node state the runtime hands to every call.

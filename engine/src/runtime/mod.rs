@@ -122,7 +122,7 @@ pub fn node_seed(graph_seed: u64, node: &str) -> u64 {
         h = (h ^ u64::from(*b)).wrapping_mul(0x0000_0100_0000_01b3);
     }
     // One SplitMix64 step from `graph_seed ^ h`.
-    crate::msg::rng::SplitMix64::new(graph_seed ^ h).next_u64()
+    dynaflow_base::rng::SplitMix64::new(graph_seed ^ h).next_u64()
 }
 
 /// A local port read by other machines: the edge the wire drains, its counters, and the

@@ -4,16 +4,16 @@
 //! at a fixed rate, and layout detection for `dynaflow run --input DIR`.
 
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
-use dynaflow_datasets::folder::{ImageFolder, list};
+use dynaflow_datasets::folder::{FolderFrame, ImageFolder, list};
 use dynaflow_datasets::intrinsics::read_calibration;
 
 use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image};
-use dynaflow_engine::op::{Context, Instance, OpError, OpKind, OpSpec, Out, Outputs, Params, Source};
+use dynaflow_engine::op::{Instance, OpError, OpKind, OpSpec, Out, Outputs, Params};
 use dynaflow_engine::params;
 
 use super::CameraParam;
+use super::sequence::{Frames, OnError, SequenceSource};
 
 params! {
     struct Config {
@@ -25,6 +25,8 @@ params! {
         rate_hz: f64 [0.001, 10_000.0] = 30.0,
         /// `fr1`/`fr2`/`fr3`, `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`, or `auto` (the folder's calibration.txt)
         intrinsics: CameraParam = CameraParam::Auto,
+        /// an unreadable image: fail the run, or skip the frame (counted, logged)
+        on_error: OnError = OnError::Fail,
     }
 }
 
@@ -42,6 +44,8 @@ params! {
         depth_path: PathBuf,
         /// depth PNG value per metre
         depth_factor: f64 [1e-6, 1e9] = 5000.0,
+        /// an unreadable image: fail the run, or skip the frame (counted, logged)
+        on_error: OnError = OnError::Fail,
     }
 }
 
@@ -62,7 +66,7 @@ pub(crate) const IMAGE_FOLDER: OpSpec = OpSpec {
     map_store: None,
     build: |params: &Params| {
         let c = Config::from_params(params)?;
-        open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, None, 1.0)
+        open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, None, 1.0, c.on_error)
     },
 };
 
@@ -79,7 +83,7 @@ pub(crate) const RGBD_FOLDER: OpSpec = OpSpec {
     map_store: None,
     build: |params: &Params| {
         let c = RgbdConfig::from_params(params)?;
-        open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, Some(&c.depth_path), c.depth_factor)
+        open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, Some(&c.depth_path), c.depth_factor, c.on_error)
     },
 };
 
@@ -90,6 +94,7 @@ fn open(
     intrinsics: CameraParam,
     depth: Option<&Path>,
     depth_factor: f64,
+    on_error: OnError,
 ) -> Result<Instance, OpError> {
     let intrinsics = match intrinsics {
         CameraParam::Auto => read_calibration(path).unwrap_or_else(|| {
@@ -101,29 +106,35 @@ fn open(
         CameraParam::Given(k) => Ok(k),
     }
     .map_err(|e| OpError::Config { key: "intrinsics".into(), message: e.to_string() })?;
-    let folder = ImageFolder::open(path, pattern, depth, intrinsics, rate_hz, depth_factor).map_err(super::input)?;
-    Ok(Instance::Source(Box::new(Folder { folder, frame_id: "camera".into() })))
+    let folder =
+        ImageFolder::open(path, pattern, depth, intrinsics, rate_hz, depth_factor).map_err(OpError::library)?;
+    Ok(Instance::Source(Box::new(SequenceSource::new(Folder(folder), path, on_error))))
 }
 
-struct Folder {
-    folder: ImageFolder,
-    frame_id: Arc<str>,
-}
+struct Folder(ImageFolder);
 
-impl Source for Folder {
-    fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
-        let Some(f) = self.folder.frame(seq as usize).map_err(super::input)? else { return Ok(None) };
-        let header = Header { seq, stamp: f.stamp, frame_id: self.frame_id.clone() };
+impl Frames for Folder {
+    type Frame = FolderFrame;
+
+    fn len(&self) -> u64 {
+        self.0.len() as u64
+    }
+
+    fn read(&mut self, i: u64) -> Result<Option<FolderFrame>, dynaflow_datasets::Error> {
+        self.0.frame(i as usize)
+    }
+
+    fn stamp(f: &FolderFrame) -> f64 {
+        f.stamp
+    }
+
+    fn emit(&self, f: FolderFrame, header: Header) -> Outputs {
         let mut out = Outputs::new().send(&CAMERA_INFO, header.clone(), f.camera);
         if let Some(depth) = f.depth {
             DEPTH.push(&mut out, header.clone(), depth);
         }
         RGB.push(&mut out, header, f.image);
-        Ok(Some(out))
-    }
-
-    fn len_hint(&self) -> Option<u64> {
-        Some(self.folder.len() as u64)
+        out
     }
 }
 

@@ -2,13 +2,14 @@
 //! `image_0/`+`image_1/` grey or `image_2/`+`image_3/` colour, optional poses).
 
 use std::path::PathBuf;
-use std::sync::Arc;
 
-use dynaflow_datasets::kitti::{KittiSequence, Pair as KittiPair, Poses};
+use dynaflow_datasets::kitti::{KittiFrame, KittiSequence, Pair as KittiPair, Poses};
 
 use dynaflow_engine::msg::{CameraInfo, Header, Image, Pose, StereoRig};
-use dynaflow_engine::op::{Context, Instance, OpError, OpKind, OpSpec, Out, Outputs, Params, Source};
+use dynaflow_engine::op::{Instance, OpError, OpKind, OpSpec, Out, Outputs, Params};
 use dynaflow_engine::{param_enum, params};
+
+use super::sequence::{Frames, OnError, SequenceSource, ground_truth_pose};
 
 param_enum! {
     /// Which stereo pair.
@@ -25,6 +26,8 @@ params! {
         poses: String = "auto".into(),
         /// read at most this many frames (0 = all)
         frames: u64 [0, i64::MAX] = 0,
+        /// an unreadable frame: fail the run, or skip the frame (counted, logged)
+        on_error: OnError = OnError::Fail,
     }
 }
 
@@ -64,31 +67,36 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         "auto" => Poses::Auto,
         _ => Poses::File(&file),
     };
-    let sequence = KittiSequence::open(&c.path, pair, poses, c.frames as usize).map_err(super::input)?;
-    Ok(Instance::Source(Box::new(Kitti { sequence, frame_id: "camera".into() })))
+    let sequence = KittiSequence::open(&c.path, pair, poses, c.frames as usize).map_err(OpError::library)?;
+    Ok(Instance::Source(Box::new(SequenceSource::new(Kitti(sequence), &c.path, c.on_error))))
 }
 
-struct Kitti {
-    sequence: KittiSequence,
-    frame_id: Arc<str>,
-}
+struct Kitti(KittiSequence);
 
-impl Source for Kitti {
-    fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
-        let Some(f) = self.sequence.frame(seq as usize).map_err(super::input)? else { return Ok(None) };
-        let header = Header { seq, stamp: f.stamp, frame_id: self.frame_id.clone() };
+impl Frames for Kitti {
+    type Frame = KittiFrame;
+
+    fn len(&self) -> u64 {
+        self.0.len() as u64
+    }
+
+    fn read(&mut self, i: u64) -> Result<Option<KittiFrame>, dynaflow_datasets::Error> {
+        self.0.frame(i as usize)
+    }
+
+    fn stamp(f: &KittiFrame) -> f64 {
+        f.stamp
+    }
+
+    fn emit(&self, f: KittiFrame, header: Header) -> Outputs {
         let mut out = Outputs::new()
             .send(&LEFT, header.clone(), f.left)
             .send(&RIGHT, header.clone(), f.right)
             .send(&CAMERA_INFO, header.clone(), f.camera)
-            .send(&STEREO, header.clone(), StereoRig { baseline: self.sequence.baseline });
+            .send(&STEREO, header.clone(), StereoRig { baseline: self.0.baseline });
         if let Some(p) = f.gt_pose {
-            GT_POSE.push(&mut out, Header { frame_id: "world".into(), ..header }, Pose { world_from_cam: p });
+            ground_truth_pose(&mut out, &GT_POSE, &header, Pose { world_from_cam: p });
         }
-        Ok(Some(out))
-    }
-
-    fn len_hint(&self) -> Option<u64> {
-        Some(self.sequence.len() as u64)
+        out
     }
 }

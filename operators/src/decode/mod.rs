@@ -1,24 +1,21 @@
 //! The reader operators: TUM RGB-D folders (`tum_rgbd`), image folders (`image_folder`),
 //! KITTI odometry sequences (`kitti_odometry`), and layout detection for `--input`. Each is a
-//! thin wrapper over its reader in `dynaflow-datasets`, which does the file work.
+//! thin wrapper over its reader in `dynaflow-datasets`, which does the file work, streamed by
+//! the one source skeleton in `sequence` (which `synth` uses too).
 
 mod folder;
 mod kitti;
+mod sequence;
 mod tum;
 
 use dynaflow_datasets::intrinsics::Intrinsics;
-use dynaflow_engine::op::{OpError, Param, ParamType, Params};
+use dynaflow_engine::op::{Param, ParamType, Params};
 
 pub(crate) use folder::{IMAGE_FOLDER, RGBD_FOLDER};
 pub use folder::{Layout, detect_layout};
 pub(crate) use kitti::KITTI_ODOMETRY;
+pub(crate) use sequence::{Frames, OnError, SequenceSource, ground_truth_pose};
 pub(crate) use tum::TUM_RGBD;
-
-/// A reader's error as the operator's: bad input, the file named (by value: `map_err` hands it so).
-#[allow(clippy::needless_pass_by_value)]
-fn input(e: dynaflow_datasets::Error) -> OpError {
-    OpError::Input(e.to_string())
-}
 
 /// The `intrinsics` parameter of the readers: `auto` (from the folder) or given.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -1,20 +1,15 @@
 //! `tum_rgbd`: reads a TUM RGB-D sequence folder as it is.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 
-use dynaflow_datasets::tum::{GT_MAX_DIFF_S, TumSequence};
+use dynaflow_datasets::tum::{GT_MAX_DIFF_S, TumFrame, TumSequence};
 
 use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, Pose, SegmentationMask};
-use dynaflow_engine::op::{Context, Instance, OpError, OpKind, OpSpec, Out, Outputs, Params, Source};
-use dynaflow_engine::{param_enum, params};
+use dynaflow_engine::op::{Instance, OpError, OpKind, OpSpec, Out, Outputs, Params};
+use dynaflow_engine::params;
 
 use super::CameraParam;
-
-param_enum! {
-    /// What an unreadable frame does.
-    enum OnError { Fail = "fail", Skip = "skip" }
-}
+use super::sequence::{Frames, OnError, SequenceSource, ground_truth_pose};
 
 params! {
     struct Config {
@@ -71,7 +66,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
             dynaflow_datasets::Error::UnknownCamera { .. } => {
                 OpError::Config { key: "intrinsics".into(), message: e.to_string() }
             }
-            e => super::input(e),
+            e => OpError::library(e),
         },
     )?;
     if sequence.frames_without_pose > 0 {
@@ -82,25 +77,27 @@ fn build(params: &Params) -> Result<Instance, OpError> {
             sequence.len()
         );
     }
-    Ok(Instance::Source(Box::new(TumSource {
-        sequence,
-        skip: c.on_error == OnError::Skip,
-        skipped: Vec::new(),
-        frame_id: "camera".into(),
-    })))
+    Ok(Instance::Source(Box::new(SequenceSource::new(Tum(sequence), &c.path, c.on_error))))
 }
 
-struct TumSource {
-    sequence: TumSequence,
-    skip: bool,
-    skipped: Vec<String>,
-    frame_id: Arc<str>,
-}
+struct Tum(TumSequence);
 
-impl TumSource {
-    fn load(&self, seq: u64) -> Result<Option<Outputs>, dynaflow_datasets::Error> {
-        let Some(f) = self.sequence.frame(seq as usize)? else { return Ok(None) };
-        let header = Header { seq, stamp: f.stamp, frame_id: self.frame_id.clone() };
+impl Frames for Tum {
+    type Frame = TumFrame;
+
+    fn len(&self) -> u64 {
+        self.0.len() as u64
+    }
+
+    fn read(&mut self, i: u64) -> Result<Option<TumFrame>, dynaflow_datasets::Error> {
+        self.0.frame(i as usize)
+    }
+
+    fn stamp(f: &TumFrame) -> f64 {
+        f.stamp
+    }
+
+    fn emit(&self, f: TumFrame, header: Header) -> Outputs {
         let mut out = Outputs::new().send(&RGB, header.clone(), f.rgb).send(&DEPTH, header.clone(), f.depth).send(
             &CAMERA_INFO,
             header.clone(),
@@ -110,38 +107,8 @@ impl TumSource {
             GT_MASK.push(&mut out, header.clone(), mask);
         }
         if let Some(pose) = f.gt_pose {
-            GT_POSE.push(&mut out, Header { frame_id: "world".into(), ..header }, Pose { world_from_cam: pose });
+            ground_truth_pose(&mut out, &GT_POSE, &header, Pose { world_from_cam: pose });
         }
-        Ok(Some(out))
-    }
-}
-
-impl Source for TumSource {
-    fn next(&mut self, _ctx: &mut Context, seq: u64) -> Result<Option<Outputs>, OpError> {
-        match self.load(seq) {
-            Ok(out) => Ok(out),
-            Err(e) if self.skip => {
-                tracing::warn!("skipping frame {seq}: {e}");
-                self.skipped.push(e.to_string());
-                Ok(Some(Outputs::new()))
-            }
-            Err(e) => Err(OpError::Input(format!("{}: {e}", self.sequence.dir().display()))),
-        }
-    }
-
-    fn stop(&mut self, _ctx: &mut Context) -> Result<(), OpError> {
-        if !self.skipped.is_empty() {
-            tracing::warn!(
-                "{}: skipped {} of {} frames",
-                self.sequence.dir().display(),
-                self.skipped.len(),
-                self.sequence.len()
-            );
-        }
-        Ok(())
-    }
-
-    fn len_hint(&self) -> Option<u64> {
-        Some(self.sequence.len() as u64)
+        out
     }
 }

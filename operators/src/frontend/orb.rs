@@ -1,6 +1,6 @@
 //! `orb_extract`.
 
-use dynaflow_engine::msg::{Descriptors, Image, Keypoint, Keypoints, SegmentationMask};
+use dynaflow_engine::msg::{Descriptors, Image, Keypoints, SegmentationMask};
 use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::{param_enum, params};
 use dynaflow_vision::GrayImage;
@@ -89,11 +89,7 @@ impl Operator for OrbOp {
             None => None,
         };
         let f = self.0.extract(&img, mask.as_ref());
-        let points = f
-            .keypoints
-            .iter()
-            .map(|k| Keypoint { x: k.x, y: k.y, size: k.size, angle: k.angle, response: k.response, octave: k.octave })
-            .collect();
+        let points = f.keypoints;
         let descriptors = Descriptors { bytes_per: 32, data: f.descriptors.concat() };
         let keypoints = Keypoints { points, descriptors: Some(descriptors) };
         Ok(Outputs::new().send(&KEYPOINTS, msg.header.clone(), keypoints))

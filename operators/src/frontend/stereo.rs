@@ -2,7 +2,7 @@
 
 use dynaflow_engine::msg::{self, CameraInfo, DepthImage, Image, Keypoints, Scalars};
 use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
-use dynaflow_vision::orb::{OrbExtractor, OrbKeypoint};
+use dynaflow_vision::orb::OrbExtractor;
 use dynaflow_vision::stereo::{StereoRig, StereoView, stereo_match};
 
 // The right image is extracted with `orb_extract`'s own parameters, which must be those of
@@ -76,28 +76,17 @@ impl Operator for StereoOp {
                 p.octave
             )));
         }
-        let keypoints: Vec<OrbKeypoint> = kp
-            .points
-            .iter()
-            .map(|p| OrbKeypoint {
-                x: p.x,
-                y: p.y,
-                size: p.size,
-                angle: p.angle,
-                response: p.response,
-                octave: p.octave,
-            })
-            .collect();
+        let keypoints = &kp.points;
         let fr = self.right.extract(&r, None);
         let rl = self.right.pyramid(&r);
         let ll = self.left.build_pyramid(&l);
         let scale_factor = self.right.config().scale_factor;
         let m = stereo_match(
-            &StereoView { keypoints: &keypoints, descriptors: &descriptors, levels: &ll },
+            &StereoView { keypoints, descriptors: &descriptors, levels: &ll },
             &StereoView { keypoints: &fr.keypoints, descriptors: &fr.descriptors, levels: &rl },
             &StereoRig { bf: k.fx * baseline, baseline, scale_factor },
         )
-        .map_err(|e| OpError::Input(e.to_string()))?;
+        .map_err(OpError::library)?;
         let mut depth = DepthImage { width: left.width, height: left.height, data: vec![0.0; l.width * l.height] };
         for (p, s) in kp.points.iter().zip(&m.matches) {
             let Some(s) = s else { continue };

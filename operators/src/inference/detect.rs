@@ -75,14 +75,14 @@ pub const DETECT: OpSpec = OpSpec {
             let m = onnx::parse(YOLOX_NANO).map_err(|e| OpError::Input(format!("embedded YOLOX-nano: {e}")))?;
             (m, YOLOX_NANO.to_vec())
         } else {
-            onnx::load_with_bytes(&c.model).map_err(|e| OpError::Input(e.to_string()))?
+            onnx::load_with_bytes(&c.model).map_err(OpError::library)?
         };
         let decoder = c.decoder.decoder();
         let which = if embedded { "the embedded YOLOX-nano".to_owned() } else { c.model.display().to_string() };
         let detector = Detector::new(model, decoder).map_err(|e| OpError::Input(format!("{which}: {e}")))?;
         let names: Vec<Arc<str>> = COCO_NAMES.lines().map(Arc::from).collect();
-        let (runner, backend) = Runner::new(&bytes, detector.model(), c.backend, c.allow_software)
-            .map_err(|e| OpError::Input(e.to_string()))?;
+        let (runner, backend) =
+            Runner::new(&bytes, detector.model(), c.backend, c.allow_software).map_err(OpError::library)?;
         Ok(Instance::Transform(Box::new(Detect { config: c, detector, names, runner, backend })))
     },
 };
@@ -107,7 +107,7 @@ impl Operator for Detect {
         let found = self
             .detector
             .detect_with(&rgb, w, h, classes, score, iou, |name, input| runner.run(name, input))
-            .map_err(|e| OpError::Input(e.to_string()))?;
+            .map_err(OpError::library)?;
         let detections = found
             .into_iter()
             .map(|d| Detection {
@@ -121,7 +121,8 @@ impl Operator for Detect {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
-        ctx.report = Some(serde_json::json!({ "backend": self.backend }));
+        let report = crate::report::InferenceReport { backend: self.backend.clone() };
+        ctx.report = Some(crate::report::NodeReport::from(report).to_json());
         Ok(())
     }
 }

@@ -84,14 +84,13 @@ impl Operator for KeyframeGate {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
         let inferred: u64 = self.fired[1..].iter().sum();
-        let rules: serde_json::Map<String, serde_json::Value> =
-            RULES.iter().zip(self.fired).map(|(k, v)| ((*k).to_string(), serde_json::json!(v))).collect();
-        ctx.report = Some(serde_json::json!({
-            "frames": self.frames,
-            "inferred": inferred,
-            "inferred_share": if self.frames > 0 { inferred as f64 / self.frames as f64 } else { 0.0 },
-            "rules": rules,
-        }));
+        let report = crate::report::GateReport {
+            frames: self.frames,
+            inferred,
+            inferred_share: if self.frames > 0 { inferred as f64 / self.frames as f64 } else { 0.0 },
+            rules: RULES.iter().zip(self.fired).map(|(k, v)| ((*k).to_string(), v)).collect(),
+        };
+        ctx.report = Some(crate::report::NodeReport::from(report).to_json());
         Ok(())
     }
 }

@@ -181,7 +181,8 @@ impl Operator for Segment {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
-        ctx.report = Some(serde_json::json!({ "backend": self.backend }));
+        let report = crate::report::InferenceReport { backend: self.backend.clone() };
+        ctx.report = Some(crate::report::NodeReport::from(report).to_json());
         Ok(())
     }
 }

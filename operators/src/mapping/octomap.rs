@@ -77,7 +77,7 @@ pub const OCTOMAP: OpSpec = OpSpec {
             max_memory_bytes: c.max_memory_mb << 20,
             ..TreeParams::default()
         };
-        let tree = OcTree::new(params, true).map_err(|e| OpError::Input(e.to_string()))?;
+        let tree = OcTree::new(params, true).map_err(OpError::library)?;
         Ok(Instance::Transform(Box::new(Octomap { config: c, tree, insert_ms: Vec::new(), frames: 0, skipped: 0 })))
     },
 };
@@ -216,20 +216,17 @@ impl Operator for Octomap {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
-        let mut ms = self.insert_ms.clone();
-        ms.sort_by(f64::total_cmp);
-        let pct = |q: f64| ms.get(((ms.len() as f64 - 1.0) * q).round() as usize).copied().unwrap_or(0.0);
         let leaves = self.tree.leaves();
-        let occupied = leaves.iter().filter(|l| self.tree.is_occupied(&l.node)).count();
-        let mut report = serde_json::json!({
-            "frames": self.frames,
-            "insert_ms": { "mean": ms.iter().sum::<f64>() / ms.len().max(1) as f64, "median": pct(0.5), "p95": pct(0.95) },
-            "nodes": self.tree.size(),
-            "leaves": leaves.len(),
-            "occupied_leaves": occupied,
-            "memory_bytes": self.tree.memory_bytes(),
-            "dynamic_pixels_skipped": self.skipped,
-        });
+        let mut report = crate::report::OctomapReport {
+            frames: self.frames,
+            insert_ms: crate::report::Timing::of(&self.insert_ms),
+            nodes: self.tree.size(),
+            leaves: leaves.len(),
+            occupied_leaves: leaves.iter().filter(|l| self.tree.is_occupied(&l.node)).count(),
+            memory_bytes: self.tree.memory_bytes(),
+            dynamic_pixels_skipped: self.skipped,
+            files: Vec::new(),
+        };
         if let (Some(ot), Some(bt)) = (ctx.output_file("ot"), ctx.output_file("bt")) {
             let mut tree = self.tree.clone();
             if self.config.color == Colour::Class {
@@ -239,9 +236,9 @@ impl Operator for Octomap {
                 dynaflow_engine::files::write_atomic(path, &bytes)
                     .map_err(|source| OpError::Io { path: path.clone(), source })?;
             }
-            report["files"] = serde_json::json!([ot.display().to_string(), bt.display().to_string()]);
+            report.files = vec![ot.display().to_string(), bt.display().to_string()];
         }
-        ctx.report = Some(report);
+        ctx.report = Some(crate::report::NodeReport::from(report).to_json());
         Ok(())
     }
 }

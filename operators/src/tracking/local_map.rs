@@ -3,13 +3,12 @@
 use std::sync::Arc;
 use std::time::Instant;
 
+use crate::report::{LocalMappingReport, NodeReport, Timing};
 use dynaflow_engine::msg::{CameraInfo, Header, Message, PointCloud, Scalars, SparseMap};
 use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 use dynaflow_slam::{LocalMapConfig, LocalMapper};
 use dynaflow_vision::camera::Pinhole;
-
-use super::convert;
 
 params! {
     struct Config {
@@ -82,13 +81,13 @@ impl Operator for LocalMap {
             if batch.features.is_empty() {
                 c.bf = k.fx * rig.unwrap_or(self.config.baseline);
             }
-            LocalMapper::new(c, Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy })
+            LocalMapper::new(c, Pinhole::from(k))
         });
         if let Some(correction) = super::fresh(LOOP.find(inputs)?, &mut self.last_loop) {
-            mapper.apply_correction(&convert::from_msg(correction));
+            mapper.apply_correction(correction);
         }
         let t0 = Instant::now();
-        let update = mapper.insert(&convert::from_msg(batch));
+        let update = mapper.insert(batch);
         // Wall time stays out of the messages (they must be identical run to run); it goes
         // to the summary at the end.
         self.ba_ms.push(t0.elapsed().as_secs_f64() * 1e3);
@@ -112,18 +111,20 @@ impl Operator for LocalMap {
                 .collect(),
             colors: None,
         };
-        Ok(Outputs::new()
-            .send(&MAP, header.clone(), convert::to_msg(&update))
-            .send(&POINTS, header.clone(), cloud)
-            .send(&STATS, header, Scalars { values: stats }))
+        Ok(Outputs::new().send(&MAP, header.clone(), update).send(&POINTS, header.clone(), cloud).send(
+            &STATS,
+            header,
+            Scalars { values: stats },
+        ))
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
-        ctx.report = Some(serde_json::json!({
-            "keyframes": self.mapper.as_ref().map_or(0, LocalMapper::keyframes),
-            "points": self.mapper.as_ref().map_or(0, LocalMapper::points),
-            "local_ba_ms": super::timing_report(&self.ba_ms),
-        }));
+        let report = LocalMappingReport {
+            keyframes: self.mapper.as_ref().map_or(0, LocalMapper::keyframes),
+            points: self.mapper.as_ref().map_or(0, LocalMapper::points),
+            local_ba_ms: Timing::of(&self.ba_ms),
+        };
+        ctx.report = Some(NodeReport::from(report).to_json());
         Ok(())
     }
 }

@@ -4,6 +4,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::time::Instant;
 
+use crate::report::{GlobalBaReport, LoopClosingReport, LoopReport, NodeReport, Timing, VocabularyReport};
 use dynaflow_engine::msg::{CameraInfo, Header, Pose, Scalars, SparseMap, StampedPose, Trajectory};
 use dynaflow_engine::op::{
     Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
@@ -13,8 +14,6 @@ use dynaflow_slam::bow::Vocabulary;
 use dynaflow_slam::loop_closing::{LoopCloser, LoopConfig, LoopError, Rejection};
 use dynaflow_vision::camera::Pinhole;
 use rand_core::Rng;
-
-use super::convert;
 
 params! {
     struct Config {
@@ -113,7 +112,7 @@ impl Operator for LoopClose {
         }
         let closer = self.closer.get_or_insert_with(|| {
             let bf = k.fx * rig.unwrap_or(self.config.baseline);
-            let cam = Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
+            let cam = Pinhole::from(k);
             LoopCloser::new(
                 LoopConfig::new(bf, f64::from(k.width), f64::from(k.height)),
                 cam,
@@ -125,7 +124,7 @@ impl Operator for LoopClose {
             self.ground_truth.push((msg.header.stamp, gt.world_from_cam));
         }
         let t0 = Instant::now();
-        let closed = match closer.insert(&convert::from_msg(update)) {
+        let closed = match closer.insert(update) {
             Ok(c) => c,
             Err(e @ LoopError::Monocular(_)) => {
                 tracing::warn!("`{}`: {e}", ctx.node);
@@ -177,7 +176,7 @@ impl Operator for LoopClose {
                 .map(|k| StampedPose { stamp: k.stamp, world_from_cam: k.world_from_cam })
                 .collect();
             out = out
-                .send(&CORRECTION, header.clone(), convert::to_msg(&closer.correction()))
+                .send(&CORRECTION, header.clone(), closer.correction())
                 .send(&KEYFRAMES, header.clone(), Trajectory { poses })
                 .send(&LOOP_EDGE, header, Trajectory { poses: edge });
         }
@@ -186,44 +185,60 @@ impl Operator for LoopClose {
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
         let gt_at = |t: f64| self.ground_truth.iter().find(|g| (g.0 - t).abs() < 1e-6).map(|g| g.1);
-        let mut false_loops = 0;
-        let loops: Vec<serde_json::Value> = self
+        let loops: Vec<LoopReport> = self
             .closer
             .as_ref()
             .map(|c| {
                 c.loops()
                     .iter()
-                    .map(|l| {
-                        let overlap =
-                            gt_at(l.current_stamp).zip(gt_at(l.loop_stamp)).map(|(a, b)| views_overlap(&a, &b));
-                        false_loops += usize::from(overlap == Some(false));
-                        serde_json::json!({
-                            "ground_truth_overlap": overlap,
-                            "keyframe": l.current, "loop_keyframe": l.loop_keyframe, "stamp": l.current_stamp,
-                            "loop_stamp": l.loop_stamp, "bow_matches": l.bow_matches,
-                            "inliers": l.inliers, "matches": l.matches, "correction_m": l.correction_m,
-                            "correction_deg": l.correction_deg, "fused": l.fused, "keyframes": l.keyframes,
-                            "edges": l.edges, "graph_cost_before": l.cost_before, "graph_cost_after": l.cost_after,
-                            "global_ba": { "iterations": l.global_ba.iterations, "cost_before": l.global_ba.initial_cost,
-                                           "cost_after": l.global_ba.final_cost, "ms": l.global_ba_ms },
-                        })
+                    .map(|l| LoopReport {
+                        ground_truth_overlap: gt_at(l.current_stamp)
+                            .zip(gt_at(l.loop_stamp))
+                            .map(|(a, b)| views_overlap(&a, &b)),
+                        keyframe: l.current,
+                        loop_keyframe: l.loop_keyframe,
+                        stamp: l.current_stamp,
+                        loop_stamp: l.loop_stamp,
+                        bow_matches: l.bow_matches,
+                        inliers: l.inliers,
+                        matches: l.matches,
+                        correction_m: l.correction_m,
+                        correction_deg: l.correction_deg,
+                        fused: l.fused,
+                        keyframes: l.keyframes,
+                        edges: l.edges,
+                        graph_cost_before: l.cost_before,
+                        graph_cost_after: l.cost_after,
+                        global_ba: GlobalBaReport {
+                            iterations: l.global_ba.iterations,
+                            cost_before: l.global_ba.initial_cost,
+                            cost_after: l.global_ba.final_cost,
+                            ms: l.global_ba_ms,
+                        },
                     })
                     .collect()
             })
             .unwrap_or_default();
-        ctx.report = Some(serde_json::json!({
-            "vocabulary": { "file": self.vocabulary_name, "id": self.vocabulary.id(), "words": self.vocabulary.words(),
-                            "load_ms": self.load_ms },
-            "keyframes": self.closer.as_ref().map_or(0, LoopCloser::keyframes),
-            "loops": loops,
-            "false_loops": if self.ground_truth.is_empty() { None } else { Some(false_loops) },
-            "rejected_candidates": self.closer.as_ref().map(|c| {
-                Rejection::NAMES.iter().zip(c.rejected()).map(|(n, v)| ((*n).to_owned(), serde_json::json!(v))).collect::<serde_json::Map<_, _>>()
-            }),
-            "detection_ms": super::timing_report(&self.insert_ms),
-            "loop_correction_ms": super::timing_report(&self.loop_ms),
-            "refused": self.refused,
-        }));
+        let false_loops = loops.iter().filter(|l| l.ground_truth_overlap == Some(false)).count();
+        let report = LoopClosingReport {
+            vocabulary: VocabularyReport {
+                file: self.vocabulary_name.clone(),
+                id: self.vocabulary.id(),
+                words: self.vocabulary.words(),
+                load_ms: self.load_ms,
+            },
+            keyframes: self.closer.as_ref().map_or(0, LoopCloser::keyframes),
+            loops,
+            false_loops: (!self.ground_truth.is_empty()).then_some(false_loops),
+            rejected_candidates: self
+                .closer
+                .as_ref()
+                .map(|c| Rejection::NAMES.iter().zip(c.rejected()).map(|(n, v)| ((*n).to_owned(), v)).collect()),
+            detection_ms: Timing::of(&self.insert_ms),
+            loop_correction_ms: Timing::of(&self.loop_ms),
+            refused: self.refused.clone(),
+        };
+        ctx.report = Some(NodeReport::from(report).to_json());
         Ok(())
     }
 }

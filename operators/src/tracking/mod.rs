@@ -10,9 +10,7 @@
 //! - `loop_close`: ORB-SLAM2's loop closing (BoW detection, SE(3) verification, fusion, the
 //!   essential graph), its corrected map fed back to both over `delay: 1` edges.
 //!
-//! `convert` maps between the engine's `SparseMap` message and the library's.
 
-mod convert;
 mod local_map;
 mod loop_close;
 mod track;
@@ -44,15 +42,6 @@ fn fresh<'a, T>(found: Option<(&'a Arc<Message>, &'a T)>, last: &mut Option<Arc<
     Some(t)
 }
 
-/// Wall times (milliseconds) for a summary: count, mean, median, p95, max (nearest rank).
-fn timing_report(ms: &[f64]) -> serde_json::Value {
-    let mut t = ms.to_vec();
-    t.sort_by(f64::total_cmp);
-    let q = |p: f64| t.get(((t.len() as f64 - 1.0) * p).round() as usize).copied().unwrap_or(0.0);
-    let mean = if t.is_empty() { 0.0 } else { t.iter().sum::<f64>() / t.len() as f64 };
-    serde_json::json!({ "count": t.len(), "mean": mean, "median": q(0.5), "p95": q(0.95), "max": q(1.0) })
-}
-
 /// The default vocabulary (k 10, L 5), trained by `scripts/train_vocabulary.sh`: see
 /// `slam/vocabulary/SOURCE.md` for what it was trained on.
 pub const DEFAULT_VOCABULARY: &[u8] = include_bytes!("../../../slam/vocabulary/default.voc");
@@ -62,11 +51,11 @@ pub const DEFAULT_VOCABULARY: &[u8] = include_bytes!("../../../slam/vocabulary/d
 fn load_vocabulary(path: &Path) -> Result<(Arc<Vocabulary>, String, f64), OpError> {
     let t0 = std::time::Instant::now();
     let (v, name) = if path.as_os_str().is_empty() {
-        let v = Vocabulary::from_bytes(DEFAULT_VOCABULARY, "the embedded default vocabulary")
-            .map_err(|e| OpError::Input(e.to_string()))?;
+        let v =
+            Vocabulary::from_bytes(DEFAULT_VOCABULARY, "the embedded default vocabulary").map_err(OpError::library)?;
         (v, "default".to_owned())
     } else {
-        (Vocabulary::load(path).map_err(|e| OpError::Input(e.to_string()))?, path.display().to_string())
+        (Vocabulary::load(path).map_err(OpError::library)?, path.display().to_string())
     };
     Ok((Arc::new(v), name, t0.elapsed().as_secs_f64() * 1e3))
 }

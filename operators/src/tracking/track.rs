@@ -21,7 +21,6 @@ use dynaflow_vision::camera::Pinhole;
 use nalgebra::Isometry3;
 use rand_core::Rng;
 
-use super::convert;
 use crate::report::{Ate, FrameStates, MapSaved, NodeReport, Rpe, TrackerReport};
 
 /// What gives keypoints their depth (ORB-SLAM2's three sensor modes): fixed by the operator.
@@ -217,7 +216,7 @@ fn build(p: &Params, sensor: Sensor) -> Result<Instance, OpError> {
         let cam = Pinhole { fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 };
         Some(
             dynaflow_slam::map_file::load(&config.load_map, cam, 0.0, 0.0, 1.2, vocabulary.clone())
-                .map_err(|e| OpError::Input(e.to_string()))?,
+                .map_err(OpError::library)?,
         )
     };
     Ok(Instance::Transform(Box::new(Track {
@@ -309,7 +308,7 @@ impl Track {
         tc.min_inliers = self.config.min_inliers as usize;
         tc.ransac_threshold = self.config.ransac_threshold;
         tc.reset_after = self.config.reset_after as u32;
-        let cam = Pinhole { fx: k.fx, fy: k.fy, cx: k.cx, cy: k.cy };
+        let cam = Pinhole::from(k);
         let mut tracker = Tracker::new(tc, cam, k.width as usize, k.height as usize, ctx.rng.next_u64())
             .with_vocabulary(self.vocabulary.clone());
         if let Some(map) = self.loaded.take() {
@@ -361,10 +360,10 @@ impl Operator for Track {
         }
         let Some(tracker) = self.tracker.as_mut() else { return Ok(Outputs::new()) };
         if let Some(update) = super::fresh(MAP.find(inputs)?, &mut self.last_map) {
-            tracker.apply_map_update(&convert::from_msg(update));
+            tracker.apply_map_update(update);
         }
         if let Some(correction) = super::fresh(LOOP.find(inputs)?, &mut self.last_loop) {
-            tracker.apply_correction(&convert::from_msg(correction));
+            tracker.apply_correction(correction);
         }
         let uv: Vec<[f32; 2]> = kp.points.iter().map(|p| [p.x, p.y]).collect();
         let dynamic = dynamic_keypoints(inputs, &uv, self.config.label_radius as f32)?;
@@ -417,7 +416,7 @@ impl Operator for Track {
             out = out.send(&POSE, header.clone(), Pose { world_from_cam });
         }
         if let Some(kf) = &r.keyframe {
-            out = out.send(&KEYFRAME, header, convert::to_msg(kf));
+            out = out.send(&KEYFRAME, header, kf.clone());
         }
         Ok(out)
     }
@@ -482,7 +481,7 @@ impl Operator for Track {
         if !self.config.load_map.as_os_str().is_empty() {
             report.map_loaded = Some(self.config.load_map.display().to_string());
         }
-        ctx.report = Some(NodeReport::Tracker(Box::new(report)).to_json());
+        ctx.report = Some(NodeReport::from(report).to_json());
         written.and(saved.map(|_| ()))
     }
 }

@@ -131,13 +131,14 @@ impl Operator for MaskIou {
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
         let [inter, union, mp, tp] = self.sums;
         let ratio = |n: u64, d: u64| if d == 0 { 1.0 } else { n as f64 / d as f64 };
-        ctx.report = Some(serde_json::json!({
-            "frames": self.frames,
-            "iou": ratio(inter, union),
-            "precision": ratio(inter, mp),
-            "recall": ratio(inter, tp),
-            "mean_frame_iou": if self.frames == 0 { 0.0 } else { self.iou_sum / self.frames as f64 },
-        }));
+        let report = crate::report::MaskAccuracyReport {
+            frames: self.frames,
+            iou: ratio(inter, union),
+            precision: ratio(inter, mp),
+            recall: ratio(inter, tp),
+            mean_frame_iou: if self.frames == 0 { 0.0 } else { self.iou_sum / self.frames as f64 },
+        };
+        ctx.report = Some(crate::report::NodeReport::from(report).to_json());
         Ok(())
     }
 }

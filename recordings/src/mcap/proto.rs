@@ -112,10 +112,10 @@ pub enum Field<'a> {
 }
 
 /// The fields of an encoded message, in order (the workspace's one wire reader,
-/// `dynaflow_engine::msg::wire`); `Err` names the first malformed byte.
+/// `dynaflow_base::wire`); `Err` names the first malformed byte.
 pub fn fields(data: &[u8]) -> Result<Vec<Field<'_>>, String> {
-    use dynaflow_engine::msg::wire::Value;
-    let read = dynaflow_engine::msg::wire::fields(data).map_err(|e| e.0)?;
+    use dynaflow_base::wire::Value;
+    let read = dynaflow_base::wire::fields(data).map_err(|e| e.0)?;
     Ok(read
         .into_iter()
         .map(|(n, v)| match v {

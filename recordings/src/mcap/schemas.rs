@@ -280,7 +280,7 @@ fn point_cloud_json(c: &PointCloud, ts: &Value) -> Value {
 /// A sparse map's points as a cloud (what the recorders show of a map batch).
 pub fn map_cloud(m: &SparseMap) -> PointCloud {
     PointCloud {
-        points: m.points.iter().map(|p| [p.position[0] as f32, p.position[1] as f32, p.position[2] as f32]).collect(),
+        points: m.points.iter().map(|p| [p.position.x as f32, p.position.y as f32, p.position.z as f32]).collect(),
         colors: None,
     }
 }

@@ -26,12 +26,12 @@ impl Tracker {
         self.keyframe_poses.insert(id, fit.world_from_cam);
         self.reference = Some(id);
         self.frames_since_kf = 0;
-        let info = KeyFrameInfo { id, stamp, world_from_cam: fit.world_from_cam };
+        let info = MapKeyFrame { id, stamp, world_from_cam: fit.world_from_cam };
         let depth_of = |f: &Feature| f.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth);
         let mut observations = Vec::new();
         for (f, m) in features.iter().zip(&fit.matched) {
             if let Some(pid) = m {
-                observations.push(Observation {
+                observations.push(MapObservation {
                     keyframe: id,
                     point: *pid,
                     uv: f.uv,
@@ -65,14 +65,20 @@ impl Tracker {
             self.next_point += 1;
             self.points.insert(pid, TPoint { position, descriptor: f.descriptor, first_keyframe: id });
             points.push(MapPoint { id: pid, position, descriptor: f.descriptor, observations: 1, first_keyframe: id });
-            observations.push(Observation { keyframe: id, point: pid, uv: f.uv, depth: depth_of(f), octave: f.octave });
+            observations.push(MapObservation {
+                keyframe: id,
+                point: pid,
+                uv: f.uv,
+                depth: depth_of(f),
+                octave: f.octave,
+            });
             point_of[i] = Some(pid);
         }
         let keypoints = features
             .iter()
             .zip(&point_of)
             .filter(|(f, _)| !f.dynamic)
-            .map(|(f, p)| KeyFrameKeypoint {
+            .map(|(f, p)| MapKeypoint {
                 keyframe: id,
                 uv: f.uv,
                 octave: f.octave,

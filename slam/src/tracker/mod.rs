@@ -39,7 +39,7 @@ use nalgebra::{Isometry3, Point3};
 
 use crate::bow::Vocabulary;
 use crate::keyframe_map::KeyFrameMap;
-use crate::map::{Feature, KeyFrameFeature, KeyFrameInfo, KeyFrameKeypoint, MapPoint, Observation, SparseMap, sigma};
+use crate::map::{Feature, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, SparseMap, sigma};
 
 /// Tracking settings (defaults: ORB-SLAM2's for an RGB-D camera, see [`TrackerConfig::rgbd`]).
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -10,12 +10,12 @@ impl Tracker {
     }
 
     /// A monocular key frame's keypoints for triangulation: static and unmatched.
-    pub(super) fn candidates(keyframe: u64, features: &[Feature], matched: &[Option<u64>]) -> Vec<KeyFrameFeature> {
+    pub(super) fn candidates(keyframe: u64, features: &[Feature], matched: &[Option<u64>]) -> Vec<MapFeature> {
         features
             .iter()
             .zip(matched)
             .filter(|(f, m)| m.is_none() && !f.dynamic)
-            .map(|(f, _)| KeyFrameFeature { keyframe, uv: f.uv, octave: f.octave, descriptor: f.descriptor })
+            .map(|(f, _)| MapFeature { keyframe, uv: f.uv, octave: f.octave, descriptor: f.descriptor })
             .collect()
     }
 
@@ -137,8 +137,8 @@ impl Tracker {
             let (fr, fc) = (&reference[r], &features[c]);
             self.points.insert(pid, TPoint { position, descriptor: fc.descriptor, first_keyframe: k0 });
             points.push(MapPoint { id: pid, position, descriptor: fc.descriptor, observations: 2, first_keyframe: k0 });
-            observations.push(Observation { keyframe: k0, point: pid, uv: fr.uv, depth: None, octave: fr.octave });
-            observations.push(Observation { keyframe: k1, point: pid, uv: fc.uv, depth: None, octave: fc.octave });
+            observations.push(MapObservation { keyframe: k0, point: pid, uv: fr.uv, depth: None, octave: fr.octave });
+            observations.push(MapObservation { keyframe: k1, point: pid, uv: fc.uv, depth: None, octave: fc.octave });
             matched0[r] = Some(pid);
             matched1[c] = Some(pid);
         }
@@ -146,8 +146,8 @@ impl Tracker {
         let mut candidates = Self::candidates(k0, &reference, &matched0);
         candidates.extend(Self::candidates(k1, features, &matched1));
         let keyframes = vec![
-            KeyFrameInfo { id: k0, stamp: ref_stamp, world_from_cam: world_from_c1 },
-            KeyFrameInfo { id: k1, stamp, world_from_cam: world_from_c2 },
+            MapKeyFrame { id: k0, stamp: ref_stamp, world_from_cam: world_from_c1 },
+            MapKeyFrame { id: k1, stamp, world_from_cam: world_from_c2 },
         ];
         let inliers = points.len();
         let batch = SparseMap {

@@ -65,7 +65,7 @@ pub(super) fn read_row(job: &Job, exit_ok: bool) -> Row {
         }
     }
     let node = s.ate.as_ref().and_then(|a| a.node.clone()).unwrap_or_else(|| "track".into());
-    row.sim3 = s.ate.as_ref().and_then(|a| a.align.as_deref()) == Some("sim3");
+    row.sim3 = s.ate.as_ref().is_some_and(|a| a.align == "sim3");
     for n in &s.run.nodes {
         row.nodes.push((n.node.clone(), 1e3 * n.busy_s / row.frames.max(1) as f64));
     }
@@ -85,7 +85,7 @@ pub(super) fn read_row(job: &Job, exit_ok: bool) -> Row {
                 }
             }
             NodeReport::LabelAccuracy(a) if a.frames > 0 => row.labels.push((name.to_owned(), a.precision, a.recall)),
-            NodeReport::LabelAccuracy(_) => {}
+            _ => {}
         }
     }
     let est = files.node_file(&node, "trajectory.txt");

@@ -12,7 +12,7 @@
 //! as good. Deterministic from the generator it is given; each call site derives its generator
 //! by name ([`SplitMix64::named`]).
 
-pub use dynaflow_msg::rng::SplitMix64;
+pub use dynaflow_base::rng::SplitMix64;
 
 /// RANSAC settings, one type for every estimator; the defaults are OpenCV's
 /// `findFundamentalMat(FM_RANSAC)` ones.

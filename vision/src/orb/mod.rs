@@ -72,28 +72,15 @@ impl Default for OrbConfig {
     }
 }
 
-/// One ORB keypoint (OpenCV `KeyPoint` conventions).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct OrbKeypoint {
-    /// Column in level-0 pixels.
-    pub x: f32,
-    /// Row in level-0 pixels.
-    pub y: f32,
-    /// Patch diameter at level 0 (31 * scale^octave).
-    pub size: f32,
-    /// Orientation, degrees in `[0, 360)`.
-    pub angle: f32,
-    /// Harris corner response (7x7 block, k = 0.04, OpenCV's scaling).
-    pub response: f32,
-    /// Pyramid level.
-    pub octave: u8,
-}
+/// One ORB keypoint: the message type (OpenCV `KeyPoint` conventions; ORB's `size` is the
+/// patch diameter at level 0, `31 * scale^octave`, its `response` the Harris score).
+pub use dynaflow_msg::Keypoint;
 
 /// Keypoints and their 256-bit descriptors, aligned.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct OrbFeatures {
     /// The keypoints.
-    pub keypoints: Vec<OrbKeypoint>,
+    pub keypoints: Vec<Keypoint>,
     /// One 32-byte descriptor per keypoint.
     pub descriptors: Vec<[u8; 32]>,
 }
@@ -222,7 +209,7 @@ impl OrbExtractor {
                 let (x, y) = (usize::from(c.x), usize::from(c.y));
                 let angle = brief::ic_angle(img, x, y, &self.umax);
                 out.descriptors.push(brief::describe(&self.blurred, x, y, angle));
-                out.keypoints.push(OrbKeypoint {
+                out.keypoints.push(Keypoint {
                     x: f32::from(c.x) * scale,
                     y: f32::from(c.y) * scale,
                     size: PATCH_SIZE as f32 * scale,
@@ -241,7 +228,7 @@ impl OrbExtractor {
     /// Orientation and descriptor for keypoints found elsewhere (e.g. by another detector;
     /// OpenCV's `compute`). Keypoints whose patch would leave their level are dropped; the
     /// result holds the kept ones with their angle filled in.
-    pub fn describe(&mut self, image: &GrayImage, keypoints: &[OrbKeypoint]) -> OrbFeatures {
+    pub fn describe(&mut self, image: &GrayImage, keypoints: &[Keypoint]) -> OrbFeatures {
         let mut out = OrbFeatures::default();
         if image.is_empty() || image.data.len() < image.width * image.height {
             return out;
@@ -257,7 +244,7 @@ impl OrbExtractor {
             } else {
                 (self.levels[level].width, self.levels[level].height)
             };
-            let on_level: Vec<&OrbKeypoint> = keypoints.iter().filter(|k| usize::from(k.octave) == level).collect();
+            let on_level: Vec<&Keypoint> = keypoints.iter().filter(|k| usize::from(k.octave) == level).collect();
             if on_level.is_empty() {
                 continue;
             }
@@ -271,7 +258,7 @@ impl OrbExtractor {
                 let (x, y) = (x as usize, y as usize);
                 let angle = brief::ic_angle(img, x, y, &self.umax);
                 out.descriptors.push(brief::describe(&self.blurred, x, y, angle));
-                out.keypoints.push(OrbKeypoint { angle, ..*k });
+                out.keypoints.push(Keypoint { angle, ..*k });
             }
         }
         out

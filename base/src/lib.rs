@@ -1,0 +1,13 @@
+//! What every dynaflow crate may build on that is not data, with no dependencies of its own:
+//!
+//! - [`rng`]: SplitMix64, the one seeded generator: RANSAC samples with it, the engine derives
+//!   each node's seed with it, and named streams (`SplitMix64::named`) give every call site its
+//!   own reproducible sequence.
+//! - [`wire`]: the protobuf wire format, read: ONNX model files (`dynaflow-infer`) and the
+//!   protobuf images of MCAP recordings (`dynaflow-recordings`) share the one reader.
+//!
+//! Message types live in `dynaflow-msg`; neither module here is one.
+#![warn(missing_docs)]
+
+pub mod rng;
+pub mod wire;
