@@ -8,7 +8,9 @@ set -uo pipefail
 cd "$(dirname "$0")/.."
 target="${CARGO_TARGET_DIR:-$PWD/target}"
 export DYNAFLOW_PEERS="${DYNAFLOW_PEERS:-$target/peers}"
+t0=$(date +%s)
 bash scripts/peers.sh || { echo "error: installing the peers failed (scripts/peers.sh)" >&2; exit 1; }
+t1=$(date +%s)
 export DYNAFLOW_REQUIRE_PEERS=1
 skips="$target/peer-skips"
 rm -rf "$skips" && mkdir -p "$skips"
@@ -16,13 +18,23 @@ export DYNAFLOW_SKIP_LOG="$skips"
 # `--features zenoh`: graphs across machines are built and tested too (the default build has
 # no zenoh crate; tests/dependencies.rs checks that).
 log="$target/test-output.txt"
-cargo test --workspace --release --no-fail-fast --features zenoh "$@" 2>&1 | tee "$log"
+: > "$log"
+# Built first, so the build's time is told apart from the tests'.
+cargo test --workspace --release --features zenoh --no-run "$@" 2>&1 | tee "$target/build-output.txt"
 status=${PIPESTATUS[0]}
+t2=$(date +%s)
+if [ "$status" -eq 0 ]; then
+  cargo test --workspace --release --no-fail-fast --features zenoh "$@" 2>&1 | tee "$log"
+  status=${PIPESTATUS[0]}
+fi
+t3=$(date +%s)
 # The wall time of each test binary, slowest first (from cargo's own "finished in" lines).
 awk '/^ *Running / { bin = $2; if (bin == "unittests") { n = split($NF, a, "/"); b = a[n]; sub(/-[0-9a-f]+\)$/, "", b); bin = "unittests " b } }
      /^ *Doc-tests / { bin = "doc-tests " $2 }
      /^test result:/ { t = $NF; sub(/s$/, "", t); printf "%8.1f s  %s\n", t, bin }' "$log" |
   sort -rn | awk 'BEGIN { print "test binaries by wall time:" } { print; total += $1 } END { printf "%8.1f s  in all\n", total }'
+
+echo "wall time: peers $((t1 - t0)) s, build $((t2 - t1)) s, tests $((t3 - t2)) s"
 
 list="$(cat "$skips"/*.txt 2>/dev/null | sort -u)"
 if [ -z "$list" ]; then

@@ -70,3 +70,33 @@ fn the_crate_table_in_the_architecture_doc_is_the_dependency_graph() {
     }
     assert_eq!(documented, workspace_edges(), "docs/architecture.md's crate table against cargo metadata");
 }
+
+#[test]
+fn a_library_file_over_600_lines_says_why_in_its_first_lines() {
+    fn walk(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+        for e in std::fs::read_dir(dir).unwrap().map(Result::unwrap) {
+            let p = e.path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else if p.extension().is_some_and(|x| x == "rs") {
+                out.push(p);
+            }
+        }
+    }
+    let root = common::repo();
+    let mut files = Vec::new();
+    walk(&root.join("src"), &mut files);
+    for krate in workspace_edges().keys().filter_map(|k| k.strip_prefix("dynaflow-")) {
+        walk(&root.join(krate).join("src"), &mut files);
+    }
+    assert!(files.len() > 100, "{} files", files.len());
+    let long: Vec<String> = files
+        .iter()
+        .filter_map(|f| {
+            let text = std::fs::read_to_string(f).unwrap();
+            let head: String = text.lines().take(12).collect::<Vec<_>>().join("\n");
+            (text.lines().count() > 600 && !head.contains("Why one file of this size")).then(|| f.display().to_string())
+        })
+        .collect();
+    assert!(long.is_empty(), "over 600 lines without saying why in the first 12: {long:?}");
+}

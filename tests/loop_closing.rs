@@ -28,7 +28,7 @@ fn run_with(
     extra: &[&str],
 ) -> dynaflow::summary::Summary {
     let mut c = common::bin();
-    c.args(["run", "--no-progress", "--digest", "--record", "none", "--seed", &seed.to_string()])
+    c.args(["run", "--no-progress", "--record", "none", "--seed", &seed.to_string()])
         .args(["--set", "camera.motion=loop"])
         .args(extra)
         .args(["--set", &format!("camera.people={people}"), "--out"])
@@ -108,9 +108,6 @@ fn a_loop_around_the_static_room_is_closed_where_it_revisits_and_halves_the_erro
     let without = run("orb_baseline", Some("no_loop"), 0, 0, &dir.path().join("b"));
     let gt = dir.path().join("a/orb_baseline.track.groundtruth.txt");
     println!("{}", check(&with, &without, &gt, "orb_baseline, static, seed 0"));
-    // Deterministic with the correction fed back: a second run gives the same digests.
-    let again = run("orb_baseline", None, 0, 0, &dir.path().join("c"));
-    assert_eq!(with.digests, again.digests, "loop closing is not deterministic");
 }
 
 #[test]

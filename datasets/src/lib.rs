@@ -24,6 +24,48 @@ pub mod tum;
 
 use std::path::{Path, PathBuf};
 
+/// A recorded (or generated) sequence, read frame by frame: what a source operator streams.
+/// The readers differ in their files; the operators stream all of them the same way.
+pub trait Sequence: Send + 'static {
+    /// One frame.
+    type Frame;
+    /// Frames in the sequence.
+    fn len(&self) -> usize;
+    /// Whether it has no frame.
+    fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+    /// Frame `index`; `None` past the end. An error names the file.
+    fn read(&mut self, index: usize) -> Result<Option<Self::Frame>, Error>;
+    /// A frame's sensor time, seconds.
+    fn stamp(frame: &Self::Frame) -> f64;
+    /// At the start of a run, the seed a generated sequence draws from (a recorded one has
+    /// nothing to draw and ignores it).
+    fn seed(&mut self, _seed: u64) {}
+}
+
+/// A reader with inherent `len` and `frame` and a frame with a `stamp` is a [`Sequence`].
+macro_rules! sequence {
+    ($reader:ty, $frame:ty) => {
+        impl Sequence for $reader {
+            type Frame = $frame;
+            fn len(&self) -> usize {
+                <$reader>::len(self)
+            }
+            fn read(&mut self, index: usize) -> Result<Option<$frame>, Error> {
+                self.frame(index)
+            }
+            fn stamp(frame: &$frame) -> f64 {
+                frame.stamp
+            }
+        }
+    };
+}
+
+sequence!(tum::TumSequence, tum::TumFrame);
+sequence!(kitti::KittiSequence, kitti::KittiFrame);
+sequence!(folder::ImageFolder, folder::FolderFrame);
+
 /// What reading or writing a sequence can fail with.
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]

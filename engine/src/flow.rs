@@ -4,9 +4,7 @@
 //! engine; `register` adds them to a registry (dynaflow's and [`crate::testing::registry`]).
 
 use crate::msg::Body;
-use crate::op::{
-    Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params, PortSpec, Registry,
-};
+use crate::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params, PortSpec, Registry};
 use crate::params;
 
 /// Add `passthrough` and `gate` to `r`.
@@ -31,19 +29,14 @@ pub fn forward(inputs: &Inputs) -> Result<Outputs, OpError> {
 // --- passthrough -----------------------------------------------------------------------
 
 /// `passthrough`: forwards its input unchanged.
-pub const PASSTHROUGH: OpSpec = OpSpec {
-    name: "passthrough",
-    family: "util",
-    doc: "Forwards its input unchanged. Used to measure engine overhead per hop.",
-    kind: OpKind::Transform,
-    inputs: ANY_IN,
-    outputs: SAME_OUT,
-    params: &[],
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |_| Ok(Instance::Transform(Box::new(Passthrough))),
-};
+pub const PASSTHROUGH: OpSpec = OpSpec::transform(
+    "passthrough",
+    "util",
+    "Forwards its input unchanged. Used to measure engine overhead per hop.",
+    |_| Ok(Instance::Transform(Box::new(Passthrough))),
+)
+.inputs(ANY_IN)
+.outputs(SAME_OUT);
 
 struct Passthrough;
 
@@ -64,20 +57,15 @@ params! {
     }
 }
 
+const GATE_DOC: &str = "Forwards frames whose number `k` satisfies `k % every == offset`; other frames carry nothing (a watermark). Models a key-frame gate.";
+
 /// `gate`: every `every`-th frame from `offset`, the rest as watermarks.
-pub const GATE: OpSpec = OpSpec {
-    name: "gate",
-    family: "util",
-    doc: "Forwards frames whose number `k` satisfies `k % every == offset`; other frames carry nothing (a watermark). Models a key-frame gate.",
-    kind: OpKind::Transform,
-    inputs: ANY_IN,
-    outputs: SAME_OUT,
-    params: GateConfig::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(Gate(GateConfig::from_params(p)?)))),
-};
+pub const GATE: OpSpec = OpSpec::transform("gate", "util", GATE_DOC, |p: &Params| {
+    Ok(Instance::Transform(Box::new(Gate(GateConfig::from_params(p)?))))
+})
+.inputs(ANY_IN)
+.outputs(SAME_OUT)
+.params(GateConfig::PARAMS);
 
 struct Gate(GateConfig);
 

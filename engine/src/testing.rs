@@ -9,9 +9,7 @@ use std::time::{Duration, Instant};
 use rand_core::Rng;
 
 use crate::msg::{Body, Header, Image, PixelFormat, Scalars};
-use crate::op::{
-    Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params, Registry, Source,
-};
+use crate::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params, Registry, Source};
 use crate::{param_enum, params};
 
 /// Add the `testing.*` operators to `r`.
@@ -67,20 +65,13 @@ params! {
 const IMAGE: Out<Image> = Out::new("image", "RGB8 gradient shifted by one pixel per frame");
 const TICK: Out<Scalars> = Out::new("tick", "`frame` = sequence number, `time` = stamp in seconds");
 
+const TEST_PATTERN_DOC: &str = "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): A moving RGB gradient and a frame counter at a fixed rate. For engine tests and smoke runs; it is not a camera model and feeds no SLAM result.";
+
 /// `testing.test_pattern`: a moving gradient and a frame counter.
-pub const TEST_PATTERN: OpSpec = OpSpec {
-    name: "testing.test_pattern",
-    family: "testing",
-    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): A moving RGB gradient and a frame counter at a fixed rate. For engine tests and smoke runs; it is not a camera model and feeds no SLAM result.",
-    kind: OpKind::Source,
-    inputs: &[],
-    outputs: &[IMAGE.spec, TICK.spec],
-    params: Config::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: build_test_pattern,
-};
+pub const TEST_PATTERN: OpSpec =
+    OpSpec::source("testing.test_pattern", "testing", TEST_PATTERN_DOC, build_test_pattern)
+        .outputs(&[IMAGE.spec, TICK.spec])
+        .params(Config::PARAMS);
 
 fn build_test_pattern(params: &Params) -> Result<Instance, OpError> {
     let config = Config::from_params(params)?;
@@ -126,20 +117,17 @@ params! {
     }
 }
 
+const SIMULATE_WORK_DOC: &str = "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input after spending `work_us` on the blocking pool (sleeping, or spinning with `spin`). Models a slow consumer.";
+
 /// `testing.simulate_work`: a slow consumer.
-pub const SIMULATE_WORK: OpSpec = OpSpec {
-    name: "testing.simulate_work",
-    family: "testing",
-    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input after spending `work_us` on the blocking pool (sleeping, or spinning with `spin`). Models a slow consumer.",
-    kind: OpKind::Transform,
-    inputs: ANY_IN,
-    outputs: SAME_OUT,
-    params: WorkConfig::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(SimulateWork(WorkConfig::from_params(p)?)))),
-};
+pub const SIMULATE_WORK: OpSpec =
+    OpSpec::transform("testing.simulate_work", "testing", SIMULATE_WORK_DOC, |p: &Params| {
+        Ok(Instance::Transform(Box::new(SimulateWork(WorkConfig::from_params(p)?))))
+    })
+    .inputs(ANY_IN)
+    .outputs(SAME_OUT)
+    .params(WorkConfig::PARAMS)
+    .cpu_heavy();
 
 struct SimulateWork(WorkConfig);
 
@@ -176,20 +164,16 @@ params! {
 const TRIGGER: In<Body> = In::required("trigger", "any message; one value is drawn per frame");
 const VALUE: Out<Scalars> = Out::new("value", "`value`: the draw");
 
+const RANDOM_SCALAR_DOC: &str = "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Emits one random number per frame from the node's seeded RNG (`value`). Shows that runs with the same seed are identical.";
+
 /// `testing.random_scalar`: one seeded draw per frame.
-pub const RANDOM_SCALAR: OpSpec = OpSpec {
-    name: "testing.random_scalar",
-    family: "testing",
-    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Emits one random number per frame from the node's seeded RNG (`value`). Shows that runs with the same seed are identical.",
-    kind: OpKind::Transform,
-    inputs: &[TRIGGER.spec],
-    outputs: &[VALUE.spec],
-    params: RandomConfig::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(RandomScalar(RandomConfig::from_params(p)?)))),
-};
+pub const RANDOM_SCALAR: OpSpec =
+    OpSpec::transform("testing.random_scalar", "testing", RANDOM_SCALAR_DOC, |p: &Params| {
+        Ok(Instance::Transform(Box::new(RandomScalar(RandomConfig::from_params(p)?))))
+    })
+    .inputs(&[TRIGGER.spec])
+    .outputs(&[VALUE.spec])
+    .params(RandomConfig::PARAMS);
 
 struct RandomScalar(RandomConfig);
 
@@ -215,20 +199,14 @@ impl Operator for RandomScalar {
 
 // --- scalar_sum ------------------------------------------------------------------------
 
+const SCALAR_SUM_DOC: &str = "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Sums the first value of `a` and, when present, of `b` into `sum`; also reports whether `b` was present (`b_present`). Exercises joins and feedback.";
+
 /// `testing.scalar_sum`: a join with an optional input.
-pub const SCALAR_SUM: OpSpec = OpSpec {
-    name: "testing.scalar_sum",
-    family: "testing",
-    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Sums the first value of `a` and, when present, of `b` into `sum`; also reports whether `b` was present (`b_present`). Exercises joins and feedback.",
-    kind: OpKind::Transform,
-    inputs: &[A.spec, B.spec],
-    outputs: &[SUM.spec],
-    params: &[],
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |_| Ok(Instance::Transform(Box::new(ScalarSum))),
-};
+pub const SCALAR_SUM: OpSpec = OpSpec::transform("testing.scalar_sum", "testing", SCALAR_SUM_DOC, |_| {
+    Ok(Instance::Transform(Box::new(ScalarSum)))
+})
+.inputs(&[A.spec, B.spec])
+.outputs(&[SUM.spec]);
 
 const A: In<Scalars> = In::required("a", "first addend (required)");
 const B: In<Scalars> = In::optional("b", "second addend (optional)");
@@ -270,20 +248,15 @@ params! {
     }
 }
 
+const FAULT_DOC: &str = "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input until frame `at_frame`, then fails with an error or a panic. Tests shutdown on operator failure.";
+
 /// `testing.fault`: an error or a panic at a given frame.
-pub const FAULT: OpSpec = OpSpec {
-    name: "testing.fault",
-    family: "testing",
-    doc: "Testing only (engine tests and benchmarks; the `testing.` prefix marks it): Forwards its input until frame `at_frame`, then fails with an error or a panic. Tests shutdown on operator failure.",
-    kind: OpKind::Transform,
-    inputs: ANY_IN,
-    outputs: SAME_OUT,
-    params: FaultConfig::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(Fault(FaultConfig::from_params(p)?)))),
-};
+pub const FAULT: OpSpec = OpSpec::transform("testing.fault", "testing", FAULT_DOC, |p: &Params| {
+    Ok(Instance::Transform(Box::new(Fault(FaultConfig::from_params(p)?))))
+})
+.inputs(ANY_IN)
+.outputs(SAME_OUT)
+.params(FaultConfig::PARAMS);
 
 struct Fault(FaultConfig);
 

@@ -3,6 +3,9 @@
 //! bits, instance ids, class names, descriptors), so a decoded message has the digest of the
 //! one encoded and a run split over machines gives the digests of the run in one process.
 //!
+//! Why one file of this size: one encoder and one decoder, each a `match` over every body,
+//! kept side by side so that each field is read in the order it is written.
+//!
 //! Layout, little-endian: a version byte ([`VERSION`]), the header (`seq` u64, `stamp` f64,
 //! `frame_id` string), the body's [`PortType`] tag (u8) and its fields. A string is a u32 byte
 //! count and UTF-8; a sequence is a u64 count and its items; an optional value a flag byte (0, or

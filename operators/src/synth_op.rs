@@ -4,12 +4,13 @@ use std::path::Path;
 
 use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, PixelFormat, Pose, SegmentationMask, StereoRig};
 use dynaflow_engine::op::Seeded;
-use dynaflow_engine::op::{Instance, OpError, OpKind, OpSpec, Out, Outputs, Param, ParamType, Params};
+use dynaflow_engine::op::{Instance, OpError, OpSpec, Out, Outputs, Param, ParamType, Params};
 use dynaflow_engine::params;
 
 use dynaflow_datasets::synth::{Frame, Generator, Motion, PeopleMode, SynthConfig, scaled_fr3};
 
-use crate::decode::{Frames, OnError, SequenceSource, ground_truth_pose};
+use crate::decode::{OnError, SequenceSource, ground_truth_pose};
+use dynaflow_datasets::Sequence;
 
 /// The camera motion as a parameter (the generator's names).
 #[derive(Clone, Copy, Debug)]
@@ -66,19 +67,11 @@ const STEREO: Out<StereoRig> = Out::new("stereo", "the rig (with `stereo_baselin
 const GT_MASK: Out<SegmentationMask> =
     Out::ground_truth("gt_mask", "ground-truth class (0 static, 1 person) and instance masks");
 
-pub(crate) const SYNTH: OpSpec = OpSpec {
-    name: "synth",
-    family: "synth",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/synth.md")),
-    kind: OpKind::Source,
-    inputs: &[],
-    outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec, RIGHT.spec, STEREO.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build,
-};
+pub(crate) const SYNTH: OpSpec =
+    OpSpec::source("synth", "synth", dynaflow_engine::op::doc_line(include_str!("docs/synth.md")), build)
+        .outputs(&[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec, RIGHT.spec, STEREO.spec])
+        .params(Config::PARAMS)
+        .cpu_heavy();
 
 fn build(params: &Params) -> Result<Instance, OpError> {
     let c = Config::from_params(params)?;
@@ -101,7 +94,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         frames: c.frames,
         stereo_baseline: (c.stereo_baseline > 0.0).then_some(c.stereo_baseline),
     };
-    Ok(Instance::Source(Box::new(SequenceSource::new(frames, Path::new("synth"), OnError::Fail))))
+    Ok(Instance::Source(Box::new(SequenceSource::new(frames, emit, Path::new("synth"), OnError::Fail))))
 }
 
 struct Synth {
@@ -113,51 +106,51 @@ struct Synth {
     stereo_baseline: Option<f64>,
 }
 
-impl Frames for Synth {
+impl Sequence for Synth {
     type Frame = Frame;
 
-    fn len(&self) -> u64 {
-        self.frames
+    fn len(&self) -> usize {
+        self.frames as usize
     }
 
-    fn read(&mut self, i: u64) -> Result<Option<Frame>, dynaflow_datasets::Error> {
-        Ok((i < self.frames).then(|| self.generator.frame(i, false)))
+    fn read(&mut self, i: usize) -> Result<Option<Frame>, dynaflow_datasets::Error> {
+        Ok((i < self.len()).then(|| self.generator.frame(i as u64, false)))
     }
 
     fn stamp(f: &Frame) -> f64 {
         f.stamp
     }
 
-    fn start(&mut self, seed: u64) {
+    fn seed(&mut self, seed: u64) {
         if !self.seeded {
             let mut config = self.generator.config().clone();
             config.seed = seed;
             self.generator = Generator::new(config);
         }
     }
+}
 
-    fn emit(&self, f: Frame, header: Header) -> Outputs {
-        let k = &self.generator.config().intrinsics;
-        let mut out = Outputs::new();
-        if let Some(b) = self.stereo_baseline
-            && let Some(right) = self.generator.right(&f, b)
-        {
-            let image = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: right };
-            out = out.send(&RIGHT, header.clone(), image).send(&STEREO, header.clone(), StereoRig { baseline: b });
-        }
-        let mask = SegmentationMask {
-            width: k.width,
-            height: k.height,
-            classes: f.class,
-            instances: Some(f.instance),
-            class_names: vec!["static".into(), "person".into()],
-        };
-        let rgb = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: f.rgb };
-        let mut out = out
-            .send(&RGB, header.clone(), rgb)
-            .send(&DEPTH, header.clone(), DepthImage { width: k.width, height: k.height, data: f.depth })
-            .send(&CAMERA_INFO, header.clone(), k.clone());
-        ground_truth_pose(&mut out, &GT_POSE, &header, Pose { world_from_cam: f.world_from_cam });
-        out.send(&GT_MASK, header, mask)
+fn emit(synth: &Synth, f: Frame, header: &Header) -> Outputs {
+    let k = &synth.generator.config().intrinsics;
+    let mut out = Outputs::new();
+    if let Some(b) = synth.stereo_baseline
+        && let Some(right) = synth.generator.right(&f, b)
+    {
+        let image = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: right };
+        out = out.send(&RIGHT, header.clone(), image).send(&STEREO, header.clone(), StereoRig { baseline: b });
     }
+    let mask = SegmentationMask {
+        width: k.width,
+        height: k.height,
+        classes: f.class,
+        instances: Some(f.instance),
+        class_names: vec!["static".into(), "person".into()],
+    };
+    let rgb = Image { width: k.width, height: k.height, format: PixelFormat::Rgb8, data: f.rgb };
+    let mut out = out
+        .send(&RGB, header.clone(), rgb)
+        .send(&DEPTH, header.clone(), DepthImage { width: k.width, height: k.height, data: f.depth })
+        .send(&CAMERA_INFO, header.clone(), k.clone());
+    ground_truth_pose(&mut out, &GT_POSE, header, Pose { world_from_cam: f.world_from_cam });
+    out.send(&GT_MASK, header.clone(), mask)
 }

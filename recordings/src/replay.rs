@@ -20,7 +20,7 @@ use dynaflow_engine::msg::{
     StereoRig, Track, Tracks, Trajectory,
 };
 use dynaflow_engine::op::{
-    Context, Instance, OpError, OpKind, OpSpec, Outputs, Param, ParamMap, ParamType, Params, PortSpec, Source,
+    Context, Instance, OpError, OpSpec, Outputs, Param, ParamMap, ParamType, Params, PortSpec, Source,
 };
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 use serde_json::Value;
@@ -44,20 +44,14 @@ const OUTPUTS: &[PortSpec] = &[
     PortSpec::output("stereo", PortType::StereoRig, "stereo rig topic"),
 ];
 
+const MCAP_REPLAY_DOC: &str = "Replays topics of a dynaflow MCAP recording as ports, keeping frame numbers and stamps, so a user re-runs only the late part of a graph on recorded intermediates. `topics` maps ports to topics, e.g. `{ pose: /track/pose, keypoints: /orb/keypoints }`.";
+
 /// The `mcap_replay` operator.
-pub const MCAP_REPLAY: OpSpec = OpSpec {
-    name: "mcap_replay",
-    family: "recordings",
-    doc: "Replays topics of a dynaflow MCAP recording as ports, keeping frame numbers and stamps, so a user re-runs only the late part of a graph on recorded intermediates. `topics` maps ports to topics, e.g. `{ pose: /track/pose, keypoints: /orb/keypoints }`.",
-    kind: OpKind::Source,
-    inputs: &[],
-    outputs: OUTPUTS,
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: Some(replayed_ground_truth),
-    map_store: None,
-    build,
-};
+pub const MCAP_REPLAY: OpSpec = OpSpec::source("mcap_replay", "recordings", MCAP_REPLAY_DOC, build)
+    .outputs(OUTPUTS)
+    .params(Config::PARAMS)
+    .cpu_heavy()
+    .ground_truth_outputs(replayed_ground_truth);
 
 /// The ports that replay a topic the recorded run marked as ground truth (its provenance's
 /// `ground_truth_topics`), so validation follows them as it followed the original ports. A

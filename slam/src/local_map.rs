@@ -1,4 +1,6 @@
-//! ORB-SLAM's local mapping for RGB-D: key frames arrive from tracking with their
+//! ORB-SLAM2's `LocalMapping`. Why one file of this size: it mirrors that one class.
+//!
+//! RGB-D and stereo: key frames arrive from tracking with their
 //! observations and new points; each new key frame's covisible neighbours form the local
 //! window, whose poses and points are refined by local BA (two stages, outliers dropped in
 //! between, as ORB-SLAM's `LocalBundleAdjustment`), key frames outside the window that see its

@@ -1,4 +1,5 @@
 //! ORB-SLAM2's third thread, loop closing, for rigid maps (RGB-D and stereo: SE(3)).
+//! Why one file of this size: it mirrors one ORB-SLAM2 class (`LoopClosing`), step for step.
 //!
 //! Key frames arrive after local mapping with all their keypoints (descriptor, depth and the
 //! map point each observes) and the refined local window. [`LoopCloser::insert`] keeps the

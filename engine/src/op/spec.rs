@@ -279,6 +279,85 @@ pub struct OpSpec {
 }
 
 impl OpSpec {
+    /// A source (no inputs) named `name` in `family`, documented by `doc`, made by `build`;
+    /// ports and parameters follow: `OpSpec::source(..).outputs(&[..]).params(..)`.
+    pub const fn source(
+        name: &'static str,
+        family: &'static str,
+        doc: &'static str,
+        build: fn(&Params) -> Result<Instance, OpError>,
+    ) -> Self {
+        Self::new(name, family, doc, OpKind::Source, build)
+    }
+
+    /// A transform named `name` in `family`, documented by `doc`, made by `build`.
+    pub const fn transform(
+        name: &'static str,
+        family: &'static str,
+        doc: &'static str,
+        build: fn(&Params) -> Result<Instance, OpError>,
+    ) -> Self {
+        Self::new(name, family, doc, OpKind::Transform, build)
+    }
+
+    const fn new(
+        name: &'static str,
+        family: &'static str,
+        doc: &'static str,
+        kind: OpKind,
+        build: fn(&Params) -> Result<Instance, OpError>,
+    ) -> Self {
+        Self {
+            name,
+            family,
+            doc,
+            kind,
+            inputs: &[],
+            outputs: &[],
+            params: &[],
+            cpu_heavy: false,
+            ground_truth_outputs: None,
+            map_store: None,
+            build,
+        }
+    }
+
+    /// With these input ports.
+    pub const fn inputs(mut self, inputs: &'static [PortSpec]) -> Self {
+        self.inputs = inputs;
+        self
+    }
+
+    /// With these output ports.
+    pub const fn outputs(mut self, outputs: &'static [PortSpec]) -> Self {
+        self.outputs = outputs;
+        self
+    }
+
+    /// With these parameters.
+    pub const fn params(mut self, params: &'static [ParamSpec]) -> Self {
+        self.params = params;
+        self
+    }
+
+    /// Runs `process` on the blocking pool (CPU-heavy work).
+    pub const fn cpu_heavy(mut self) -> Self {
+        self.cpu_heavy = true;
+        self
+    }
+
+    /// With outputs that carry ground truth depending on the parameters.
+    pub const fn ground_truth_outputs(mut self, outputs: fn(&Params) -> Vec<&'static str>) -> Self {
+        self.ground_truth_outputs = Some(outputs);
+        self
+    }
+
+    /// With the parameters `dynaflow run --save-map/--load-map/--localise` set.
+    pub const fn map_store(mut self, store: MapStore) -> Self {
+        self.map_store = Some(store);
+        self
+    }
+
     /// The input port named `name`.
     pub fn input(&self, name: &str) -> Option<&'static PortSpec> {
         self.inputs.iter().find(|p| p.name == name)

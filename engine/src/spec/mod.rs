@@ -39,6 +39,7 @@
 //!   faster:  { camera: { params: { frames: 10 } } }
 //! ```
 
+mod endpoint;
 mod oracle;
 mod params;
 mod parse;

@@ -183,7 +183,7 @@ fn check_machines(spec: &GraphSpec, nodes: &[ResolvedNode], edges: &[SpannedEdge
     // (A machine named twice is a duplicate key, reported by the parser.)
     // Each endpoint's socket in one spelling (`None` for a malformed one, reported by the parser).
     let sockets: Vec<Option<(String, u16)>> =
-        spec.machines.iter().map(|m| super::parse::canonical_endpoint(&m.endpoint).ok()).collect();
+        spec.machines.iter().map(|m| super::endpoint::canonical_endpoint(&m.endpoint).ok()).collect();
     for (i, m) in spec.machines.iter().enumerate() {
         if let Some((other, _)) = spec.machines[..i]
             .iter()

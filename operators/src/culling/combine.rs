@@ -20,19 +20,13 @@ const LABELS_A: In<PointLabels> = In::required("a", "first rule's labels");
 const LABELS_B: In<PointLabels> = In::required("b", "second rule's labels");
 
 /// The `combine_labels` operator (its doc: `dynaflow ops combine_labels`).
-pub const COMBINE_LABELS: OpSpec = OpSpec {
-    name: "combine_labels",
-    family: "culling",
-    doc: doc_line(include_str!("docs/combine_labels.md")),
-    kind: OpKind::Transform,
-    inputs: &[In::<Tracks>::required("tracks", "the tracks both label sets index").spec, LABELS_A.spec, LABELS_B.spec],
-    outputs: &[LABELS.spec, STATIC.spec, Out::<Scalars>::new("counts", "`dynamic`, `static`, `total`").spec],
-    params: CombineConfig::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(CombineOp(CombineConfig::from_params(p)?)))),
-};
+pub const COMBINE_LABELS: OpSpec =
+    OpSpec::transform("combine_labels", "culling", doc_line(include_str!("docs/combine_labels.md")), |p: &Params| {
+        Ok(Instance::Transform(Box::new(CombineOp(CombineConfig::from_params(p)?))))
+    })
+    .inputs(&[In::<Tracks>::required("tracks", "the tracks both label sets index").spec, LABELS_A.spec, LABELS_B.spec])
+    .outputs(&[LABELS.spec, STATIC.spec, Out::<Scalars>::new("counts", "`dynamic`, `static`, `total`").spec])
+    .params(CombineConfig::PARAMS);
 
 struct CombineOp(CombineConfig);
 

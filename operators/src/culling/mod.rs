@@ -19,7 +19,7 @@ use dynaflow_engine::msg::{
     SegmentationMask, Track, Tracks,
 };
 use dynaflow_engine::op::{
-    Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Param, ParamMap, ParamType, Params,
+    Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Param, ParamMap, ParamType, Params,
     PortSpec, doc_line,
 };
 use dynaflow_engine::{param_enum, params};
@@ -91,19 +91,16 @@ fn boxes(d: Option<&Detections>) -> Vec<LabelledBox> {
 macro_rules! rule_op {
     ($spec:ident, $name:literal, $inputs:expr, $config:ident, $build:expr) => {
         #[doc = concat!("The `", $name, "` operator (its doc: `dynaflow ops ", $name, "`).")]
-        pub const $spec: OpSpec = OpSpec {
-            name: $name,
-            family: "culling",
-            doc: doc_line(include_str!(concat!("docs/", $name, ".md"))),
-            kind: OpKind::Transform,
-            inputs: $inputs,
-            outputs: RULE_OUTPUTS,
-            params: $config::PARAMS,
-            cpu_heavy: true,
-            ground_truth_outputs: None,
-            map_store: None,
-            build: |p: &Params| Ok(Instance::Transform(Box::new(($build)($config::from_params(p)?)))),
-        };
+        pub const $spec: OpSpec = OpSpec::transform(
+            $name,
+            "culling",
+            doc_line(include_str!(concat!("docs/", $name, ".md"))),
+            |p: &Params| Ok(Instance::Transform(Box::new(($build)($config::from_params(p)?)))),
+        )
+        .inputs($inputs)
+        .outputs(RULE_OUTPUTS)
+        .params($config::PARAMS)
+        .cpu_heavy();
     };
 }
 

@@ -21,19 +21,11 @@ const F_MODEL: Out<Scalars> = Out::new("model", "`f00`..`f22` (x2^T F x1 = 0), `
 const F_LABELS: Out<PointLabels> =
     Out::new("labels", "per track: outlier = dynamic, reason `epipolar`, score = distance");
 
+const FUNDAMENTAL_RANSAC_DOC: &str = "The fundamental matrix of the previous-to-current tracks by LO-RANSAC over the 7-point solver (8-point refits), deterministic from the node's seed. `labels` marks RANSAC outliers dynamic with each track's epipolar distance (pixels, MG-SLAM's Eq. 4) as score.";
+
 /// The `fundamental_ransac` operator (its doc: `dynaflow ops fundamental_ransac`).
-pub const FUNDAMENTAL_RANSAC: OpSpec = OpSpec {
-    name: "fundamental_ransac",
-    family: "epipolar",
-    doc: "The fundamental matrix of the previous-to-current tracks by LO-RANSAC over the 7-point solver (8-point refits), deterministic from the node's seed. `labels` marks RANSAC outliers dynamic with each track's epipolar distance (pixels, MG-SLAM's Eq. 4) as score.",
-    kind: OpKind::Transform,
-    inputs: &[TRACKS.spec],
-    outputs: &[F_MODEL.spec, F_LABELS.spec],
-    params: FConfig::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const FUNDAMENTAL_RANSAC: OpSpec =
+    OpSpec::transform("fundamental_ransac", "epipolar", FUNDAMENTAL_RANSAC_DOC, |p: &Params| {
         let c = FConfig::from_params(p)?;
         Ok(Instance::Transform(Box::new(FundamentalOp(RansacConfig {
             threshold: c.ransac_threshold,
@@ -41,8 +33,11 @@ pub const FUNDAMENTAL_RANSAC: OpSpec = OpSpec {
             max_iterations: c.max_iterations as usize,
             local_optimisation: c.local_optimisation,
         }))))
-    },
-};
+    })
+    .inputs(&[TRACKS.spec])
+    .outputs(&[F_MODEL.spec, F_LABELS.spec])
+    .params(FConfig::PARAMS)
+    .cpu_heavy();
 
 struct FundamentalOp(RansacConfig);
 
@@ -90,20 +85,17 @@ const H_MODEL: Out<Scalars> = Out::new("model", "`h00`..`h22` (p2 ~ H p1), `inli
 const H_LABELS: Out<PointLabels> =
     Out::new("labels", "per track: outlier = dynamic, reason `flow`, score = transfer error (px)");
 
+const HOMOGRAPHY_PROSAC_DOC: &str = "The homography of the previous-to-current tracks by PROSAC (samples from the best-ranked tracks first; rank = 1 / (1 + error), the tracker's residual or Hamming distance), for camera-motion compensation as in PSPNet-SLAM. `labels` marks tracks whose transfer error exceeds `threshold` pixels.";
+
 /// The `homography_prosac` operator (its doc: `dynaflow ops homography_prosac`).
-pub const HOMOGRAPHY_PROSAC: OpSpec = OpSpec {
-    name: "homography_prosac",
-    family: "epipolar",
-    doc: "The homography of the previous-to-current tracks by PROSAC (samples from the best-ranked tracks first; rank = 1 / (1 + error), the tracker's residual or Hamming distance), for camera-motion compensation as in PSPNet-SLAM. `labels` marks tracks whose transfer error exceeds `threshold` pixels.",
-    kind: OpKind::Transform,
-    inputs: &[TRACKS.spec],
-    outputs: &[H_MODEL.spec, H_LABELS.spec],
-    params: HConfig::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(HomographyOp(HConfig::from_params(p)?)))),
-};
+pub const HOMOGRAPHY_PROSAC: OpSpec =
+    OpSpec::transform("homography_prosac", "epipolar", HOMOGRAPHY_PROSAC_DOC, |p: &Params| {
+        Ok(Instance::Transform(Box::new(HomographyOp(HConfig::from_params(p)?))))
+    })
+    .inputs(&[TRACKS.spec])
+    .outputs(&[H_MODEL.spec, H_LABELS.spec])
+    .params(HConfig::PARAMS)
+    .cpu_heavy();
 
 struct HomographyOp(HConfig);
 

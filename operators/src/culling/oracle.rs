@@ -14,20 +14,15 @@ params! {
 const GT_MASK: In<SegmentationMask> = In::required("mask", "ground-truth class and instance mask");
 const ORACLE_DETECTIONS: Out<Detections> = Out::new("detections", "one box per instance (score 1.0)");
 
+const ORACLE_BOXES_DOC: &str = "ORACLE, not a detector: turns a ground-truth instance mask (the `synth` source's `gt_mask`) into one box per instance with its class name and score 1, so the semantic rules can be developed and measured before a detector exists. Never use it to claim detection results.";
+
 /// The `oracle_boxes` operator (its doc: `dynaflow ops oracle_boxes`).
-pub const ORACLE_BOXES: OpSpec = OpSpec {
-    name: "oracle_boxes",
-    family: "culling",
-    doc: "ORACLE, not a detector: turns a ground-truth instance mask (the `synth` source's `gt_mask`) into one box per instance with its class name and score 1, so the semantic rules can be developed and measured before a detector exists. Never use it to claim detection results.",
-    kind: OpKind::Transform,
-    inputs: &[GT_MASK.spec],
-    outputs: &[ORACLE_DETECTIONS.spec],
-    params: OracleConfig::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(OracleOp(OracleConfig::from_params(p)?)))),
-};
+pub const ORACLE_BOXES: OpSpec = OpSpec::transform("oracle_boxes", "culling", ORACLE_BOXES_DOC, |p: &Params| {
+    Ok(Instance::Transform(Box::new(OracleOp(OracleConfig::from_params(p)?))))
+})
+.inputs(&[GT_MASK.spec])
+.outputs(&[ORACLE_DETECTIONS.spec])
+.params(OracleConfig::PARAMS);
 
 struct OracleOp(OracleConfig);
 

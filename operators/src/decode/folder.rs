@@ -9,13 +9,14 @@ use dynaflow_datasets::folder::{FolderFrame, ImageFolder, list};
 use dynaflow_datasets::intrinsics::read_calibration;
 
 use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image};
-use dynaflow_engine::op::{Instance, OpError, OpKind, OpSpec, Out, Outputs, Params};
+use dynaflow_engine::op::{Instance, OpError, OpSpec, Out, Outputs, ParamSpec, concat_params};
 use dynaflow_engine::params;
 
 use super::CameraParam;
-use super::sequence::{Frames, OnError, SequenceSource};
+use super::sequence::{OnError, SequenceSource};
 
 params! {
+    /// Both folder readers' parameters.
     struct Config {
         /// image folder
         path: PathBuf,
@@ -31,72 +32,41 @@ params! {
 }
 
 params! {
-    struct RgbdConfig {
-        /// image folder
-        path: PathBuf,
-        /// file-name glob (`*` and `?`), e.g. `*.jpg`
-        pattern: String = "*.png".into(),
-        /// frame rate that sets the stamps
-        rate_hz: f64 [0.001, 10_000.0] = 30.0,
-        /// `fr1`/`fr2`/`fr3`, `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`, or `auto` (the folder's calibration.txt)
-        intrinsics: CameraParam = CameraParam::Auto,
+    /// `rgbd_folder`'s own: the depth folder.
+    struct DepthFolder {
         /// folder of 16-bit depth PNGs, the n-th (in name order) paired with the n-th image
         depth_path: PathBuf,
         /// depth PNG value per metre
         depth_factor: f64 [1e-6, 1e9] = 5000.0,
-        /// an unreadable image: fail the run, or skip the frame (counted, logged)
-        on_error: OnError = OnError::Fail,
     }
 }
+
+const RGBD_PARAMS: [ParamSpec; Config::PARAMS.len() + DepthFolder::PARAMS.len()] =
+    concat_params(Config::PARAMS, DepthFolder::PARAMS);
 
 const RGB: Out<Image> = Out::new("rgb", "the image (RGB8 or Gray8)");
 const DEPTH: Out<DepthImage> = Out::new("depth", "depth in metres");
 const CAMERA_INFO: Out<CameraInfo> = Out::new("camera_info", "intrinsics");
 
-pub(crate) const IMAGE_FOLDER: OpSpec = OpSpec {
-    name: "image_folder",
-    family: "decode",
-    doc: "Plays the images of a folder that match `pattern` in file-name order at `rate_hz`, with the given intrinsics: a monocular source (no depth port; `rgbd_folder` adds a depth folder).",
-    kind: OpKind::Source,
-    inputs: &[],
-    outputs: &[RGB.spec, CAMERA_INFO.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |params: &Params| {
-        let c = Config::from_params(params)?;
-        open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, None, 1.0, c.on_error)
-    },
-};
+const IMAGE_FOLDER_DOC: &str = "Plays the images of a folder that match `pattern` in file-name order at `rate_hz`, with the given intrinsics: a monocular source (no depth port; `rgbd_folder` adds a depth folder).";
+const RGBD_FOLDER_DOC: &str = "Plays the images of a folder that match `pattern` in file-name order at `rate_hz`, with the given intrinsics, each with the depth PNG of the same rank in `depth_path`.";
 
-pub(crate) const RGBD_FOLDER: OpSpec = OpSpec {
-    name: "rgbd_folder",
-    family: "decode",
-    doc: "Plays the images of a folder that match `pattern` in file-name order at `rate_hz`, with the given intrinsics, each with the depth PNG of the same rank in `depth_path`.",
-    kind: OpKind::Source,
-    inputs: &[],
-    outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec],
-    params: RgbdConfig::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |params: &Params| {
-        let c = RgbdConfig::from_params(params)?;
-        open(&c.path, &c.pattern, c.rate_hz, c.intrinsics, Some(&c.depth_path), c.depth_factor, c.on_error)
-    },
-};
+pub(crate) const IMAGE_FOLDER: OpSpec =
+    OpSpec::source("image_folder", "decode", IMAGE_FOLDER_DOC, |params| open(&Config::from_params(params)?, None))
+        .outputs(&[RGB.spec, CAMERA_INFO.spec])
+        .params(Config::PARAMS)
+        .cpu_heavy();
 
-fn open(
-    path: &Path,
-    pattern: &str,
-    rate_hz: f64,
-    intrinsics: CameraParam,
-    depth: Option<&Path>,
-    depth_factor: f64,
-    on_error: OnError,
-) -> Result<Instance, OpError> {
-    let intrinsics = match intrinsics {
+pub(crate) const RGBD_FOLDER: OpSpec = OpSpec::source("rgbd_folder", "decode", RGBD_FOLDER_DOC, |params| {
+    open(&Config::from_params(params)?, Some(&DepthFolder::from_params(params)?))
+})
+.outputs(&[RGB.spec, DEPTH.spec, CAMERA_INFO.spec])
+.params(&RGBD_PARAMS)
+.cpu_heavy();
+
+fn open(c: &Config, depth: Option<&DepthFolder>) -> Result<Instance, OpError> {
+    let path = c.path.as_path();
+    let intrinsics = match c.intrinsics {
         CameraParam::Auto => read_calibration(path).unwrap_or_else(|| {
             Err(dynaflow_datasets::Error::file(
                 path,
@@ -106,36 +76,19 @@ fn open(
         CameraParam::Given(k) => Ok(k),
     }
     .map_err(|e| OpError::Config { key: "intrinsics".into(), message: e.to_string() })?;
-    let folder =
-        ImageFolder::open(path, pattern, depth, intrinsics, rate_hz, depth_factor).map_err(OpError::library)?;
-    Ok(Instance::Source(Box::new(SequenceSource::new(Folder(folder), path, on_error))))
+    let (depth_dir, depth_factor) = depth.map_or((None, 1.0), |d| (Some(d.depth_path.as_path()), d.depth_factor));
+    let folder = ImageFolder::open(path, &c.pattern, depth_dir, intrinsics, c.rate_hz, depth_factor)
+        .map_err(OpError::library)?;
+    Ok(Instance::Source(Box::new(SequenceSource::new(folder, emit, path, c.on_error))))
 }
 
-struct Folder(ImageFolder);
-
-impl Frames for Folder {
-    type Frame = FolderFrame;
-
-    fn len(&self) -> u64 {
-        self.0.len() as u64
+fn emit(_: &ImageFolder, f: FolderFrame, header: &Header) -> Outputs {
+    let mut out = Outputs::new().send(&CAMERA_INFO, header.clone(), f.camera);
+    if let Some(depth) = f.depth {
+        DEPTH.push(&mut out, header.clone(), depth);
     }
-
-    fn read(&mut self, i: u64) -> Result<Option<FolderFrame>, dynaflow_datasets::Error> {
-        self.0.frame(i as usize)
-    }
-
-    fn stamp(f: &FolderFrame) -> f64 {
-        f.stamp
-    }
-
-    fn emit(&self, f: FolderFrame, header: Header) -> Outputs {
-        let mut out = Outputs::new().send(&CAMERA_INFO, header.clone(), f.camera);
-        if let Some(depth) = f.depth {
-            DEPTH.push(&mut out, header.clone(), depth);
-        }
-        RGB.push(&mut out, header, f.image);
-        out
-    }
+    RGB.push(&mut out, header.clone(), f.image);
+    out
 }
 
 /// What `dynaflow run --input DIR` found in a folder: the reader op and its parameters.

@@ -6,10 +6,10 @@ use std::path::PathBuf;
 use dynaflow_datasets::kitti::{KittiFrame, KittiSequence, Pair as KittiPair, Poses};
 
 use dynaflow_engine::msg::{CameraInfo, Header, Image, Pose, StereoRig};
-use dynaflow_engine::op::{Instance, OpError, OpKind, OpSpec, Out, Outputs, Params};
+use dynaflow_engine::op::{Instance, OpError, OpSpec, Out, Outputs, Params};
 use dynaflow_engine::{param_enum, params};
 
-use super::sequence::{Frames, OnError, SequenceSource, ground_truth_pose};
+use super::sequence::{OnError, SequenceSource, ground_truth_pose};
 
 param_enum! {
     /// Which stereo pair.
@@ -41,19 +41,15 @@ const STEREO: Out<StereoRig> = Out::new("stereo", "the rig: baseline from `calib
 const GT_POSE: Out<Pose> =
     Out::ground_truth("gt_pose", "ground-truth world_from_cam of the left camera, when poses are available");
 
-pub(crate) const KITTI_ODOMETRY: OpSpec = OpSpec {
-    name: "kitti_odometry",
-    family: "decode",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/kitti_odometry.md")),
-    kind: OpKind::Source,
-    inputs: &[],
-    outputs: &[LEFT.spec, RIGHT.spec, CAMERA_INFO.spec, STEREO.spec, GT_POSE.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
+pub(crate) const KITTI_ODOMETRY: OpSpec = OpSpec::source(
+    "kitti_odometry",
+    "decode",
+    dynaflow_engine::op::doc_line(include_str!("docs/kitti_odometry.md")),
     build,
-};
+)
+.outputs(&[LEFT.spec, RIGHT.spec, CAMERA_INFO.spec, STEREO.spec, GT_POSE.spec])
+.params(Config::PARAMS)
+.cpu_heavy();
 
 fn build(params: &Params) -> Result<Instance, OpError> {
     let c = Config::from_params(params)?;
@@ -68,35 +64,17 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         _ => Poses::File(&file),
     };
     let sequence = KittiSequence::open(&c.path, pair, poses, c.frames as usize).map_err(OpError::library)?;
-    Ok(Instance::Source(Box::new(SequenceSource::new(Kitti(sequence), &c.path, c.on_error))))
+    Ok(Instance::Source(Box::new(SequenceSource::new(sequence, emit, &c.path, c.on_error))))
 }
 
-struct Kitti(KittiSequence);
-
-impl Frames for Kitti {
-    type Frame = KittiFrame;
-
-    fn len(&self) -> u64 {
-        self.0.len() as u64
+fn emit(sequence: &KittiSequence, f: KittiFrame, header: &Header) -> Outputs {
+    let mut out = Outputs::new()
+        .send(&LEFT, header.clone(), f.left)
+        .send(&RIGHT, header.clone(), f.right)
+        .send(&CAMERA_INFO, header.clone(), f.camera)
+        .send(&STEREO, header.clone(), StereoRig { baseline: sequence.baseline });
+    if let Some(p) = f.gt_pose {
+        ground_truth_pose(&mut out, &GT_POSE, header, Pose { world_from_cam: p });
     }
-
-    fn read(&mut self, i: u64) -> Result<Option<KittiFrame>, dynaflow_datasets::Error> {
-        self.0.frame(i as usize)
-    }
-
-    fn stamp(f: &KittiFrame) -> f64 {
-        f.stamp
-    }
-
-    fn emit(&self, f: KittiFrame, header: Header) -> Outputs {
-        let mut out = Outputs::new()
-            .send(&LEFT, header.clone(), f.left)
-            .send(&RIGHT, header.clone(), f.right)
-            .send(&CAMERA_INFO, header.clone(), f.camera)
-            .send(&STEREO, header.clone(), StereoRig { baseline: self.0.baseline });
-        if let Some(p) = f.gt_pose {
-            ground_truth_pose(&mut out, &GT_POSE, &header, Pose { world_from_cam: p });
-        }
-        out
-    }
+    out
 }

@@ -14,7 +14,7 @@ use dynaflow_engine::op::{Param, ParamType, Params};
 pub(crate) use folder::{IMAGE_FOLDER, RGBD_FOLDER};
 pub use folder::{Layout, detect_layout};
 pub(crate) use kitti::KITTI_ODOMETRY;
-pub(crate) use sequence::{Frames, OnError, SequenceSource, ground_truth_pose};
+pub(crate) use sequence::{OnError, SequenceSource, ground_truth_pose};
 pub(crate) use tum::TUM_RGBD;
 
 /// The `intrinsics` parameter of the readers: `auto` (from the folder) or given.

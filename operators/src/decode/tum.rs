@@ -5,11 +5,11 @@ use std::path::PathBuf;
 use dynaflow_datasets::tum::{GT_MAX_DIFF_S, TumFrame, TumSequence};
 
 use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, Pose, SegmentationMask};
-use dynaflow_engine::op::{Instance, OpError, OpKind, OpSpec, Out, Outputs, Params};
+use dynaflow_engine::op::{Instance, OpError, OpSpec, Out, Outputs, Params};
 use dynaflow_engine::params;
 
 use super::CameraParam;
-use super::sequence::{Frames, OnError, SequenceSource, ground_truth_pose};
+use super::sequence::{OnError, SequenceSource, ground_truth_pose};
 
 params! {
     struct Config {
@@ -40,19 +40,11 @@ const GT_MASK: Out<SegmentationMask> = Out::ground_truth(
     "ground-truth class/instance mask from `mask/` and `instance/` (written by `dynaflow synth`; absent for real TUM data)",
 );
 
-pub(crate) const TUM_RGBD: OpSpec = OpSpec {
-    name: "tum_rgbd",
-    family: "decode",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/tum_rgbd.md")),
-    kind: OpKind::Source,
-    inputs: &[],
-    outputs: &[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build,
-};
+pub(crate) const TUM_RGBD: OpSpec =
+    OpSpec::source("tum_rgbd", "decode", dynaflow_engine::op::doc_line(include_str!("docs/tum_rgbd.md")), build)
+        .outputs(&[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec])
+        .params(Config::PARAMS)
+        .cpu_heavy();
 
 fn build(params: &Params) -> Result<Instance, OpError> {
     let c = Config::from_params(params)?;
@@ -77,38 +69,20 @@ fn build(params: &Params) -> Result<Instance, OpError> {
             sequence.len()
         );
     }
-    Ok(Instance::Source(Box::new(SequenceSource::new(Tum(sequence), &c.path, c.on_error))))
+    Ok(Instance::Source(Box::new(SequenceSource::new(sequence, emit, &c.path, c.on_error))))
 }
 
-struct Tum(TumSequence);
-
-impl Frames for Tum {
-    type Frame = TumFrame;
-
-    fn len(&self) -> u64 {
-        self.0.len() as u64
+fn emit(_: &TumSequence, f: TumFrame, header: &Header) -> Outputs {
+    let mut out = Outputs::new().send(&RGB, header.clone(), f.rgb).send(&DEPTH, header.clone(), f.depth).send(
+        &CAMERA_INFO,
+        header.clone(),
+        f.camera,
+    );
+    if let Some(mask) = f.gt_mask {
+        GT_MASK.push(&mut out, header.clone(), mask);
     }
-
-    fn read(&mut self, i: u64) -> Result<Option<TumFrame>, dynaflow_datasets::Error> {
-        self.0.frame(i as usize)
+    if let Some(pose) = f.gt_pose {
+        ground_truth_pose(&mut out, &GT_POSE, header, Pose { world_from_cam: pose });
     }
-
-    fn stamp(f: &TumFrame) -> f64 {
-        f.stamp
-    }
-
-    fn emit(&self, f: TumFrame, header: Header) -> Outputs {
-        let mut out = Outputs::new().send(&RGB, header.clone(), f.rgb).send(&DEPTH, header.clone(), f.depth).send(
-            &CAMERA_INFO,
-            header.clone(),
-            f.camera,
-        );
-        if let Some(mask) = f.gt_mask {
-            GT_MASK.push(&mut out, header.clone(), mask);
-        }
-        if let Some(pose) = f.gt_pose {
-            ground_truth_pose(&mut out, &GT_POSE, &header, Pose { world_from_cam: pose });
-        }
-        out
-    }
+    out
 }

@@ -1,7 +1,7 @@
 //! `lk_flow`.
 
 use dynaflow_engine::msg::{Image, Keypoints, Track, Tracks};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 use dynaflow_vision::flow::{LkConfig, LkTracker, Pyramid, seed_corners};
 
@@ -38,18 +38,11 @@ const TRACKS: Out<Tracks> = Out::new(
 );
 
 /// The `lk_flow` operator (its doc: `dynaflow ops lk_flow`).
-pub const LK_FLOW: OpSpec = OpSpec {
-    name: "lk_flow",
-    family: "flow",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/lk_flow.md")),
-    kind: OpKind::Transform,
-    inputs: &[IMAGE.spec, POINTS.spec],
-    outputs: &[TRACKS.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const LK_FLOW: OpSpec = OpSpec::transform(
+    "lk_flow",
+    "flow",
+    dynaflow_engine::op::doc_line(include_str!("docs/lk_flow.md")),
+    |p: &Params| {
         let c = Config::from_params(p)?;
         let lk = LkConfig {
             window: c.window as usize,
@@ -70,7 +63,11 @@ pub const LK_FLOW: OpSpec = OpSpec {
             config: c,
         })))
     },
-};
+)
+.inputs(&[IMAGE.spec, POINTS.spec])
+.outputs(&[TRACKS.spec])
+.params(Config::PARAMS)
+.cpu_heavy();
 
 struct LkOp {
     tracker: LkTracker,

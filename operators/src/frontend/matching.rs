@@ -1,7 +1,7 @@
 //! `match_descriptors`.
 
 use dynaflow_engine::msg::{Keypoints, Track, Tracks};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 use dynaflow_vision::matching::{MatchConfig, match_brute_force};
 
@@ -23,19 +23,11 @@ const PREVIOUS: In<Keypoints> = In::optional("previous", "the previous frame's k
 const TRACKS: Out<Tracks> =
     Out::new("tracks", "one per match: track id, previous and current position, Hamming distance as `error`");
 
+const MATCH_DESCRIPTORS_DOC: &str = "Matches this frame's ORB keypoints to the previous frame's (wire `previous` with `delay: 1`): Hamming brute force with Lowe's ratio test, cross-check and ORB-SLAM's rotation-consistency histogram. A keypoint matched to a tracked one keeps its track id; others start new tracks.";
+
 /// The `match_descriptors` operator (its doc: `dynaflow ops match_descriptors`).
-pub const MATCH_DESCRIPTORS: OpSpec = OpSpec {
-    name: "match_descriptors",
-    family: "matching",
-    doc: "Matches this frame's ORB keypoints to the previous frame's (wire `previous` with `delay: 1`): Hamming brute force with Lowe's ratio test, cross-check and ORB-SLAM's rotation-consistency histogram. A keypoint matched to a tracked one keeps its track id; others start new tracks.",
-    kind: OpKind::Transform,
-    inputs: &[CURRENT.spec, PREVIOUS.spec],
-    outputs: &[TRACKS.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const MATCH_DESCRIPTORS: OpSpec =
+    OpSpec::transform("match_descriptors", "matching", MATCH_DESCRIPTORS_DOC, |p: &Params| {
         let c = Config::from_params(p)?;
         let config = MatchConfig {
             max_distance: c.max_distance as u32,
@@ -44,8 +36,11 @@ pub const MATCH_DESCRIPTORS: OpSpec = OpSpec {
             check_orientation: c.check_orientation,
         };
         Ok(Instance::Transform(Box::new(MatchOp { config, last: None, next_id: 0 })))
-    },
-};
+    })
+    .inputs(&[CURRENT.spec, PREVIOUS.spec])
+    .outputs(&[TRACKS.spec])
+    .params(Config::PARAMS)
+    .cpu_heavy();
 
 struct MatchOp {
     config: MatchConfig,

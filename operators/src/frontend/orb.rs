@@ -1,7 +1,7 @@
 //! `orb_extract`.
 
 use dynaflow_engine::msg::{Descriptors, Image, Keypoints, SegmentationMask};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::{param_enum, params};
 use dynaflow_vision::GrayImage;
 use dynaflow_vision::orb::{Distribution, OrbConfig, OrbExtractor};
@@ -36,21 +36,16 @@ const KEYPOINTS: Out<Keypoints> = Out::new(
 );
 
 /// The `orb_extract` operator (its doc: `dynaflow ops orb_extract`).
-pub const ORB_EXTRACT: OpSpec = OpSpec {
-    name: "orb_extract",
-    family: "orb",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/orb_extract.md")),
-    kind: OpKind::Transform,
-    inputs: &[IMAGE.spec, MASK.spec],
-    outputs: &[KEYPOINTS.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
-        Ok(Instance::Transform(Box::new(OrbOp(OrbExtractor::new(orb_config(&Config::from_params(p)?))))))
-    },
-};
+pub const ORB_EXTRACT: OpSpec = OpSpec::transform(
+    "orb_extract",
+    "orb",
+    dynaflow_engine::op::doc_line(include_str!("docs/orb_extract.md")),
+    |p: &Params| Ok(Instance::Transform(Box::new(OrbOp(OrbExtractor::new(orb_config(&Config::from_params(p)?)))))),
+)
+.inputs(&[IMAGE.spec, MASK.spec])
+.outputs(&[KEYPOINTS.spec])
+.params(Config::PARAMS)
+.cpu_heavy();
 
 /// The extractor's settings from the operator's parameters (`stereo_match` extracts its right
 /// image with the same ones).

@@ -1,7 +1,7 @@
 //! `stereo_match`.
 
 use dynaflow_engine::msg::{self, CameraInfo, DepthImage, Image, Keypoints, Scalars};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_vision::orb::OrbExtractor;
 use dynaflow_vision::stereo::{StereoRig, StereoView, stereo_match};
 
@@ -27,25 +27,22 @@ const STATS: Out<Scalars> = Out::new(
 );
 
 /// The `stereo_match` operator (its doc: `dynaflow ops stereo_match`).
-pub const STEREO_MATCH: OpSpec = OpSpec {
-    name: "stereo_match",
-    family: "stereo",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/stereo_match.md")),
-    kind: OpKind::Transform,
-    inputs: &[KEYPOINTS.spec, LEFT.spec, RIGHT.spec, CAMERA_INFO.spec, STEREO.spec],
-    outputs: &[DEPTH.spec, STATS.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const STEREO_MATCH: OpSpec = OpSpec::transform(
+    "stereo_match",
+    "stereo",
+    dynaflow_engine::op::doc_line(include_str!("docs/stereo_match.md")),
+    |p: &Params| {
         let config = orb_config(&Config::from_params(p)?);
         Ok(Instance::Transform(Box::new(StereoOp {
             left: OrbExtractor::new(config.clone()),
             right: OrbExtractor::new(config),
         })))
     },
-};
+)
+.inputs(&[KEYPOINTS.spec, LEFT.spec, RIGHT.spec, CAMERA_INFO.spec, STEREO.spec])
+.outputs(&[DEPTH.spec, STATS.spec])
+.params(Config::PARAMS)
+.cpu_heavy();
 
 struct StereoOp {
     /// Builds the left pyramid (the keypoints come from `orb_extract`).

@@ -3,7 +3,7 @@
 use std::sync::Arc;
 
 use dynaflow_engine::msg::{DepthImage, Detections, SegmentationMask};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 
 use super::{ClassName, class_list};
@@ -26,19 +26,15 @@ const MASK: Out<SegmentationMask> =
     Out::new("mask", "class 0 static, k the k-th class of `classes` (named in the mask); instance = box index + 1");
 
 /// The `box_to_mask` operator (its doc: `dynaflow ops box_to_mask`).
-pub const BOX_TO_MASK: OpSpec = OpSpec {
-    name: "box_to_mask",
-    family: "inference",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/box_to_mask.md")),
-    kind: OpKind::Transform,
-    inputs: &[DETECTIONS.spec, DEPTH.spec],
-    outputs: &[MASK.spec],
-    params: Config::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| Ok(Instance::Transform(Box::new(BoxToMask { config: Config::from_params(p)? }))),
-};
+pub const BOX_TO_MASK: OpSpec = OpSpec::transform(
+    "box_to_mask",
+    "inference",
+    dynaflow_engine::op::doc_line(include_str!("docs/box_to_mask.md")),
+    |p: &Params| Ok(Instance::Transform(Box::new(BoxToMask { config: Config::from_params(p)? }))),
+)
+.inputs(&[DETECTIONS.spec, DEPTH.spec])
+.outputs(&[MASK.spec])
+.params(Config::PARAMS);
 
 struct BoxToMask {
     config: Config,

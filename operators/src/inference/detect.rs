@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 use super::runner::{Backend, Runner};
 use dynaflow_engine::msg::{Detection, Detections, Image};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::{param_enum, params};
 use dynaflow_infer::detect::{Decoder, Detector};
 use dynaflow_infer::onnx;
@@ -57,18 +57,11 @@ impl DecoderName {
 }
 
 /// The `detect` operator (its doc: `dynaflow ops detect`).
-pub const DETECT: OpSpec = OpSpec {
-    name: "detect",
-    family: "inference",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/detect.md")),
-    kind: OpKind::Transform,
-    inputs: &[IMAGE.spec],
-    outputs: &[DETECTIONS.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const DETECT: OpSpec = OpSpec::transform(
+    "detect",
+    "inference",
+    dynaflow_engine::op::doc_line(include_str!("docs/detect.md")),
+    |p: &Params| {
         let c = Config::from_params(p)?;
         let embedded = c.model.as_os_str().is_empty();
         let (model, bytes) = if embedded {
@@ -85,7 +78,11 @@ pub const DETECT: OpSpec = OpSpec {
             Runner::new(&bytes, detector.model(), c.backend, c.allow_software).map_err(OpError::library)?;
         Ok(Instance::Transform(Box::new(Detect { config: c, detector, names, runner, backend })))
     },
-};
+)
+.inputs(&[IMAGE.spec])
+.outputs(&[DETECTIONS.spec])
+.params(Config::PARAMS)
+.cpu_heavy();
 
 struct Detect {
     config: Config,

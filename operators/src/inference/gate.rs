@@ -1,7 +1,7 @@
 //! `keyframe_gate`.
 
 use dynaflow_engine::msg::{Image, Scalars};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 
 params! {
@@ -24,18 +24,11 @@ const STATS: Out<Scalars> =
     Out::new("stats", "`infer` (0/1), `rule` (0 skipped, 1 first, 2 relocalised, 3 few_dynamic, 4 keyframe, 5 gap)");
 
 /// The `keyframe_gate` operator (its doc: `dynaflow ops keyframe_gate`).
-pub const KEYFRAME_GATE: OpSpec = OpSpec {
-    name: "keyframe_gate",
-    family: "inference",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/keyframe_gate.md")),
-    kind: OpKind::Transform,
-    inputs: &[IMAGE.spec, TRACKING.spec, COUNTS.spec],
-    outputs: &[IMAGE_OUT.spec, STATS.spec],
-    params: Config::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const KEYFRAME_GATE: OpSpec = OpSpec::transform(
+    "keyframe_gate",
+    "inference",
+    dynaflow_engine::op::doc_line(include_str!("docs/keyframe_gate.md")),
+    |p: &Params| {
         Ok(Instance::Transform(Box::new(KeyframeGate {
             config: Config::from_params(p)?,
             since: None,
@@ -43,7 +36,10 @@ pub const KEYFRAME_GATE: OpSpec = OpSpec {
             frames: 0,
         })))
     },
-};
+)
+.inputs(&[IMAGE.spec, TRACKING.spec, COUNTS.spec])
+.outputs(&[IMAGE_OUT.spec, STATS.spec])
+.params(Config::PARAMS);
 
 struct KeyframeGate {
     config: Config,

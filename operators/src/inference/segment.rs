@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use super::runner::{Backend, Runner};
 use dynaflow_engine::msg::{DepthImage, Image, SegmentationMask};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::{param_enum, params};
 use dynaflow_infer::onnx;
 use dynaflow_infer::segment::{self, Normalise, Segmenter};
@@ -56,24 +56,21 @@ const MASK: Out<SegmentationMask> = Out::new(
 );
 
 /// The `segment` operator (its doc: `dynaflow ops segment`).
-pub const SEGMENT: OpSpec = OpSpec {
-    name: "segment",
-    family: "inference",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/segment.md")),
-    kind: OpKind::Transform,
-    inputs: &[IMAGE.spec, DEPTH.spec],
-    outputs: &[MASK.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const SEGMENT: OpSpec = OpSpec::transform(
+    "segment",
+    "inference",
+    dynaflow_engine::op::doc_line(include_str!("docs/segment.md")),
+    |p: &Params| {
         let c = Config::from_params(p)?;
         let (segmenter, runner, backend) = load(&c.model, &c.classes, c.input_range, c.backend, c.allow_software)?;
         let names = segmenter.classes().iter().map(|s| Arc::from(s.as_str())).collect();
         Ok(Instance::Transform(Box::new(Segment { config: c, segmenter, names, runner, backend })))
     },
-};
+)
+.inputs(&[IMAGE.spec, DEPTH.spec])
+.outputs(&[MASK.spec])
+.params(Config::PARAMS)
+.cpu_heavy();
 
 impl InputRange {
     /// The normalisation it names.

@@ -3,7 +3,7 @@
 use std::time::Instant;
 
 use dynaflow_engine::msg::{CameraInfo, DepthImage, Image, OctreeUpdate, PixelFormat, Pose, SegmentationMask};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::{param_enum, params};
 
 use crate::inference::{ClassName, class_list};
@@ -55,18 +55,11 @@ const MAP: Out<OctreeUpdate> = Out::new(
 );
 
 /// The `octomap` operator (its doc: `dynaflow ops octomap`).
-pub const OCTOMAP: OpSpec = OpSpec {
-    name: "octomap",
-    family: "mapping",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/octomap.md")),
-    kind: OpKind::Transform,
-    inputs: &[DEPTH.spec, CAMERA_INFO.spec, POSE.spec, IMAGE.spec, MASK.spec],
-    outputs: &[UPDATES.spec, MAP.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const OCTOMAP: OpSpec = OpSpec::transform(
+    "octomap",
+    "mapping",
+    dynaflow_engine::op::doc_line(include_str!("docs/octomap.md")),
+    |p: &Params| {
         let c = Config::from_params(p)?;
         let params = TreeParams {
             resolution: c.resolution,
@@ -80,7 +73,11 @@ pub const OCTOMAP: OpSpec = OpSpec {
         let tree = OcTree::new(params, true).map_err(OpError::library)?;
         Ok(Instance::Transform(Box::new(Octomap { config: c, tree, insert_ms: Vec::new(), frames: 0, skipped: 0 })))
     },
-};
+)
+.inputs(&[DEPTH.spec, CAMERA_INFO.spec, POSE.spec, IMAGE.spec, MASK.spec])
+.outputs(&[UPDATES.spec, MAP.spec])
+.params(Config::PARAMS)
+.cpu_heavy();
 
 struct Octomap {
     config: Config,

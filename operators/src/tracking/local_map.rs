@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use crate::report::{LocalMappingReport, NodeReport, Timing};
 use dynaflow_engine::msg::{CameraInfo, Header, Message, PointCloud, Scalars, SparseMap};
-use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params};
+use dynaflow_engine::op::{Context, In, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 use dynaflow_slam::{LocalMapConfig, LocalMapper};
 use dynaflow_vision::camera::Pinhole;
@@ -36,18 +36,11 @@ const STATS: Out<Scalars> = Out::new(
 );
 
 /// The `local_map` operator (its doc: `dynaflow ops local_map`).
-pub const LOCAL_MAP: OpSpec = OpSpec {
-    name: "local_map",
-    family: "pnp_ba",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/local_map.md")),
-    kind: OpKind::Transform,
-    inputs: &[KEYFRAME.spec, CAMERA_INFO.spec, STEREO.spec, LOOP.spec],
-    outputs: &[MAP.spec, POINTS.spec, STATS.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const LOCAL_MAP: OpSpec = OpSpec::transform(
+    "local_map",
+    "pnp_ba",
+    dynaflow_engine::op::doc_line(include_str!("docs/local_map.md")),
+    |p: &Params| {
         Ok(Instance::Transform(Box::new(LocalMap {
             config: Config::from_params(p)?,
             mapper: None,
@@ -55,7 +48,11 @@ pub const LOCAL_MAP: OpSpec = OpSpec {
             last_loop: None,
         })))
     },
-};
+)
+.inputs(&[KEYFRAME.spec, CAMERA_INFO.spec, STEREO.spec, LOOP.spec])
+.outputs(&[MAP.spec, POINTS.spec, STATS.spec])
+.params(Config::PARAMS)
+.cpu_heavy();
 
 struct LocalMap {
     config: Config,

@@ -6,9 +6,7 @@ use std::time::Instant;
 
 use crate::report::{GlobalBaReport, LoopClosingReport, LoopReport, NodeReport, Timing, VocabularyReport};
 use dynaflow_engine::msg::{CameraInfo, Header, Pose, Scalars, SparseMap, StampedPose, Trajectory};
-use dynaflow_engine::op::{
-    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
-};
+use dynaflow_engine::op::{Context, In, InputRole, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 use dynaflow_slam::bow::Vocabulary;
 use dynaflow_slam::loop_closing::{LoopCloser, LoopConfig, LoopError, Rejection};
@@ -47,18 +45,11 @@ const STATS: Out<Scalars> = Out::new(
 );
 
 /// The `loop_close` operator (its doc: `dynaflow ops loop_close`).
-pub const LOOP_CLOSE: OpSpec = OpSpec {
-    name: "loop_close",
-    family: "pnp_ba",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/loop_close.md")),
-    kind: OpKind::Transform,
-    inputs: &[MAP.spec, CAMERA_INFO.spec, STEREO.spec, GT_POSE.spec],
-    outputs: &[CORRECTION.spec, KEYFRAMES.spec, LOOP_EDGE.spec, STATS.spec],
-    params: Config::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
+pub const LOOP_CLOSE: OpSpec = OpSpec::transform(
+    "loop_close",
+    "pnp_ba",
+    dynaflow_engine::op::doc_line(include_str!("docs/loop_close.md")),
+    |p: &Params| {
         let config = Config::from_params(p)?;
         let (vocabulary, name, load_ms) = super::load_vocabulary(&config.vocabulary)?;
         Ok(Instance::Transform(Box::new(LoopClose {
@@ -73,7 +64,11 @@ pub const LOOP_CLOSE: OpSpec = OpSpec {
             ground_truth: Vec::new(),
         })))
     },
-};
+)
+.inputs(&[MAP.spec, CAMERA_INFO.spec, STEREO.spec, GT_POSE.spec])
+.outputs(&[CORRECTION.spec, KEYFRAMES.spec, LOOP_EDGE.spec, STATS.spec])
+.params(Config::PARAMS)
+.cpu_heavy();
 
 struct LoopClose {
     config: Config,

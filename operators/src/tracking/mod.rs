@@ -11,6 +11,7 @@
 //!   essential graph), its corrected map fed back to both over `delay: 1` edges.
 //!
 
+mod evaluation;
 mod local_map;
 mod loop_close;
 mod track;

@@ -2,7 +2,6 @@
 //! three operators, one per sensor, each declaring as required exactly the inputs its sensor
 //! needs, so a miswired graph is refused at validation instead of failing at frame 0.
 
-use std::io::Write;
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -11,37 +10,43 @@ use dynaflow_engine::msg::{
     StereoRig, Tracks,
 };
 use dynaflow_engine::op::{
-    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, ParamSpec, Params,
-    concat_params,
+    Context, In, InputRole, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, ParamSpec, Params, concat_params,
 };
 use dynaflow_engine::params;
-use dynaflow_slam::eval::{Align, evaluate};
-use dynaflow_slam::{Feature, Tracker, TrackerConfig};
+use dynaflow_slam::eval::Align;
+use dynaflow_slam::{Feature, Sensor, Tracker, TrackerConfig};
 use dynaflow_vision::camera::Pinhole;
-use nalgebra::Isometry3;
 use rand_core::Rng;
 
-use crate::report::{Ate, FrameStates, MapSaved, NodeReport, Rpe, TrackerReport};
+use super::evaluation::TrajectoryLog;
+use crate::report::{FrameStates, MapSaved, NodeReport, TrackerReport};
 
-/// What gives keypoints their depth (ORB-SLAM2's three sensor modes): fixed by the operator.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Sensor {
-    /// A depth camera's image.
-    Rgbd,
-    /// `stereo_match`'s depth and the rig's baseline.
+/// A tracker's sensor with what only it has: the depth camera's parameters.
+enum Setup {
+    /// `track_rgbd`.
+    Rgbd(DepthCamera),
+    /// `track_stereo`.
     Stereo,
-    /// No depth: two-view initialisation, arbitrary scale.
+    /// `track_mono`.
     Mono,
 }
 
-impl Sensor {
-    /// The name in reports.
-    pub fn as_str(self) -> &'static str {
+impl Setup {
+    fn sensor(&self) -> Sensor {
         match self {
-            Sensor::Rgbd => "rgbd",
-            Sensor::Stereo => "stereo",
-            Sensor::Mono => "mono",
+            Setup::Rgbd(_) => Sensor::Rgbd,
+            Setup::Stereo => Sensor::Stereo,
+            Setup::Mono => Sensor::Monocular,
         }
+    }
+}
+
+/// The sensor's name in reports.
+fn sensor_name(sensor: Sensor) -> &'static str {
+    match sensor {
+        Sensor::Rgbd => "rgbd",
+        Sensor::Stereo => "stereo",
+        Sensor::Monocular => "mono",
     }
 }
 
@@ -128,49 +133,39 @@ pub const MAP_STORE: dynaflow_engine::op::MapStore =
     dynaflow_engine::op::MapStore { save: "save_map", load: "load_map", mapping: "mapping" };
 
 /// ORB-SLAM2's RGB-D tracking.
-pub const TRACK_RGBD: OpSpec = OpSpec {
-    name: "track_rgbd",
-    family: "pnp_ba",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/track_rgbd.md")),
-    kind: OpKind::Transform,
-    inputs: tracker_inputs!(DEPTH_CAMERA.spec),
-    outputs: OUTPUTS,
-    params: &RGBD_PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: Some(MAP_STORE),
-    build: |p| build(p, Sensor::Rgbd),
-};
+pub const TRACK_RGBD: OpSpec =
+    OpSpec::transform("track_rgbd", "pnp_ba", dynaflow_engine::op::doc_line(include_str!("docs/track_rgbd.md")), |p| {
+        build(p, Sensor::Rgbd)
+    })
+    .inputs(tracker_inputs!(DEPTH_CAMERA.spec))
+    .outputs(OUTPUTS)
+    .params(&RGBD_PARAMS)
+    .cpu_heavy()
+    .map_store(MAP_STORE);
 
 /// ORB-SLAM2's stereo tracking.
-pub const TRACK_STEREO: OpSpec = OpSpec {
-    name: "track_stereo",
-    family: "pnp_ba",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/track_stereo.md")),
-    kind: OpKind::Transform,
-    inputs: tracker_inputs!(STEREO_DEPTH.spec, RIG.spec),
-    outputs: OUTPUTS,
-    params: Common::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: Some(MAP_STORE),
-    build: |p| build(p, Sensor::Stereo),
-};
+pub const TRACK_STEREO: OpSpec = OpSpec::transform(
+    "track_stereo",
+    "pnp_ba",
+    dynaflow_engine::op::doc_line(include_str!("docs/track_stereo.md")),
+    |p| build(p, Sensor::Stereo),
+)
+.inputs(tracker_inputs!(STEREO_DEPTH.spec, RIG.spec))
+.outputs(OUTPUTS)
+.params(Common::PARAMS)
+.cpu_heavy()
+.map_store(MAP_STORE);
 
 /// ORB-SLAM2's monocular tracking.
-pub const TRACK_MONO: OpSpec = OpSpec {
-    name: "track_mono",
-    family: "pnp_ba",
-    doc: dynaflow_engine::op::doc_line(include_str!("docs/track_mono.md")),
-    kind: OpKind::Transform,
-    inputs: tracker_inputs!(),
-    outputs: OUTPUTS,
-    params: Common::PARAMS,
-    cpu_heavy: true,
-    ground_truth_outputs: None,
-    map_store: Some(MAP_STORE),
-    build: |p| build(p, Sensor::Mono),
-};
+pub const TRACK_MONO: OpSpec =
+    OpSpec::transform("track_mono", "pnp_ba", dynaflow_engine::op::doc_line(include_str!("docs/track_mono.md")), |p| {
+        build(p, Sensor::Monocular)
+    })
+    .inputs(tracker_inputs!())
+    .outputs(OUTPUTS)
+    .params(Common::PARAMS)
+    .cpu_heavy()
+    .map_store(MAP_STORE);
 
 /// What `pnp_track` graphs change to.
 pub const PNP_TRACK_MIGRATION: &str = "`pnp_track` is one operator per sensor now: `op: track_rgbd` (what `sensor: rgbd`, the default, was), `op: track_stereo` (wire `depth: stereo.depth` and `stereo: camera.stereo`) or `op: track_mono`; drop the `sensor` param";
@@ -199,7 +194,11 @@ fn check_save_path(path: &std::path::Path) -> Result<(), OpError> {
 
 fn build(p: &Params, sensor: Sensor) -> Result<Instance, OpError> {
     let config = Common::from_params(p)?;
-    let depth_camera = if sensor == Sensor::Rgbd { Some(DepthCamera::from_params(p)?) } else { None };
+    let setup = match sensor {
+        Sensor::Rgbd => Setup::Rgbd(DepthCamera::from_params(p)?),
+        Sensor::Stereo => Setup::Stereo,
+        Sensor::Monocular => Setup::Mono,
+    };
     let (vocabulary, _, _) = super::load_vocabulary(&config.vocabulary)?;
     if !config.mapping && config.load_map.as_os_str().is_empty() {
         return Err(OpError::Config {
@@ -220,14 +219,12 @@ fn build(p: &Params, sensor: Sensor) -> Result<Instance, OpError> {
         )
     };
     Ok(Instance::Transform(Box::new(Track {
-        sensor,
+        setup,
         config,
-        depth_camera,
         vocabulary,
         loaded,
         tracker: None,
-        trajectory: Vec::new(),
-        ground_truth: Vec::new(),
+        log: TrajectoryLog::default(),
         counts: [0; 5],
         last_map: None,
         last_loop: None,
@@ -238,17 +235,15 @@ fn build(p: &Params, sensor: Sensor) -> Result<Instance, OpError> {
 }
 
 struct Track {
-    sensor: Sensor,
+    setup: Setup,
     config: Common,
-    /// `track_rgbd`'s own parameters.
-    depth_camera: Option<DepthCamera>,
     /// For relocalisation in the whole map.
     vocabulary: Arc<dynaflow_slam::bow::Vocabulary>,
     /// A map to start in (`load_map`), until the first frame gives the camera.
     loaded: Option<dynaflow_slam::keyframe_map::KeyFrameMap>,
     tracker: Option<Tracker>,
-    trajectory: Vec<(f64, Isometry3<f64>)>,
-    ground_truth: Vec<(f64, Isometry3<f64>)>,
+    /// The poses sent and the ground truth, scored at the end.
+    log: TrajectoryLog,
     /// Frames per state code.
     counts: [u64; 5],
     /// The map batch last applied (a `latest` join may repeat it).
@@ -293,16 +288,16 @@ impl Track {
     /// The tracker for this camera, made on the first frame (a loaded map gets its camera
     /// here; one made with another camera's images is refused, naming the file).
     fn start(&mut self, ctx: &mut Context, k: &CameraInfo, rig: Option<&StereoRig>) -> Result<Tracker, OpError> {
-        let mut tc = match (self.sensor, rig, &self.depth_camera) {
-            (Sensor::Mono, _, _) => TrackerConfig::monocular(k.fx),
-            (Sensor::Stereo, Some(rig), _) => TrackerConfig::stereo(k.fx, crate::frontend::stereo_baseline(rig)?),
-            (_, _, Some(d)) => TrackerConfig {
+        let mut tc = match (&self.setup, rig) {
+            (Setup::Mono, _) => TrackerConfig::monocular(k.fx),
+            (Setup::Stereo, Some(rig)) => TrackerConfig::stereo(k.fx, crate::frontend::stereo_baseline(rig)?),
+            (Setup::Stereo, None) => return Err(OpError::Input("`track_stereo` has no rig".into())),
+            (Setup::Rgbd(d), _) => TrackerConfig {
                 bf: k.fx * d.baseline,
                 th_depth: d.close_depth,
                 max_depth: d.max_depth,
                 ..TrackerConfig::rgbd(k.fx)
             },
-            _ => return Err(OpError::Failed("the tracker has no depth configuration".into())),
         };
         tc.search_radius = self.config.search_radius;
         tc.min_inliers = self.config.min_inliers as usize;
@@ -337,14 +332,10 @@ impl Operator for Track {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (msg, kp) = KEYPOINTS.require(inputs)?;
         let (_, k) = CAMERA_INFO.require(inputs)?;
-        let depth = match self.sensor {
-            Sensor::Mono => None,
-            Sensor::Rgbd => Some(DEPTH_CAMERA.require(inputs)?.1),
-            Sensor::Stereo => Some(STEREO_DEPTH.require(inputs)?.1),
-        };
-        let rig = match self.sensor {
-            Sensor::Stereo => Some(RIG.require(inputs)?.1),
-            _ => None,
+        let (depth, rig) = match self.setup {
+            Setup::Mono => (None, None),
+            Setup::Rgbd(_) => (Some(DEPTH_CAMERA.require(inputs)?.1), None),
+            Setup::Stereo => (Some(STEREO_DEPTH.require(inputs)?.1), Some(RIG.require(inputs)?.1)),
         };
         if let Some(m) = MASK.get(inputs)?
             && (m.width, m.height) != (k.width, k.height)
@@ -396,7 +387,7 @@ impl Operator for Track {
         }
         self.frames += 1;
         if let Some(gt) = GT_POSE.get(inputs)? {
-            self.ground_truth.push((stamp, gt.world_from_cam));
+            self.log.ground_truth(stamp, gt.world_from_cam);
         }
         let header = Header { frame_id: Arc::from("world"), ..msg.header.clone() };
         let stats = vec![
@@ -412,7 +403,7 @@ impl Operator for Track {
         // the pose stream and the trajectory, as ORB-SLAM2's SaveTrajectoryTUM and the TUM tools
         // leave lost frames out (their count is in the report beside the ATE).
         if let Some(world_from_cam) = r.world_from_cam.filter(|_| r.state != dynaflow_slam::TrackState::Lost) {
-            self.trajectory.push((stamp, world_from_cam));
+            self.log.pose(stamp, world_from_cam);
             out = out.send(&POSE, header.clone(), Pose { world_from_cam });
         }
         if let Some(kf) = &r.keyframe {
@@ -422,15 +413,20 @@ impl Operator for Track {
     }
 
     fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
-        // The trajectory file first: whatever happens next, the estimate is on disk.
-        let written = self.write_trajectory(ctx);
+        // The online estimate (each frame's pose as it was sent) and the final one (rebuilt
+        // from the key frames at the end, as ORB-SLAM2 saves it: local BA's refinements and
+        // loop corrections included). The trajectory files first: whatever happens next, the
+        // estimate is on disk.
+        let final_trajectory = self.tracker.as_ref().map(Tracker::keyframe_trajectory).unwrap_or_default();
+        let written = self.log.write(ctx, &final_trajectory);
         let saved = self.save_map();
         let [not_initialised, new_map, tracked, relocalised, lost] = self.counts;
+        let sensor = self.setup.sensor();
         let mut report = TrackerReport {
             frames: FrameStates { not_initialised, new_map, tracked, relocalised, lost },
             maps: self.tracker.as_ref().map_or(0, Tracker::map_id),
             map_relocalisations: self.tracker.as_ref().map_or(0, Tracker::map_relocalisations),
-            sensor: self.sensor.as_str().to_owned(),
+            sensor: sensor_name(sensor).to_owned(),
             first_pose_frame: self.first_pose_frame,
             ..TrackerReport::default()
         };
@@ -439,34 +435,8 @@ impl Operator for Track {
             report.initialised = Some(false);
             report.not_initialised_because = Some(why);
         }
-        // The online estimate (each frame's pose as it was sent) and the final one (rebuilt
-        // from the key frames at the end, as ORB-SLAM2 saves it: local BA's refinements and
-        // loop corrections included).
-        let final_trajectory = self.final_trajectory();
-        if !self.ground_truth.is_empty() {
-            // evo's default tolerance (10 ms); SE(3) alignment as the RGB-D papers report it,
-            // Sim(3) for a single camera (its scale is arbitrary; evo `-as`).
-            let (align, name) = if self.sensor == Sensor::Mono { (Align::Sim3, "sim3") } else { (Align::Se3, "se3") };
-            let score = |poses: &[(f64, Isometry3<f64>)]| -> Option<Result<(Ate, Rpe), String>> {
-                if poses.is_empty() {
-                    return None;
-                }
-                Some(match evaluate(&self.ground_truth, poses, 0.01, align, 1) {
-                    Ok(e) => Ok((Ate::of(&e, name), Rpe::of(&e))),
-                    Err(e) => Err(e.to_string()),
-                })
-            };
-            match score(&self.trajectory) {
-                Some(Ok((a, r))) => (report.ate, report.rpe) = (Some(a), Some(r)),
-                Some(Err(e)) => report.ate_error = Some(e),
-                None => {}
-            }
-            match score(&final_trajectory) {
-                Some(Ok((a, r))) => (report.ate_final, report.rpe_final) = (Some(a), Some(r)),
-                Some(Err(e)) => report.ate_final_error = Some(e),
-                None => {}
-            }
-        }
+        let align = if sensor == Sensor::Monocular { Align::Sim3 } else { Align::Se3 };
+        self.log.score(&final_trajectory, align, &mut report);
         match &saved {
             Ok(Some((keyframes, points))) => {
                 report.map_saved = Some(MapSaved {
@@ -493,7 +463,7 @@ impl Track {
             return None;
         }
         let [not_initialised, _, _, _, lost] = self.counts;
-        Some(if self.sensor == Sensor::Mono {
+        Some(if matches!(self.setup, Setup::Mono) {
             let last = self.tracker.as_ref().and_then(Tracker::init_failure).unwrap_or("no frame");
             format!(
                 "the monocular tracker never initialised in {not_initialised} frames (it needs two views with enough parallax); the last attempt: {last}"
@@ -530,39 +500,5 @@ impl Track {
         dynaflow_engine::files::write_atomic(path, &dynaflow_slam::map_file::encode(map))
             .map_err(|source| OpError::Io { path: path.clone(), source })?;
         Ok(Some((map.kfs.len(), map.points.len())))
-    }
-
-    fn final_trajectory(&self) -> Vec<(f64, Isometry3<f64>)> {
-        self.tracker.as_ref().map(Tracker::keyframe_trajectory).unwrap_or_default()
-    }
-
-    /// `<out>/<stem>.<node>.trajectory.txt` (the online estimate), `.final_trajectory.txt`
-    /// (rebuilt from the final key frames, ORB-SLAM2's `SaveTrajectoryTUM`), and with `gt_pose`
-    /// the ground truth of the same frames beside them (`.groundtruth.txt`), all TUM format
-    /// (`dynaflow eval`, `dynaflow bench`).
-    fn write_trajectory(&self, ctx: &Context) -> Result<(), OpError> {
-        let final_trajectory = self.final_trajectory();
-        for (what, poses) in [
-            ("trajectory", &self.trajectory),
-            ("final_trajectory", &final_trajectory),
-            ("groundtruth", &self.ground_truth),
-        ] {
-            // The estimate's file is written even empty (a tracker that never initialised),
-            // so a script finds it; the ground truth only when there is some.
-            if poses.is_empty() && what == "groundtruth" {
-                continue;
-            }
-            let Some(path) = ctx.output_file(&format!("{what}.txt")) else { return Ok(()) };
-            let io = |source| OpError::Io { path: path.clone(), source };
-            let mut f = std::io::BufWriter::new(dynaflow_engine::files::create_new(&path).map_err(io)?);
-            writeln!(f, "# timestamp tx ty tz qx qy qz qw (world_from_cam, dynaflow {what})").map_err(io)?;
-            for (t, p) in poses.iter() {
-                let (v, q) = (p.translation.vector, p.rotation.coords);
-                writeln!(f, "{t:.6} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9} {:.9}", v.x, v.y, v.z, q.x, q.y, q.z, q.w)
-                    .map_err(io)?;
-            }
-            f.flush().map_err(io)?;
-        }
-        Ok(())
     }
 }

@@ -3,27 +3,18 @@
 use crate::inference::{ClassName, class_list};
 use dynaflow_culling::Confusion;
 use dynaflow_engine::msg::{PointLabels, Scalars, SegmentationMask};
-use dynaflow_engine::op::{
-    Context, In, InputRole, Inputs, Instance, OpError, OpKind, OpSpec, Operator, Out, Outputs, Params,
-};
+use dynaflow_engine::op::{Context, In, InputRole, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 use std::collections::BTreeSet;
 
 // --- mask_stats ------------------------------------------------------------------------
 
-pub(super) const MASK_STATS: OpSpec = OpSpec {
-    name: "mask_stats",
-    family: "util",
-    doc: "Statistics of a segmentation mask: the fraction of pixels of a non-background class (`dynamic_fraction`) and the number of distinct instances (`instances`). Shows how dynamic each frame of a sequence is.",
-    kind: OpKind::Transform,
-    inputs: &[MASK.spec],
-    outputs: &[STATS.spec],
-    params: &[],
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |_| Ok(Instance::Transform(Box::new(MaskStats))),
-};
+const MASK_STATS_DOC: &str = "Statistics of a segmentation mask: the fraction of pixels of a non-background class (`dynamic_fraction`) and the number of distinct instances (`instances`). Shows how dynamic each frame of a sequence is.";
+
+pub(super) const MASK_STATS: OpSpec =
+    OpSpec::transform("mask_stats", "util", MASK_STATS_DOC, |_| Ok(Instance::Transform(Box::new(MaskStats))))
+        .inputs(&[MASK.spec])
+        .outputs(&[STATS.spec]);
 
 const MASK: In<SegmentationMask> =
     In::required("mask", "class (and instance) mask; class 0 is background/static").with_role(InputRole::Statistics);
@@ -52,26 +43,19 @@ params! {
     }
 }
 
-pub(super) const MASK_IOU: OpSpec = OpSpec {
-    name: "mask_iou",
-    family: "util",
-    doc: "Agreement of a mask with a reference mask (the generator's `gt_mask`): per frame the intersection over union, precision and recall of the `classes` pixels against the reference's non-zero pixels; the node report gives the run's pooled values (summed intersections over summed unions) and the per-frame mean. An evaluation: it reads ground truth, so its outputs are marked so.",
-    kind: OpKind::Transform,
-    inputs: &[IOU_MASK.spec, TRUTH.spec],
-    outputs: &[IOU.spec],
-    params: IouConfig::PARAMS,
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |p: &Params| {
-        Ok(Instance::Transform(Box::new(MaskIou {
-            config: IouConfig::from_params(p)?,
-            sums: [0; 4],
-            frames: 0,
-            iou_sum: 0.0,
-        })))
-    },
-};
+const MASK_IOU_DOC: &str = "Agreement of a mask with a reference mask (the generator's `gt_mask`): per frame the intersection over union, precision and recall of the `classes` pixels against the reference's non-zero pixels; the node report gives the run's pooled values (summed intersections over summed unions) and the per-frame mean. An evaluation: it reads ground truth, so its outputs are marked so.";
+
+pub(super) const MASK_IOU: OpSpec = OpSpec::transform("mask_iou", "util", MASK_IOU_DOC, |p: &Params| {
+    Ok(Instance::Transform(Box::new(MaskIou {
+        config: IouConfig::from_params(p)?,
+        sums: [0; 4],
+        frames: 0,
+        iou_sum: 0.0,
+    })))
+})
+.inputs(&[IOU_MASK.spec, TRUTH.spec])
+.outputs(&[IOU.spec])
+.params(IouConfig::PARAMS);
 
 const IOU_MASK: In<SegmentationMask> =
     In::required("mask", "the mask to score (a segmenter's, `box_to_mask`'s)").with_role(InputRole::Statistics);
@@ -145,19 +129,13 @@ impl Operator for MaskIou {
 
 // --- label_accuracy --------------------------------------------------------------------
 
-pub(super) const LABEL_ACCURACY: OpSpec = OpSpec {
-    name: "label_accuracy",
-    family: "util",
-    doc: "Precision and recall of a culling rule's labels against a reference mask (the generator's `gt_mask`): a label is truly dynamic where the reference is non-zero at its point. Per frame `precision`, `recall` (1 where nothing is to be found, or nothing was labelled), `tp`, `fp`, `fn`, `points`, `outside` (labels at points the reference does not cover: not scored, counted); the node report pools the run (`dynaflow bench` puts it next to the ATE). An evaluation: it reads ground truth, decides nothing; frames without a reference give nothing.",
-    kind: OpKind::Transform,
-    inputs: &[ACC_LABELS.spec, ACC_TRUTH.spec],
-    outputs: &[ACCURACY.spec],
-    params: &[],
-    cpu_heavy: false,
-    ground_truth_outputs: None,
-    map_store: None,
-    build: |_| Ok(Instance::Transform(Box::new(LabelAccuracy::default()))),
-};
+const LABEL_ACCURACY_DOC: &str = "Precision and recall of a culling rule's labels against a reference mask (the generator's `gt_mask`): a label is truly dynamic where the reference is non-zero at its point. Per frame `precision`, `recall` (1 where nothing is to be found, or nothing was labelled), `tp`, `fp`, `fn`, `points`, `outside` (labels at points the reference does not cover: not scored, counted); the node report pools the run (`dynaflow bench` puts it next to the ATE). An evaluation: it reads ground truth, decides nothing; frames without a reference give nothing.";
+
+pub(super) const LABEL_ACCURACY: OpSpec = OpSpec::transform("label_accuracy", "util", LABEL_ACCURACY_DOC, |_| {
+    Ok(Instance::Transform(Box::new(LabelAccuracy::default())))
+})
+.inputs(&[ACC_LABELS.spec, ACC_TRUTH.spec])
+.outputs(&[ACCURACY.spec]);
 
 const ACC_LABELS: In<PointLabels> =
     In::required("labels", "a rule's labels, each at its point").with_role(InputRole::Statistics);

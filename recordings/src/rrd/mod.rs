@@ -4,6 +4,10 @@
 //! the timestamp column of the trajectory files; a second timeline here would add a column per
 //! component to the footer manifest kept in memory, see below.)
 //!
+//! Why one file of this size: `record` is one `match` over every port type, each arm that
+//! type's archetype (the table below); then its unit tests (change-only logging, path
+//! segments, shared encodings). The `.rrd` writer itself is `file.rs`.
+//!
 //! | port type | entity | archetype |
 //! |---|---|---|
 //! | image | `/<node>/<port>` | `EncodedImage` (JPEG/PNG), `Image` with `--image-format raw` |
@@ -28,9 +32,6 @@
 //! waits to be written is bounded in bytes at every stage: rows per entity in the batcher and
 //! the batcher's in-flight budget; the file writer encodes and writes each chunk as it comes,
 //! with no queue of its own.
-//!
-//! Size: 580 lines of code, then its unit tests (change-only logging, path segments, shared
-//! encodings); the `.rrd` writer itself is `file.rs`.
 
 use std::collections::{BTreeMap, HashMap};
 use std::path::PathBuf;
