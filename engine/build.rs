@@ -10,7 +10,11 @@ fn main() {
         .map(|s| s.trim().to_owned())
         .filter(|s| !s.is_empty())
         .unwrap_or_else(|| "unknown".to_owned());
+    // GIT_OPTIONAL_LOCKS=0: `git status` would otherwise refresh and rewrite `.git/index`, which
+    // this script watches, so the next cargo invocation would rebuild the engine and every
+    // crate above it (a fresh clone's first status always refreshes it).
     let dirty = std::process::Command::new("git")
+        .env("GIT_OPTIONAL_LOCKS", "0")
         .args(["status", "--porcelain", "--untracked-files=no"])
         .output()
         .ok()
