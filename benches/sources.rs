@@ -29,8 +29,24 @@ fn main() {
         std::hint::black_box(clean.frame(k, false));
     }
     let render = t.elapsed().as_secs_f64();
+    // The loop walks through the middle of the room: people and furniture beside and behind
+    // the camera, where the culling by screen rectangles matters most.
+    let round = Generator::new(SynthConfig {
+        motion: dynaflow_datasets::synth::Motion::Loop,
+        depth_noise: false,
+        image_noise: 0.0,
+        blur: false,
+        ..SynthConfig::default()
+    });
+    let t = Instant::now();
+    for k in 0..frames {
+        // Spread over the whole round (900 frames).
+        std::hint::black_box(round.frame(k * 900 / frames.max(1), false));
+    }
+    let looped = t.elapsed().as_secs_f64();
     println!("synth: {frames} frames 640x480 (2 people, xyz), {threads} threads");
     println!("  render only (clean)   : {:6.1} frames/s", frames as f64 / render);
+    println!("  render only, loop     : {:6.1} frames/s (frames spread over one round)", frames as f64 / looped);
     println!("  render + sensor model : {:6.1} frames/s (Kinect noise, blur; goal >= 30)", frames as f64 / synth);
 
     let dir = std::env::temp_dir().join(format!("dynaflow-bench-src-{}", std::process::id()));

@@ -1,7 +1,8 @@
 //! A ray caster for the scene: per pixel the nearest of the room's inner faces, the furniture
 //! boxes and the people's boxes. Rays are `((u - cx)/fx, (v - cy)/fy, 1)` in the camera frame,
 //! so the ray parameter is the z-depth directly. Objects are culled per pixel by their
-//! projected screen rectangle; rows are split across threads.
+//! projected screen rectangle (of the part in front of the camera: a box behind it is never
+//! tested); rows are split across threads.
 
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 
@@ -38,25 +39,50 @@ pub struct Rendered {
 struct Prepared<'a> {
     part: &'a Part,
     cam_from_part_rot: Matrix3<f64>,
-    cam_from_part_t: Vector3<f64>,
+    /// The inverse rotation and the camera centre in part coordinates (`Rᵀ(0 − t)`), once per
+    /// frame instead of once per ray.
+    part_from_cam_rot: Matrix3<f64>,
+    origin_in_part: Vector3<f64>,
     /// Screen rectangle `[u0, v0, u1, v1]` (inclusive) where the box may appear.
     rect: [i64; 4],
     dynamic_index: u32,
 }
 
-fn prepare<'a>(part: &'a Part, cam_from_world: &Isometry3<f64>, k: &Intrinsics, dynamic_index: u32) -> Prepared<'a> {
+fn prepare<'a>(
+    part: &'a Part,
+    cam_from_world: &Isometry3<f64>,
+    k: &Intrinsics,
+    dynamic_index: u32,
+    cull: bool,
+) -> Prepared<'a> {
     let cam_from_part = cam_from_world * part.world_from_part;
     let (w, h) = (i64::from(k.width), i64::from(k.height));
-    let mut rect = [i64::MAX, i64::MAX, i64::MIN, i64::MIN];
-    let mut behind = false;
-    for corner in 0..8 {
-        let s = |bit: u32| if corner & (1 << bit) == 0 { -1.0 } else { 1.0 };
-        let p = cam_from_part * Point3::new(s(0) * part.half.x, s(1) * part.half.y, s(2) * part.half.z);
-        if p.z < 0.05 {
-            behind = true;
-            break;
+    let corners: Vec<Point3<f64>> = (0..8)
+        .map(|corner: u32| {
+            let s = |bit: u32| if corner & (1 << bit) == 0 { -1.0 } else { 1.0 };
+            cam_from_part * Point3::new(s(0) * part.half.x, s(1) * part.half.y, s(2) * part.half.z)
+        })
+        .collect();
+    // The part of the box a ray can hit lies at z >= NEAR (`hit_box` takes hits at t > 1e-4,
+    // and t is the z-depth): the corners in front of that plane and where the box's edges
+    // cross it. Its projection bounds every pixel the box can cover, so the culling is exact;
+    // a box wholly behind the camera is never tested.
+    const NEAR: f64 = 0.5e-4;
+    let mut front: Vec<Point3<f64>> = corners.iter().filter(|p| p.z >= NEAR).copied().collect();
+    for a in 0..8usize {
+        for bit in 0..3 {
+            let b = a | (1 << bit);
+            let (p, q) = (corners[a], corners[b]);
+            if b != a && (p.z < NEAR) != (q.z < NEAR) {
+                front.push(p + (q - p) * ((NEAR - p.z) / (q.z - p.z)));
+            }
         }
+    }
+    let mut rect = [i64::MAX, i64::MAX, i64::MIN, i64::MIN];
+    for p in &front {
         let (u, v) = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
+        // Clamped a little beyond the image (the tests allow a pixel of margin).
+        let (u, v) = (u.clamp(-4.0, (w + 4) as f64), v.clamp(-4.0, (h + 4) as f64));
         rect = [
             rect[0].min(u.floor() as i64),
             rect[1].min(v.floor() as i64),
@@ -64,24 +90,24 @@ fn prepare<'a>(part: &'a Part, cam_from_world: &Isometry3<f64>, k: &Intrinsics, 
             rect[3].max(v.ceil() as i64),
         ];
     }
-    if behind {
-        rect = [0, 0, w - 1, h - 1];
+    if front.is_empty() {
+        // Nothing in front: a rectangle no pixel (nor its margin) falls in.
+        rect = [w + 4, h + 4, -4, -4];
     }
-    Prepared {
-        part,
-        cam_from_part_rot: cam_from_part.rotation.to_rotation_matrix().into_inner(),
-        cam_from_part_t: cam_from_part.translation.vector,
-        rect,
-        dynamic_index,
+    if !cull {
+        rect = [-4, -4, w + 4, h + 4];
     }
+    let cam_from_part_rot = cam_from_part.rotation.to_rotation_matrix().into_inner();
+    let part_from_cam_rot = cam_from_part_rot.transpose();
+    let origin_in_part = -(part_from_cam_rot * cam_from_part.translation.vector);
+    Prepared { part, cam_from_part_rot, part_from_cam_rot, origin_in_part, rect, dynamic_index }
 }
 
 /// Slab test of a camera-frame ray (origin 0) against an oriented box: `(t, face axis, local point)`.
 fn hit_box(p: &Prepared<'_>, d: &Vector3<f64>) -> Option<(f64, usize, Vector3<f64>)> {
     // Ray in part coordinates: o' = Rᵀ(0 − t), d' = Rᵀ d.
-    let rt = p.cam_from_part_rot.transpose();
-    let o = -(rt * p.cam_from_part_t);
-    let dl = rt * d;
+    let o = p.origin_in_part;
+    let dl = p.part_from_cam_rot * d;
     let mut tmin = f64::NEG_INFINITY;
     let mut tmax = f64::INFINITY;
     let mut axis = 0;
@@ -131,12 +157,25 @@ pub fn render(
     k: &Intrinsics,
     want_hits: bool,
 ) -> Rendered {
+    render_culled(scene, dynamic, world_from_cam, k, want_hits, true)
+}
+
+/// [`render`], with the per-object screen rectangles (`cull`) or every object tested by every
+/// ray (the reference the culling must reproduce bit for bit).
+pub(super) fn render_culled(
+    scene: &Scene,
+    dynamic: &[Part],
+    world_from_cam: &Isometry3<f64>,
+    k: &Intrinsics,
+    want_hits: bool,
+    cull: bool,
+) -> Rendered {
     let cam_from_world = world_from_cam.inverse();
     let objects: Vec<Prepared<'_>> = scene
         .statics()
         .iter()
-        .map(|p| prepare(p, &cam_from_world, k, u32::MAX))
-        .chain(dynamic.iter().enumerate().map(|(i, p)| prepare(p, &cam_from_world, k, i as u32)))
+        .map(|p| prepare(p, &cam_from_world, k, u32::MAX, cull))
+        .chain(dynamic.iter().enumerate().map(|(i, p)| prepare(p, &cam_from_world, k, i as u32, cull)))
         .collect();
     let (w, h) = (k.width as usize, k.height as usize);
     let n = w * h;

@@ -236,3 +236,54 @@ fn on_the_loop_people_pass_the_camera_at_a_distance_and_stay_in_view() {
         assert!(seen >= 15, "seed {seed}: people in view in only {seen} of 90 frames");
     }
 }
+
+#[test]
+fn culling_by_screen_rectangles_changes_no_pixel() {
+    // Every case of the rectangles: the loop walks through the middle of the room (furniture
+    // and people beside, behind and in front of the camera), and a camera set beside each
+    // piece of furniture looking along it, so the box reaches from behind the camera into view.
+    let g = Generator::new(SynthConfig {
+        motion: Motion::Loop,
+        intrinsics: scaled_fr3(160, 120),
+        ..SynthConfig::default()
+    });
+    let k = &g.config().intrinsics;
+    let mut views: Vec<(u64, nalgebra::Isometry3<f64>)> = (0..900).step_by(15).map(|f| (f, g.pose(f))).collect();
+    for part in g.scene.statics() {
+        let c = part.world_from_part.translation.vector;
+        let side = nalgebra::Vector3::new(0.0, -c.y.signum() * (part.half.y + 0.3), 0.0);
+        let at = nalgebra::Translation3::from(c + side);
+        views.push((
+            0,
+            nalgebra::Isometry3::from_parts(at, scene::look_rotation(&nalgebra::Vector3::x(), &nalgebra::Vector3::z())),
+        ));
+    }
+    let mut straddling = 0;
+    for (frame, pose) in views {
+        let parts = g.scene.people_parts(g.time(frame));
+        let culled = render::render_culled(&g.scene, &parts, &pose, k, true, true);
+        let every = render::render_culled(&g.scene, &parts, &pose, k, true, false);
+        assert_eq!(culled.rgb, every.rgb, "frame {frame}");
+        assert_eq!(culled.instance, every.instance, "frame {frame}");
+        let bits = |d: &[f32]| d.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&culled.depth), bits(&every.depth), "frame {frame}");
+        let hits =
+            |r: &render::Rendered| r.hits.iter().map(|h| (h.part, h.point.map(f32::to_bits))).collect::<Vec<_>>();
+        assert_eq!(hits(&culled), hits(&every), "frame {frame}");
+        // Count the views where a box both seen and partly behind the camera was rendered.
+        let cam_from_world = pose.inverse();
+        straddling += usize::from(g.scene.statics().iter().chain(&parts).any(|p| {
+            let zs: Vec<f64> = (0..8)
+                .map(|c: u32| {
+                    let s = |b: u32| if c & (1 << b) == 0 { -1.0 } else { 1.0 };
+                    (cam_from_world
+                        * p.world_from_part
+                        * Point3::new(s(0) * p.half.x, s(1) * p.half.y, s(2) * p.half.z))
+                    .z
+                })
+                .collect();
+            zs.iter().any(|&z| z < 0.0) && zs.iter().any(|&z| z > 0.5)
+        }));
+    }
+    assert!(straddling >= 10, "only {straddling} views with a box reaching from behind the camera into view");
+}
