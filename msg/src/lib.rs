@@ -10,13 +10,15 @@
 //!
 //! Submodules group payloads by domain: `image` (pixels and intrinsics), `features`
 //! (keypoints, tracks, per-point labels), `semantic` (detections, masks), `geometry`
-//! (poses, trajectories, clouds, octree updates) and `scalar` (metrics).
+//! (poses, trajectories, clouds, octree updates), `inertial` (IMU samples and calibration) and
+//! `scalar` (metrics).
 
 pub mod codec;
 mod digest;
 mod features;
 mod geometry;
 mod image;
+mod inertial;
 mod scalar;
 mod semantic;
 
@@ -30,6 +32,7 @@ pub use geometry::{
     SparseMap, StampedPose, Trajectory,
 };
 pub use image::{CameraInfo, DepthImage, Image, PixelFormat, StereoRig};
+pub use inertial::{ImuCalibration, ImuSample, STANDARD_GRAVITY};
 pub use scalar::Scalars;
 pub use semantic::{Detection, Detections, SegmentationMask, class_rgb};
 

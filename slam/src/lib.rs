@@ -21,6 +21,8 @@
 //!   database, SE(3) RANSAC and guided matching, fusion, the essential graph.
 //! - `map_file`: a saved map (key frames, keypoints, points, vocabulary id), for map reuse.
 //! - `pose_graph`: SE(3) pose-graph optimisation (the essential graph).
+//! - `imu`: IMU pre-integration on the manifold (Forster et al. 2017): deltas, covariance,
+//!   bias Jacobians, re-integration.
 //! - `eval`: trajectory evaluation (association, Umeyama alignment, ATE and RPE) as evo does it.
 
 #![warn(missing_docs)]
@@ -28,6 +30,7 @@
 pub mod ba;
 pub mod bow;
 pub mod eval;
+pub mod imu;
 pub mod keyframe_db;
 pub mod keyframe_map;
 pub mod local_map;
