@@ -10,6 +10,7 @@
 //! (writing the TUM RGB-D layout). The `synth` operator that streams it into a graph lives in
 //! `dynaflow-operators`.
 
+mod imu;
 mod kitti;
 mod motion;
 mod render;
@@ -18,6 +19,7 @@ mod sensor;
 mod texture;
 mod tum;
 
+pub use imu::DIFF_STEP;
 pub use kitti::{KittiWriteOptions, write_kitti};
 pub use motion::Motion;
 pub use render::Intrinsics;

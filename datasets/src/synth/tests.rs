@@ -287,3 +287,29 @@ fn culling_by_screen_rectangles_changes_no_pixel() {
     }
     assert!(straddling >= 10, "only {straddling} views with a box reaching from behind the camera into view");
 }
+
+#[test]
+fn the_noisy_imu_has_the_datasheets_white_noise_and_is_seeded() {
+    // 60 s at 200 Hz. The sample-to-sample differences of the error cancel the slowly walking
+    // bias (its step is 1e-3 of the white noise's), leaving twice the white variance.
+    let calibration = dynaflow_msg::ImuCalibration::adis16448();
+    let g = Generator::new(SynthConfig { motion: Motion::Halfsphere, seed: 5, ..SynthConfig::default() });
+    let (noisy, exact) = (g.imu(&calibration, 60.0, true), g.imu(&calibration, 60.0, false));
+    assert_eq!(noisy.len(), 12_001);
+    let std_of_differences = |pick: &dyn Fn(&dynaflow_msg::ImuSample) -> nalgebra::Vector3<f64>| {
+        let e: Vec<nalgebra::Vector3<f64>> = noisy.iter().zip(&exact).map(|(n, x)| pick(n) - pick(x)).collect();
+        let d: Vec<f64> = e.windows(2).flat_map(|w| (w[1] - w[0]).iter().copied().collect::<Vec<_>>()).collect();
+        (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64 / 2.0).sqrt()
+    };
+    let rate_sqrt = calibration.rate_hz.sqrt();
+    for (name, measured, expected) in [
+        ("gyro", std_of_differences(&|s| s.gyro), calibration.gyro_noise_density * rate_sqrt),
+        ("accel", std_of_differences(&|s| s.accel), calibration.accel_noise_density * rate_sqrt),
+    ] {
+        println!("{name}: white noise {measured:.4e}, datasheet {expected:.4e}");
+        assert!((measured / expected - 1.0).abs() < 0.03, "{name}: {measured:.4e} against {expected:.4e}");
+    }
+    assert_eq!(g.imu(&calibration, 1.0, true), noisy[..201].to_vec(), "the same seed draws the same samples");
+    let other = Generator::new(SynthConfig { motion: Motion::Halfsphere, seed: 6, ..SynthConfig::default() });
+    assert_ne!(other.imu(&calibration, 1.0, true)[1], noisy[1]);
+}
