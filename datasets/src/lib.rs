@@ -6,6 +6,7 @@
 //! - [`tum`]: TUM RGB-D sequence folders: index files, association, ground truth, frames.
 //! - [`kitti`]: KITTI odometry sequence folders: calibration, times, poses, stereo frames.
 //! - [`folder`]: folders of images (and depth PNGs) in name order.
+//! - [`imu`]: an IMU stream checked against stated rules and cut into one batch per frame.
 //! - [`intrinsics`]: camera intrinsics (TUM's published presets, explicit values,
 //!   `calibration.txt`).
 //! - [`png`]: colour and depth PNG loading with format checks.
@@ -16,6 +17,7 @@
 #![warn(missing_docs)]
 
 pub mod folder;
+pub mod imu;
 pub mod intrinsics;
 pub mod kitti;
 pub mod png;
