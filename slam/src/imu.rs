@@ -37,15 +37,10 @@ pub const REINTEGRATE_GYRO: f64 = 0.01;
 /// See [`REINTEGRATE_GYRO`].
 pub const REINTEGRATE_ACCEL: f64 = 0.1;
 
-/// `[v]×`, the cross-product matrix.
-pub fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
-}
-
 /// The right Jacobian of SO(3) at `phi` (Forster eq. 8).
 pub fn right_jacobian(phi: &Vector3<f64>) -> Matrix3<f64> {
     let theta = phi.norm();
-    let k = skew(phi);
+    let k = phi.cross_matrix();
     if theta < 1e-5 {
         // Taylor expansion: the closed form divides by θ³.
         return Matrix3::identity() - 0.5 * k + k * k / 6.0;
@@ -145,7 +140,7 @@ impl Preintegrated {
         let half = UnitQuaternion::from_scaled_axis(phi * 0.5).to_rotation_matrix().into_inner();
         let r_mid = r * half;
         let j_mid = half.transpose() * self.j_r_g - right_jacobian(&(phi * 0.5)) * (0.5 * dt);
-        let acc_x = skew(&acc);
+        let acc_x = acc.cross_matrix();
         let dt2 = dt * dt;
         // Velocity and position advance with the mid-interval rotation (second order).
         self.delta_p += self.delta_v * dt + 0.5 * r_mid * acc * dt2;

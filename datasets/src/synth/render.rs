@@ -48,6 +48,15 @@ struct Prepared<'a> {
     dynamic_index: u32,
 }
 
+/// The eight corners of `part`'s box through `frame_from_part`; corner `c` has coordinate
+/// `+half` on axis `i` where bit `i` of `c` is set, `-half` elsewhere.
+pub(super) fn box_corners(part: &Part, frame_from_part: &Isometry3<f64>) -> [Point3<f64>; 8] {
+    std::array::from_fn(|corner| {
+        let s = |bit: usize| if corner & (1 << bit) == 0 { -1.0 } else { 1.0 };
+        frame_from_part * Point3::new(s(0) * part.half.x, s(1) * part.half.y, s(2) * part.half.z)
+    })
+}
+
 fn prepare<'a>(
     part: &'a Part,
     cam_from_world: &Isometry3<f64>,
@@ -57,12 +66,7 @@ fn prepare<'a>(
 ) -> Prepared<'a> {
     let cam_from_part = cam_from_world * part.world_from_part;
     let (w, h) = (i64::from(k.width), i64::from(k.height));
-    let corners: Vec<Point3<f64>> = (0..8)
-        .map(|corner: u32| {
-            let s = |bit: u32| if corner & (1 << bit) == 0 { -1.0 } else { 1.0 };
-            cam_from_part * Point3::new(s(0) * part.half.x, s(1) * part.half.y, s(2) * part.half.z)
-        })
-        .collect();
+    let corners = box_corners(part, &cam_from_part);
     // The part of the box a ray can hit lies at z >= NEAR (`hit_box` takes hits at t > 1e-4,
     // and t is the z-depth): the corners in front of that plane and where the box's edges
     // cross it. Its projection bounds every pixel the box can cover, so the culling is exact;

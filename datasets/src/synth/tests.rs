@@ -273,15 +273,7 @@ fn culling_by_screen_rectangles_changes_no_pixel() {
         // Count the views where a box both seen and partly behind the camera was rendered.
         let cam_from_world = pose.inverse();
         straddling += usize::from(g.scene.statics().iter().chain(&parts).any(|p| {
-            let zs: Vec<f64> = (0..8)
-                .map(|c: u32| {
-                    let s = |b: u32| if c & (1 << b) == 0 { -1.0 } else { 1.0 };
-                    (cam_from_world
-                        * p.world_from_part
-                        * Point3::new(s(0) * p.half.x, s(1) * p.half.y, s(2) * p.half.z))
-                    .z
-                })
-                .collect();
+            let zs = render::box_corners(p, &(cam_from_world * p.world_from_part)).map(|c| c.z);
             zs.iter().any(|&z| z < 0.0) && zs.iter().any(|&z| z > 0.5)
         }));
     }

@@ -93,10 +93,6 @@ pub fn pnp_dlt(world: &[Point3<f64>], pixels: &[[f64; 2]], cam: &Pinhole) -> Opt
     Some(Isometry3::from_parts(Translation3::from(trans), UnitQuaternion::from_rotation_matrix(&rot)))
 }
 
-fn skew(v: &Vector3<f64>) -> Matrix3<f64> {
-    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
-}
-
 /// SE(3) exponential of `xi = (rho, phi)` (translation first), as a pose increment.
 pub fn exp_se3(xi: &Vector6<f64>) -> Isometry3<f64> {
     let rho = Vector3::new(xi[0], xi[1], xi[2]);
@@ -104,9 +100,9 @@ pub fn exp_se3(xi: &Vector6<f64>) -> Isometry3<f64> {
     let theta = phi.norm();
     let rot = UnitQuaternion::from_scaled_axis(phi);
     let v = if theta < 1e-10 {
-        Matrix3::identity() + 0.5 * skew(&phi)
+        Matrix3::identity() + 0.5 * phi.cross_matrix()
     } else {
-        let a = skew(&phi);
+        let a = phi.cross_matrix();
         Matrix3::identity()
             + (1.0 - theta.cos()) / (theta * theta) * a
             + (theta - theta.sin()) / (theta.powi(3)) * a * a
@@ -181,7 +177,7 @@ pub fn observation_jacobian(
     }
     let mut j = SMatrix::<f64, 3, 6>::zeros();
     j.fixed_view_mut::<3, 3>(0, 0).copy_from(&dp);
-    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(dp * -skew(&pc.coords)));
+    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&(dp * -pc.coords.cross_matrix()));
     Some((r, j))
 }
 
