@@ -49,6 +49,33 @@ pub fn right_jacobian(phi: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::identity() - (1.0 - theta.cos()) / t2 * k + (theta - theta.sin()) / (t2 * theta) * k * k
 }
 
+/// The inverse of [`right_jacobian`] (Forster eq. 9).
+pub fn right_jacobian_inverse(phi: &Vector3<f64>) -> Matrix3<f64> {
+    let theta = phi.norm();
+    let k = phi.cross_matrix();
+    if theta < 1e-5 {
+        return Matrix3::identity() + 0.5 * k + k * k / 12.0;
+    }
+    let c = 1.0 / (theta * theta) - (1.0 + theta.cos()) / (2.0 * theta * theta.sin());
+    Matrix3::identity() + 0.5 * k + c * k * k
+}
+
+/// The first-order Jacobians of the deltas with respect to the biases (at the linearisation
+/// point): `r_g` = ∂ΔR/∂b_g (tangent), `v_g`, `v_a` = ∂Δv/∂b, `p_g`, `p_a` = ∂Δp/∂b.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct BiasJacobians {
+    /// ∂ΔR/∂b_g in ΔR's tangent space.
+    pub r_g: Matrix3<f64>,
+    /// ∂Δv/∂b_g.
+    pub v_g: Matrix3<f64>,
+    /// ∂Δv/∂b_a.
+    pub v_a: Matrix3<f64>,
+    /// ∂Δp/∂b_g.
+    pub p_g: Matrix3<f64>,
+    /// ∂Δp/∂b_a.
+    pub p_a: Matrix3<f64>,
+}
+
 /// One held measurement, kept for re-integration.
 #[derive(Clone, Copy, Debug)]
 struct Step {
@@ -216,6 +243,11 @@ impl Preintegrated {
         self.linearised
     }
 
+    /// The bias Jacobians at the linearisation point.
+    pub fn jacobians(&self) -> BiasJacobians {
+        BiasJacobians { r_g: self.j_r_g, v_g: self.j_v_g, v_a: self.j_v_a, p_g: self.j_p_g, p_a: self.j_p_a }
+    }
+
     /// Covariance of (δφ, δv, δp), from the white measurement noise.
     pub fn covariance(&self) -> &Matrix9 {
         &self.covariance
@@ -259,6 +291,8 @@ impl Preintegrated {
         (Isometry3::from_parts(Translation3::from(p), rotation), v)
     }
 }
+
+pub mod init;
 
 #[cfg(test)]
 mod tests;

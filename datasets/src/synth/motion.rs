@@ -1,5 +1,7 @@
 //! Camera trajectories modelled on the TUM fr3 sequences (`static`, `xyz`, `rpy`, `halfsphere`),
-//! and `loop`, a walk around the room that comes back to where it started (loop closing).
+//! `loop`, a walk around the room that comes back to where it started (loop closing), and
+//! `handheld`, a camera held in the hand that rests, then shakes and turns (visual-inertial
+//! initialisation).
 
 use std::f64::consts::PI;
 
@@ -23,7 +25,20 @@ pub enum Motion {
     /// seconds: frames after that revisit the first ones. People walk their lanes a metre
     /// clear of its circle ([`Motion::walkway`]), in front of it and behind it.
     Loop,
+    /// A camera held in the hand at the back of the room: at rest for [`HANDHELD_REST`]
+    /// seconds (a static IMU initialisation can run), then, eased in over
+    /// [`HANDHELD_EASE`] seconds, it moves along all three axes (±12 to ±25 cm, periods of
+    /// 1.7 to 3.1 s, peak accelerations of 1.0 to 1.6 m/s²) and turns about all three (±7 to
+    /// ±14°, periods of 3.7 to 5.3 s), so that scale, gravity and the biases are observable
+    /// from the first seconds of motion.
+    Handheld,
 }
+
+/// Seconds [`Motion::Handheld`] rests before it moves.
+pub const HANDHELD_REST: f64 = 1.0;
+/// Seconds over which [`Motion::Handheld`]'s motion eases in (a quintic smooth step, so
+/// acceleration stays continuous and the IMU sees no jump).
+pub const HANDHELD_EASE: f64 = 1.5;
 
 /// Seconds of one round of [`Motion::Loop`] (900 frames at 30 Hz).
 pub const LOOP_PERIOD: f64 = 30.0;
@@ -35,7 +50,7 @@ const LOOP_RADIUS: f64 = 0.6;
 
 impl Motion {
     /// Names used in graphs and on the command line.
-    pub const NAMES: &'static [&'static str] = &["static", "xyz", "rpy", "halfsphere", "loop"];
+    pub const NAMES: &'static [&'static str] = &["static", "xyz", "rpy", "halfsphere", "loop", "handheld"];
 
     /// Parse a name.
     pub fn from_name(name: &str) -> Option<Self> {
@@ -45,6 +60,7 @@ impl Motion {
             "rpy" => Some(Self::Rpy),
             "halfsphere" => Some(Self::Halfsphere),
             "loop" => Some(Self::Loop),
+            "handheld" => Some(Self::Handheld),
             _ => None,
         }
     }
@@ -104,6 +120,24 @@ impl Motion {
                 let forward = radial - Vector3::new(0.0, 0.0, 0.08);
                 Isometry3::from_parts(Translation3::from(p), look_rotation(&forward, &up))
             }
+            Motion::Handheld => {
+                // Incommensurate periods (1.7 to 5.3 s), so no two axes move in step.
+                let e = handheld_envelope(t);
+                let shake = Vector3::new(0.25 * w(3.1).sin(), 0.15 * (w(2.3) + 1.0).sin(), 0.12 * w(1.7).sin());
+                let look = look_rotation(&(target - base), &up);
+                let yaw = 0.25 * w(4.3).sin();
+                let pitch = 0.15 * (w(3.7) + 0.5).sin();
+                let roll = 0.12 * w(5.3).sin();
+                let wiggle = UnitQuaternion::from_euler_angles(e * pitch, e * yaw, e * roll);
+                Isometry3::from_parts(Translation3::from(base + e * shake), look * wiggle)
+            }
         }
     }
+}
+
+/// How much of [`Motion::Handheld`]'s motion is on at `t`: 0 at rest, then a quintic smooth
+/// step (zero first and second derivatives at both ends) to 1.
+fn handheld_envelope(t: f64) -> f64 {
+    let x = ((t - HANDHELD_REST) / HANDHELD_EASE).clamp(0.0, 1.0);
+    x * x * x * (x * (6.0 * x - 15.0) + 10.0)
 }

@@ -175,7 +175,7 @@ fn the_synthetic_noise_free_imu_reproduces_the_generators_relative_poses() {
     use dynaflow_datasets::synth::{Generator, Motion, STAMP_BASE, SynthConfig};
     let calibration = ImuCalibration::adis16448();
     let mut worst = (0.0f64, 0.0f64);
-    for motion in [Motion::Xyz, Motion::Halfsphere, Motion::Loop] {
+    for motion in [Motion::Xyz, Motion::Halfsphere, Motion::Loop, Motion::Handheld] {
         let g = Generator::new(SynthConfig { motion, ..SynthConfig::default() });
         let samples = g.imu(&calibration, 12.0, false);
         for start in [0.5, 3.0, 7.25, 10.0] {
