@@ -5,6 +5,7 @@
 //!   writer in the TUM RGB-D layout.
 //! - [`tum`]: TUM RGB-D sequence folders: index files, association, ground truth, frames.
 //! - [`kitti`]: KITTI odometry sequence folders: calibration, times, poses, stereo frames.
+//! - [`euroc`]: EuRoC MAV (ASL) folders: cameras, IMU, ground truth, `sensor.yaml` extrinsics.
 //! - [`folder`]: folders of images (and depth PNGs) in name order.
 //! - [`imu`]: an IMU stream checked against stated rules and cut into one batch per frame.
 //! - [`intrinsics`]: camera intrinsics (TUM's published presets, explicit values,
@@ -16,6 +17,7 @@
 
 #![warn(missing_docs)]
 
+pub mod euroc;
 pub mod folder;
 pub mod imu;
 pub mod intrinsics;
@@ -67,6 +69,7 @@ macro_rules! sequence {
 sequence!(tum::TumSequence, tum::TumFrame);
 sequence!(kitti::KittiSequence, kitti::KittiFrame);
 sequence!(folder::ImageFolder, folder::FolderFrame);
+sequence!(euroc::EurocSequence, euroc::EurocFrame);
 
 /// What reading or writing a sequence can fail with.
 #[derive(Debug, thiserror::Error)]

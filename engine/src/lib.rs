@@ -17,7 +17,7 @@ pub mod runtime;
 pub mod sink;
 pub mod spec;
 pub mod testing;
-pub mod yaml;
+pub use dynaflow_base::yaml;
 
 pub use dynaflow_msg as msg;
 pub use load::{LoadRequest, Loaded, MapRequest, SourceOverride, load, load_str};

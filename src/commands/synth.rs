@@ -1,11 +1,12 @@
-//! `dynaflow synth`: write a generated sequence as a TUM RGB-D folder or a KITTI odometry
-//! stereo sequence.
+//! `dynaflow synth`: write a generated sequence as a TUM RGB-D folder, a KITTI odometry
+//! stereo sequence or a EuRoC MAV folder (cameras, depth, IMU, ground truth).
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use dynaflow_datasets::synth::{
-    Generator, KittiWriteOptions, Motion, PeopleMode, SynthConfig, WriteOptions, scaled_fr3, write_kitti, write_tum,
+    EurocWriteOptions, Generator, KittiWriteOptions, Motion, PeopleMode, SynthConfig, WriteOptions, rig_calibration,
+    scaled_fr3, write_euroc, write_kitti, write_tum,
 };
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
@@ -14,7 +15,7 @@ use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 #[derive(Debug, clap::Args)]
 pub struct SynthArgs {
     /// Camera motion.
-    #[arg(long, default_value = "xyz", value_parser = ["static", "xyz", "rpy", "halfsphere", "loop"])]
+    #[arg(long, default_value = "xyz", value_parser = clap::builder::PossibleValuesParser::new(Motion::NAMES))]
     pub motion: String,
     /// Number of people.
     #[arg(long, default_value_t = 2, value_parser = clap::value_parser!(u64).range(0..=16))]
@@ -44,12 +45,14 @@ pub struct SynthArgs {
     /// No depth noise, image noise or blur (exact rendering).
     #[arg(long)]
     pub clean: bool,
-    /// Layout: `tum` (RGB-D: rgb/, depth/, ground truth, masks) or `kitti` (a rectified stereo
-    /// pair in the KITTI odometry layout: OUT/sequences/00 and OUT/poses/00.txt).
-    #[arg(long, default_value = "tum", value_parser = ["tum", "kitti"])]
+    /// Layout: `tum` (RGB-D: rgb/, depth/, ground truth, masks), `kitti` (a rectified stereo
+    /// pair in the KITTI odometry layout: OUT/sequences/00 and OUT/poses/00.txt) or `euroc`
+    /// (EuRoC MAV: OUT/mav0 with cam0, a rectified cam1, depth0, a 200 Hz ADIS16448-like imu0
+    /// and the body's ground truth; use `--motion handheld` for visual-inertial runs).
+    #[arg(long, default_value = "tum", value_parser = ["tum", "kitti", "euroc"])]
     pub format: String,
-    /// Stereo baseline in metres for `--format kitti` (12 cm: a ZED-class rig at room scale;
-    /// KITTI's own rig is 54 cm, for street depths).
+    /// Stereo baseline in metres for `--format kitti` and `euroc` (12 cm: a ZED-class rig at
+    /// room scale; KITTI's own rig is 54 cm, for street depths).
     #[arg(long, default_value_t = 0.12)]
     pub baseline: f64,
     /// Output folder. Name it `rgbd_dataset_freiburg3_*` and TUM tools pick fr3 intrinsics
@@ -77,10 +80,11 @@ pub fn synth(args: &SynthArgs) -> u8 {
     };
     let t = Instant::now();
     let generator = Generator::new(config);
-    let written = if args.format == "kitti" {
+    if args.format != "tum" {
         if args.flow {
             eprintln!(
-                "error: `--flow` writes TUM-layout extras; KITTI odometry has no flow (drop `--flow` or use `--format tum`)"
+                "error: `--flow` writes TUM-layout extras; {} has no flow (drop `--flow` or use `--format tum`)",
+                args.format
             );
             return EXIT_BAD_INPUT;
         }
@@ -88,6 +92,23 @@ pub fn synth(args: &SynthArgs) -> u8 {
             eprintln!("error: `--baseline {}`: a stereo baseline must be positive metres", args.baseline);
             return EXIT_BAD_INPUT;
         }
+    }
+    if args.format == "euroc" && args.kidnap.is_some() {
+        eprintln!(
+            "error: `--kidnap` rewinds the camera, a jump no IMU measures; the EuRoC layout is written without one"
+        );
+        return EXIT_BAD_INPUT;
+    }
+    let written = if args.format == "euroc" {
+        let opts = EurocWriteOptions {
+            frames: args.frames,
+            baseline: Some(args.baseline),
+            depth: true,
+            calibration: rig_calibration(),
+        };
+        write_euroc(&generator, &args.out, &opts)
+            .map(|root| eprintln!("EuRoC MAV folder {}", root.join("mav0").display()))
+    } else if args.format == "kitti" {
         write_kitti(&generator, &args.out, &KittiWriteOptions { frames: args.frames, baseline: args.baseline }).map(
             |seq| eprintln!("KITTI sequence {} (poses {})", seq.display(), args.out.join("poses/00.txt").display()),
         )

@@ -18,6 +18,19 @@ use super::{Generator, STAMP_BASE};
 /// Central-difference step, seconds.
 pub const DIFF_STEP: f64 = 1e-3;
 
+/// The synthetic rig's IMU: EuRoC's ADIS16448 noise at 200 Hz, the camera mounted as EuRoC's
+/// cam0 is, roughly: 7 cm from the IMU and turned a quarter about the IMU's `z`
+/// (`T_BS` of EuRoC's `cam0/sensor.yaml` rounded). `dynaflow synth --format euroc` writes it.
+pub fn rig_calibration() -> ImuCalibration {
+    ImuCalibration {
+        body_from_cam: Isometry3::from_parts(
+            nalgebra::Translation3::new(-0.02, -0.065, 0.01),
+            nalgebra::UnitQuaternion::from_scaled_axis(Vector3::z() * std::f64::consts::FRAC_PI_2),
+        ),
+        ..ImuCalibration::adis16448()
+    }
+}
+
 impl Generator {
     /// `world_from_body` at `t` seconds after the start.
     pub fn body_pose(&self, t: f64, calibration: &ImuCalibration) -> Isometry3<f64> {
@@ -47,6 +60,17 @@ impl Generator {
     /// standard deviation `density · √rate` per sample and biases that start at zero and walk
     /// by `random_walk · √dt · N(0, 1)` per sample, drawn from the scene seed's `"imu"` stream.
     pub fn imu(&self, calibration: &ImuCalibration, until: f64, noisy: bool) -> Vec<ImuSample> {
+        self.imu_with_biases(calibration, until, noisy).into_iter().map(|(s, _)| s).collect()
+    }
+
+    /// [`Generator::imu`] with each sample's true biases (gyroscope, accelerometer): what
+    /// EuRoC's ground truth states beside the pose.
+    pub fn imu_with_biases(
+        &self,
+        calibration: &ImuCalibration,
+        until: f64,
+        noisy: bool,
+    ) -> Vec<(ImuSample, [Vector3<f64>; 2])> {
         let rate = calibration.rate_hz;
         let n = (until * rate).floor() as u64;
         let dt = 1.0 / rate;
@@ -59,13 +83,14 @@ impl Generator {
         (0..=n)
             .map(|k| {
                 let mut s = self.imu_truth(k as f64 * dt, calibration);
+                let biases = [bias_g, bias_a];
                 if noisy {
                     s.gyro += bias_g + draw(white_g);
                     s.accel += bias_a + draw(white_a);
                     bias_g += draw(walk_g);
                     bias_a += draw(walk_a);
                 }
-                s
+                (s, biases)
             })
             .collect()
     }

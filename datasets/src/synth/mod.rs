@@ -6,10 +6,11 @@
 //! (`world_from_cam`, TUM convention), per-pixel class and instance masks, optical flow.
 //!
 //! Split: `scene` (geometry and motion of people), `texture` (procedural patterns),
-//! `motion` (camera trajectories), `render` (ray caster), `sensor` (noise models), `tum`
-//! (writing the TUM RGB-D layout). The `synth` operator that streams it into a graph lives in
+//! `motion` (camera trajectories), `render` (ray caster), `sensor` (noise models), `imu` (the
+//! rig's IMU), `tum`, `kitti` and `euroc` (writing those layouts). The `synth` operator that streams it into a graph lives in
 //! `dynaflow-operators`.
 
+mod euroc;
 mod imu;
 mod kitti;
 mod motion;
@@ -19,9 +20,10 @@ mod sensor;
 mod texture;
 mod tum;
 
-pub use imu::DIFF_STEP;
+pub use euroc::{EurocWriteOptions, write_euroc};
+pub use imu::{DIFF_STEP, rig_calibration};
 pub use kitti::{KittiWriteOptions, write_kitti};
-pub use motion::Motion;
+pub use motion::{HANDHELD_REST, Motion};
 pub use render::Intrinsics;
 pub use scene::PeopleMode;
 pub use tum::{WriteOptions, write_tum};
