@@ -441,3 +441,66 @@ fn a_frame_of_another_size_or_a_missing_or_mismatched_mask_is_an_error() {
         report.failures
     );
 }
+
+#[test]
+fn a_euroc_folder_written_by_synth_runs_as_its_tum_twin_and_records_every_imu_sample() {
+    // The same generator (seed 5, hand-held motion, two people) written as a TUM folder and as
+    // a EuRoC MAV folder: `--input` picks `tum_rgbd` for one and `euroc` for the other, and
+    // the RGB-D graph tracks both alike (the same images, depth and intrinsics; EuRoC's ground
+    // truth comes through the body and `T_BS`). The EuRoC run's MCAP holds the IMU port: every
+    // sample of imu0/data.csv up to the last frame, once.
+    let dir = common::TempDir::new("euroc");
+    let frames = "90";
+    let write = |format: &str, out: &Path| {
+        let o = common::bin()
+            .args(["synth", "--motion", "handheld", "--people", "2", "--frames", frames, "--seed", "5", "--format"])
+            .arg(format)
+            .arg("--out")
+            .arg(out)
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{format}: {}", String::from_utf8_lossy(&o.stderr));
+    };
+    let (tum, euroc) = (dir.path().join("tum"), dir.path().join("euroc"));
+    write("tum", &tum);
+    write("euroc", &euroc);
+    let run = |input: &Path, name: &str, record: &str| {
+        let out = dir.path().join(name);
+        let o = common::bin()
+            .args(["run", "--no-progress", "--record", record, "--input"])
+            .arg(input)
+            .arg("--out")
+            .arg(&out)
+            .arg(common::repo().join("graphs/orb_baseline.yaml"))
+            .output()
+            .unwrap();
+        assert_eq!(o.status.code(), Some(0), "{name}: {}", String::from_utf8_lossy(&o.stderr));
+        let summary = common::summary(&out.join("orb_baseline.summary.json"));
+        let ate = summary.ate.clone().unwrap();
+        assert_eq!(ate.pairs, 90, "{name}: every frame has ground truth");
+        (ate.rmse, out)
+    };
+    let (ate_tum, _) = run(&tum, "on-tum", "none");
+    let (ate_euroc, out) = run(&euroc, "on-euroc", "mcap");
+    eprintln!("orb_baseline on the TUM layout: ATE {ate_tum:.6} m; on the EuRoC layout: {ate_euroc:.6} m");
+    // TUM's ground truth is written to 1 µm; the estimates are the same.
+    assert!((ate_tum - ate_euroc).abs() <= 1e-5, "TUM {ate_tum} m, EuRoC {ate_euroc} m");
+
+    let rec = dynaflow_recordings::diff::read_mcap(&out.join("orb_baseline.mcap")).unwrap();
+    let (name, topic) = rec.topics.iter().find(|(k, _)| k.ends_with("/imu")).expect("an IMU topic");
+    assert_eq!(topic.schema, "dynaflow.ImuBatch", "{name}");
+    let recorded: Vec<f64> = topic
+        .frames
+        .values()
+        .flat_map(|f| f["data"]["stamp"].as_array().unwrap().iter().map(|s| s.as_f64().unwrap()).collect::<Vec<_>>())
+        .collect();
+    let csv = std::fs::read_to_string(euroc.join("mav0/imu0/data.csv")).unwrap();
+    let last_frame = 1_700_000_000.0 + 89.0 / 30.0;
+    let written: Vec<f64> = csv
+        .lines()
+        .filter(|l| !l.starts_with('#'))
+        .map(|l| l.split(',').next().unwrap().parse::<i64>().unwrap() as f64 * 1e-9)
+        .filter(|&t| t <= last_frame + 1e-6)
+        .collect();
+    assert_eq!(recorded, written, "each sample once, in order");
+}

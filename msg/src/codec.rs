@@ -23,6 +23,7 @@ use crate::{
     PointCloud, PointLabel, PointLabels, PortType, Pose, Scalars, SegmentationMask, SparseMap, StampedPose, StereoRig,
     Track, Tracks, Trajectory,
 };
+use crate::{ImuBatch, ImuCalibration, ImuSample};
 
 /// The encoding's version byte; a reader refuses any other.
 pub const VERSION: u8 = 2;
@@ -277,6 +278,27 @@ fn body(w: &mut W, b: &Body) {
             }
         }
         Body::StereoRig(s) => w.f64(s.baseline),
+        Body::Imu(b) => {
+            let c = &b.calibration;
+            for v in [
+                c.gyro_noise_density,
+                c.accel_noise_density,
+                c.gyro_random_walk,
+                c.accel_random_walk,
+                c.rate_hz,
+                c.gravity,
+            ] {
+                w.f64(v);
+            }
+            w.iso(&c.body_from_cam);
+            w.len(b.samples.len());
+            for s in &b.samples {
+                w.f64(s.stamp);
+                for v in s.gyro.iter().chain(s.accel.iter()) {
+                    w.f64(*v);
+                }
+            }
+        }
     }
 }
 
@@ -382,6 +404,13 @@ impl<'a> R<'a> {
     }
     fn f64(&mut self) -> Result<f64, CodecError> {
         Ok(f64::from_bits(self.u64()?))
+    }
+    fn f64n<const N: usize>(&mut self) -> Result<[f64; N], CodecError> {
+        let mut a = [0.0; N];
+        for v in &mut a {
+            *v = self.f64()?;
+        }
+        Ok(a)
     }
     fn f32n<const N: usize>(&mut self) -> Result<[f32; N], CodecError> {
         let mut a = [0.0; N];
@@ -556,6 +585,33 @@ fn read_body(r: &mut R<'_>, tag: u8) -> Result<Body, CodecError> {
             Body::Scalars(Scalars { values })
         }
         PortType::StereoRig => Body::StereoRig(StereoRig { baseline: r.f64()? }),
+        PortType::Imu => {
+            let [gyro_noise_density, accel_noise_density, gyro_random_walk, accel_random_walk, rate_hz, gravity] =
+                r.f64n::<6>()?;
+            let body_from_cam = checked_iso(r)?;
+            let calibration = ImuCalibration {
+                gyro_noise_density,
+                accel_noise_density,
+                gyro_random_walk,
+                accel_random_walk,
+                rate_hz,
+                body_from_cam,
+                gravity,
+            };
+            let n = r.len(56)?;
+            let samples = (0..n)
+                .map(|_| {
+                    let stamp = r.f64()?;
+                    let [a, b, c, d, e, g] = r.f64n::<6>()?;
+                    Ok(ImuSample {
+                        stamp,
+                        gyro: nalgebra::Vector3::new(a, b, c),
+                        accel: nalgebra::Vector3::new(d, e, g),
+                    })
+                })
+                .collect::<Result<_, CodecError>>()?;
+            Body::Imu(ImuBatch { samples, calibration })
+        }
         PortType::Any => return Err(CodecError("payload type `any`".into())),
     })
 }
@@ -707,6 +763,21 @@ mod tests {
             }),
             Body::Scalars(Scalars { values: vec![("ate".into(), 0.01), ("nan".into(), f64::NAN)] }),
             Body::StereoRig(StereoRig { baseline: 0.12 }),
+            Body::Imu(ImuBatch {
+                samples: vec![
+                    ImuSample {
+                        stamp: 0.005,
+                        gyro: nalgebra::Vector3::new(0.1, -0.2, 0.3),
+                        accel: nalgebra::Vector3::new(0.0, 0.1, 9.8),
+                    },
+                    ImuSample {
+                        stamp: 0.01,
+                        gyro: nalgebra::Vector3::new(0.2, -0.1, f64::NAN),
+                        accel: nalgebra::Vector3::new(-0.1, 0.2, 9.7),
+                    },
+                ],
+                calibration: ImuCalibration { body_from_cam: iso(0.2), ..ImuCalibration::adis16448() },
+            }),
         ]
     }
 

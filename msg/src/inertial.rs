@@ -3,6 +3,8 @@
 
 use nalgebra::{Isometry3, Vector3};
 
+use super::Digest;
+
 /// One IMU sample: angular rate and specific force (what an accelerometer measures: the
 /// acceleration minus gravity) in the IMU's body frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,3 +56,36 @@ impl ImuCalibration {
 
 /// Standard gravity (CGPM 1901), m/s².
 pub const STANDARD_GRAVITY: f64 = 9.806_65;
+
+/// What an `imu` port carries per frame: the IMU samples stamped after the previous frame up
+/// to this one (each sample in exactly one batch), and the IMU's calibration.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ImuBatch {
+    /// The samples, strictly increasing in stamp.
+    pub samples: Vec<ImuSample>,
+    /// The IMU's noise model, rate, mounting and gravity.
+    pub calibration: ImuCalibration,
+}
+
+impl ImuBatch {
+    pub(super) fn digest_into(&self, d: &mut Digest) {
+        let c = &self.calibration;
+        for v in
+            [c.gyro_noise_density, c.accel_noise_density, c.gyro_random_walk, c.accel_random_walk, c.rate_hz, c.gravity]
+        {
+            d.f64(v);
+        }
+        let t = c.body_from_cam.translation.vector;
+        let q = c.body_from_cam.rotation.coords;
+        for v in t.iter().chain(q.iter()) {
+            d.f64(*v);
+        }
+        d.u64(self.samples.len() as u64);
+        for s in &self.samples {
+            d.f64(s.stamp);
+            for v in s.gyro.iter().chain(s.accel.iter()) {
+                d.f64(*v);
+            }
+        }
+    }
+}

@@ -32,7 +32,7 @@ pub use geometry::{
     SparseMap, StampedPose, Trajectory,
 };
 pub use image::{CameraInfo, DepthImage, Image, PixelFormat, StereoRig};
-pub use inertial::{ImuCalibration, ImuSample, STANDARD_GRAVITY};
+pub use inertial::{ImuBatch, ImuCalibration, ImuSample, STANDARD_GRAVITY};
 pub use scalar::Scalars;
 pub use semantic::{Detection, Detections, SegmentationMask, class_rgb};
 
@@ -175,6 +175,8 @@ payloads! {
     Scalars(Scalars) = "scalars",
     /// A rectified stereo pair's baseline.
     StereoRig(StereoRig) = "stereo_rig",
+    /// The IMU samples since the previous frame, with the IMU's calibration.
+    Imu(ImuBatch) = "imu",
 }
 
 impl PortType {
@@ -271,6 +273,7 @@ impl Message {
                 serde_json::Value::Object(m.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect())
             }
             Body::StereoRig(m) => json!({"baseline_m": m.baseline}),
+            Body::Imu(m) => json!({"samples": m.samples.len(), "rate_hz": m.calibration.rate_hz}),
         }
     }
 }

@@ -31,6 +31,7 @@ pub fn registry() -> Registry {
     r.register(decode::IMAGE_FOLDER);
     r.register(decode::RGBD_FOLDER);
     r.register(decode::KITTI_ODOMETRY);
+    r.register(decode::EUROC);
     r.register(frontend::ORB_EXTRACT);
     r.register(frontend::MATCH_DESCRIPTORS);
     r.register(frontend::LK_FLOW);

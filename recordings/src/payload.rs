@@ -123,6 +123,25 @@ fn data(body: &Body) -> Value {
         }),
         Body::Scalars(s) => Value::Object(s.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect()),
         Body::StereoRig(r) => json!({"baseline_m": r.baseline}),
+        Body::Imu(b) => {
+            let c = &b.calibration;
+            let t = c.body_from_cam.translation.vector;
+            let q = c.body_from_cam.rotation.coords;
+            json!({
+                "stamp": b.samples.iter().map(|s| s.stamp).collect::<Vec<_>>(),
+                "gyro": b.samples.iter().map(|s| [s.gyro.x, s.gyro.y, s.gyro.z]).collect::<Vec<_>>(),
+                "accel": b.samples.iter().map(|s| [s.accel.x, s.accel.y, s.accel.z]).collect::<Vec<_>>(),
+                "calibration": {
+                    "gyro_noise_density": c.gyro_noise_density,
+                    "accel_noise_density": c.accel_noise_density,
+                    "gyro_random_walk": c.gyro_random_walk,
+                    "accel_random_walk": c.accel_random_walk,
+                    "rate_hz": c.rate_hz,
+                    "gravity": c.gravity,
+                    "body_from_cam": {"t": [t.x, t.y, t.z], "q": [q.x, q.y, q.z, q.w]},
+                },
+            })
+        }
         Body::PointCloud(c) => json!({"count": c.points.len()}),
         Body::Map(m) => json!({
             "map_id": m.map_id,

@@ -15,14 +15,14 @@ use std::sync::Arc;
 
 use base64::Engine as _;
 use dynaflow_engine::msg::{
-    Body, CameraInfo, DepthImage, Descriptors, Detection, Detections, Header, Image, Isometry3, Keypoint, Keypoints,
-    LabelReason, Message, PixelFormat, PointLabel, PointLabels, PortType, Pose, Scalars, SegmentationMask, StampedPose,
-    StereoRig, Track, Tracks, Trajectory,
+    Body, CameraInfo, DepthImage, Descriptors, Detection, Detections, Header, Image, ImuBatch, ImuCalibration,
+    ImuSample, Isometry3, Keypoint, Keypoints, LabelReason, Message, PixelFormat, PointLabel, PointLabels, PortType,
+    Pose, Scalars, SegmentationMask, StampedPose, StereoRig, Track, Tracks, Trajectory,
 };
 use dynaflow_engine::op::{
     Context, Instance, OpError, OpSpec, Outputs, Param, ParamMap, ParamType, Params, PortSpec, Source,
 };
-use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
 use serde_json::Value;
 
 const OUTPUTS: &[PortSpec] = &[
@@ -42,6 +42,7 @@ const OUTPUTS: &[PortSpec] = &[
     PortSpec::output("trajectory", PortType::Trajectory, "trajectory topic"),
     PortSpec::output("scalars", PortType::Scalars, "scalars topic"),
     PortSpec::output("stereo", PortType::StereoRig, "stereo rig topic"),
+    PortSpec::output("imu", PortType::Imu, "IMU topic (a frame's samples and the calibration)"),
 ];
 
 const MCAP_REPLAY_DOC: &str = "Replays topics of a dynaflow MCAP recording as ports, keeping frame numbers and stamps, so a user re-runs only the late part of a graph on recorded intermediates. `topics` maps ports to topics, e.g. `{ pose: /track/pose, keypoints: /orb/keypoints }`.";
@@ -486,6 +487,27 @@ fn decode_json(ty: PortType, v: &Value) -> Result<Body, String> {
                 .unwrap_or_default(),
         }),
         PortType::StereoRig => Body::StereoRig(StereoRig { baseline: d["baseline_m"].as_f64().unwrap_or(f64::NAN) }),
+        PortType::Imu => {
+            let c = &d["calibration"];
+            let f = |v: &Value| v.as_f64().unwrap_or(f64::NAN);
+            let v3 = |v: &Value| Vector3::new(f(&v[0]), f(&v[1]), f(&v[2]));
+            let stamps = d["stamp"].as_array().cloned().unwrap_or_default();
+            let samples = stamps
+                .iter()
+                .enumerate()
+                .map(|(i, s)| ImuSample { stamp: f(s), gyro: v3(&d["gyro"][i]), accel: v3(&d["accel"][i]) })
+                .collect();
+            let calibration = ImuCalibration {
+                gyro_noise_density: f(&c["gyro_noise_density"]),
+                accel_noise_density: f(&c["accel_noise_density"]),
+                gyro_random_walk: f(&c["gyro_random_walk"]),
+                accel_random_walk: f(&c["accel_random_walk"]),
+                rate_hz: f(&c["rate_hz"]),
+                gravity: f(&c["gravity"]),
+                body_from_cam: iso(&c["body_from_cam"]["t"], &c["body_from_cam"]["q"]),
+            };
+            Body::Imu(ImuBatch { samples, calibration })
+        }
         other => return Err(format!("replaying {other} is not supported")),
     })
 }
@@ -545,5 +567,37 @@ mod tests {
         assert!(err.contains("mono8 4x2: step 1"), "{err}");
         let (_, body) = decode(PortType::Mask, &mono8(4, 2, 4, &[1; 8])).unwrap();
         assert!(matches!(body, dynaflow_engine::msg::Body::Mask(m) if m.classes == vec![1; 8]));
+    }
+
+    #[test]
+    fn an_imu_batch_replays_from_its_payload_with_the_recorded_digest() {
+        use dynaflow_engine::msg::{Body, Header, ImuBatch, ImuCalibration, ImuSample, Message};
+        use nalgebra::{Isometry3, Vector3};
+        let samples = (0..7)
+            .map(|k| {
+                let t = f64::from(k);
+                ImuSample {
+                    stamp: 1_700_000_000.0 + 0.005 * t,
+                    gyro: Vector3::new(0.1 * t, -0.2, 1.0 / 3.0),
+                    accel: Vector3::new(0.01, 9.81 - t * 1e-3, std::f64::consts::PI),
+                }
+            })
+            .collect();
+        let calibration = ImuCalibration {
+            body_from_cam: Isometry3::new(
+                Vector3::new(-0.02, -0.065, 0.01),
+                Vector3::new(0.0, 0.0, std::f64::consts::FRAC_PI_2),
+            ),
+            ..ImuCalibration::adis16448()
+        };
+        let msg = Message::new(
+            Header { seq: 4, stamp: 1_700_000_000.03, frame_id: "imu".into() },
+            Body::Imu(ImuBatch { samples, calibration }),
+        );
+        let stored = serde_json::json!({ "dynaflow": serde_json::to_value(crate::payload::payload(&msg)).unwrap() });
+        let body = super::decode_json(PortType::Imu, &stored).unwrap();
+        let back = Message::new(msg.header.clone(), body);
+        assert_eq!(back, msg);
+        assert!(super::same_as_recorded(&back, &stored["dynaflow"]));
     }
 }

@@ -100,8 +100,8 @@ pub struct Layout {
     pub params: Vec<(&'static str, String)>,
 }
 
-/// Detect a TUM RGB-D folder, a KITTI odometry sequence or an image folder; the error says
-/// what was expected.
+/// Detect a TUM RGB-D folder, a KITTI odometry sequence, a EuRoC MAV folder or an image
+/// folder; the error says what was expected.
 pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, dynaflow_datasets::Error> {
     if !dir.is_dir() {
         return Err(dynaflow_datasets::Error::file(dir, "not a folder"));
@@ -122,6 +122,11 @@ pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, dyn
         }
         return Ok(Layout { op: "kitti_odometry", params });
     }
+    let mav0 = if dir.join("mav0").is_dir() { dir.join("mav0") } else { dir.to_path_buf() };
+    if mav0.join("cam0").join("data.csv").is_file() && mav0.join("imu0").join("data.csv").is_file() {
+        params.retain(|(k, _)| *k != "intrinsics"); // cam0/sensor.yaml carries the calibration
+        return Ok(Layout { op: "euroc", params });
+    }
     for pattern in ["*.png", "*.jpg", "*.jpeg"] {
         if list(dir, pattern).is_ok_and(|l| !l.is_empty()) {
             params.push(("pattern", pattern.to_owned()));
@@ -130,6 +135,6 @@ pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, dyn
     }
     Err(dynaflow_datasets::Error::file(
         dir,
-        "not a TUM RGB-D folder (rgb.txt + depth.txt), a KITTI odometry sequence (calib.txt + times.txt) or a folder of images (*.png, *.jpg)",
+        "not a TUM RGB-D folder (rgb.txt + depth.txt), a KITTI odometry sequence (calib.txt + times.txt), a EuRoC MAV folder (mav0/cam0 + mav0/imu0) or a folder of images (*.png, *.jpg)",
     ))
 }

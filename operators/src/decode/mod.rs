@@ -1,8 +1,9 @@
 //! The reader operators: TUM RGB-D folders (`tum_rgbd`), image folders (`image_folder`),
-//! KITTI odometry sequences (`kitti_odometry`), and layout detection for `--input`. Each is a
+//! KITTI odometry sequences (`kitti_odometry`), EuRoC MAV folders (`euroc`), and layout detection for `--input`. Each is a
 //! thin wrapper over its reader in `dynaflow-datasets`, which does the file work, streamed by
 //! the one source skeleton in `sequence` (which `synth` uses too).
 
+mod euroc;
 mod folder;
 mod kitti;
 mod sequence;
@@ -11,6 +12,7 @@ mod tum;
 use dynaflow_datasets::intrinsics::Intrinsics;
 use dynaflow_engine::op::{Param, ParamType, Params};
 
+pub(crate) use euroc::EUROC;
 pub(crate) use folder::{IMAGE_FOLDER, RGBD_FOLDER};
 pub use folder::{Layout, detect_layout};
 pub(crate) use kitti::KITTI_ODOMETRY;

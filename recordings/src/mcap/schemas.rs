@@ -2,8 +2,9 @@
 //! images, depth and masks, which are protobuf (`proto`).
 //!
 //! Foxglove's well-known schema names are used where one fits (images, annotations, poses,
-//! point clouds, calibration, scene updates); `dynaflow.PointLabels`, `dynaflow.Scalars` and
-//! `dynaflow.StereoRig` are ours. Every message also carries a `dynaflow` object (see `payload`) that Foxglove
+//! point clouds, calibration, scene updates); `dynaflow.PointLabels`, `dynaflow.Scalars`,
+//! `dynaflow.StereoRig` and `dynaflow.ImuBatch` (a frame's samples, named as ROS's
+//! `sensor_msgs/Imu` names its fields) are ours. Every message also carries a `dynaflow` object (see `payload`) that Foxglove
 //! ignores and `dynaflow diff` reads. The schemas below list the fields we write.
 
 use base64::Engine as _;
@@ -34,6 +35,7 @@ pub fn schema_name(ty: PortType, codec: ImageCodec) -> &'static str {
         PortType::OctreeUpdate => "foxglove.SceneUpdate",
         PortType::PointLabels => "dynaflow.PointLabels",
         PortType::StereoRig => "dynaflow.StereoRig",
+        PortType::Imu => "dynaflow.ImuBatch",
         PortType::Scalars | PortType::Any => "dynaflow.Scalars",
     }
 }
@@ -69,6 +71,9 @@ pub fn schema_text(name: &str) -> String {
         "dynaflow.PointLabels" => r#""timestamp":{"type":"object"},"index":{"type":"array","items":{"type":"integer"}},"dynamic":{"type":"array","items":{"type":"boolean"}},"reason":{"type":"array","items":{"type":"string","enum":["static","epipolar","semantic","flow","depth"]}},"score":{"type":"array","items":{"type":"number"}},"at":{"type":"array","items":{"type":"array","items":{"type":"number"}}}"#.replace(r#"{"type":"object"}"#, TIME),
         "dynaflow.StereoRig" => format!(
             r#""timestamp":{TIME},"baseline_m":{{"type":"number","description":"distance between the optical centres, metres"}}"#
+        ),
+        "dynaflow.ImuBatch" => format!(
+            r#""timestamp":{TIME},"stamp":{{"type":"array","items":{{"type":"number"}},"description":"each sample's time, seconds"}},"angular_velocity":{{"type":"array","items":{VEC3},"description":"rad/s, IMU frame"}},"linear_acceleration":{{"type":"array","items":{VEC3},"description":"specific force, m/s^2, IMU frame"}}"#
         ),
         _ => format!(r#""timestamp":{TIME},"values":{{"type":"object","additionalProperties":{{"type":"number"}}}}"#),
     };
@@ -201,6 +206,12 @@ pub fn to_json(msg: &Message) -> Result<Vec<u8>, String> {
             "values": Value::Object(s.values.iter().map(|(k, v)| (k.to_string(), json!(v))).collect()),
         }),
         Body::StereoRig(r) => json!({"timestamp": ts, "baseline_m": r.baseline}),
+        Body::Imu(b) => json!({
+            "timestamp": ts,
+            "stamp": b.samples.iter().map(|s| s.stamp).collect::<Vec<_>>(),
+            "angular_velocity": b.samples.iter().map(|s| json!({"x": s.gyro.x, "y": s.gyro.y, "z": s.gyro.z})).collect::<Vec<_>>(),
+            "linear_acceleration": b.samples.iter().map(|s| json!({"x": s.accel.x, "y": s.accel.y, "z": s.accel.z})).collect::<Vec<_>>(),
+        }),
         _ => json!({"timestamp": ts}),
     };
     if let Some(obj) = v.as_object_mut() {

@@ -577,6 +577,20 @@ impl Sink for RrdSink {
             Body::StereoRig(r) => {
                 self.log_series(&rec, node, port, &path, &[(std::sync::Arc::from("baseline_m"), r.baseline)])
             }
+            // The frame's mean angular rate and specific force per axis, and its sample count.
+            Body::Imu(b) => {
+                let n = b.samples.len().max(1) as f64;
+                let gyro = b.samples.iter().map(|s| s.gyro).sum::<nalgebra::Vector3<f64>>() / n;
+                let accel = b.samples.iter().map(|s| s.accel).sum::<nalgebra::Vector3<f64>>() / n;
+                let named: Vec<(std::sync::Arc<str>, f64)> =
+                    ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"]
+                        .iter()
+                        .zip(gyro.iter().chain(accel.iter()))
+                        .map(|(k, v)| (std::sync::Arc::from(*k), *v))
+                        .chain(std::iter::once((std::sync::Arc::from("samples"), b.samples.len() as f64)))
+                        .collect();
+                self.log_series(&rec, node, port, &path, &named)
+            }
             _ => Ok(()),
         };
         let entry = self.ports.entry(path).or_default();
