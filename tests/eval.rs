@@ -268,6 +268,85 @@ fn the_ate_a_run_prints_on_a_tum_folder_is_evos() {
 }
 
 #[test]
+fn eval_reads_euroc_ground_truth_as_evo_does_and_reports_the_scale_error() {
+    // A EuRoC ground-truth file (200 Hz, nanosecond stamps, `q_RS` as w, x, y, z and the
+    // velocity and bias columns) and a monocular-like estimate at 20 Hz: 0.8 times too small,
+    // turned and moved, with millimetre noise. `dynaflow eval` reads the CSV as `evo_ape euroc`
+    // does: the same pairs and the same Sim(3) ATE, and it prints the scale error.
+    let Some(python) = frontend::python_with("evo", "evo", "eval: EuRoC ground truth vs evo_ape euroc") else {
+        return;
+    };
+    use dynaflow_datasets::synth::Motion;
+    let dir = common::TempDir::new("eval-euroc");
+    let mut csv = String::from(
+        "#timestamp, p_RS_R_x [m], p_RS_R_y [m], p_RS_R_z [m], q_RS_w [], q_RS_x [], q_RS_y [], q_RS_z [], v_RS_R_x [m s^-1], v_RS_R_y [m s^-1], v_RS_R_z [m s^-1], b_w_RS_S_x [rad s^-1], b_w_RS_S_y [rad s^-1], b_w_RS_S_z [rad s^-1], b_a_RS_S_x [m s^-2], b_a_RS_S_y [m s^-2], b_a_RS_S_z [m s^-2]\n",
+    );
+    for k in 0..1000u64 {
+        let p = Motion::Handheld.pose(k as f64 * 0.005);
+        let (t, q) = (p.translation.vector, p.rotation);
+        csv.push_str(&format!(
+            "{},{},{},{},{},{},{},{},0,0,0,0,0,0,0,0,0\n",
+            1_403_636_579_763_555_584u64 + k * 5_000_000,
+            t.x,
+            t.y,
+            t.z,
+            q.w,
+            q.i,
+            q.j,
+            q.k
+        ));
+    }
+    let gt_path = dir.path().join("data.csv");
+    std::fs::write(&gt_path, csv).unwrap();
+    let offset =
+        Isometry3::from_parts(Translation3::new(0.3, -1.0, 0.2), UnitQuaternion::from_euler_angles(0.1, -0.2, 0.7));
+    let est: Vec<(f64, Isometry3<f64>)> = (0..100)
+        .map(|k| {
+            let mut p = Motion::Handheld.pose(k as f64 * 0.05);
+            let j = k as f64;
+            let noise = Vector3::new((j * 12.9898).sin(), (j * 78.233).sin(), (j * 37.719).sin()) * 1e-3;
+            p.translation.vector = p.translation.vector * 0.8 + noise;
+            (1_403_636_579_763_555_584u64 as f64 * 1e-9 + k as f64 * 0.05, offset * p)
+        })
+        .collect();
+    let est_path = dir.path().join("est.txt");
+    write_tum(&est_path, &est);
+    let out = common::bin()
+        .args(["eval", "--align", "sim3", "--json", "--gt"])
+        .arg(&gt_path)
+        .arg("--est")
+        .arg(&est_path)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let ours: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let table = common::bin()
+        .args(["eval", "--align", "sim3", "--gt"])
+        .arg(&gt_path)
+        .arg("--est")
+        .arg(&est_path)
+        .output()
+        .unwrap();
+    let table = String::from_utf8_lossy(&table.stdout).into_owned();
+    let scale = ours["scale"].as_f64().unwrap();
+    assert!(table.contains(&format!("(scale error {:.2} %)", (scale - 1.0).abs() * 100.0)), "{table}");
+    let job = serde_json::json!([{
+        "gt": gt_path, "gt_format": "euroc", "est": est_path, "max_diff": 0.01, "delta": 1, "unit": "frames"
+    }]);
+    let job_path = dir.path().join("job.json");
+    std::fs::write(&job_path, job.to_string()).unwrap();
+    let o = Command::new(&python).arg(common::repo().join("tests/peers/evo_eval.py")).arg(&job_path).output().unwrap();
+    assert!(o.status.success(), "evo: {}", String::from_utf8_lossy(&o.stderr));
+    let evo: Vec<serde_json::Value> = serde_json::from_slice(&o.stdout).unwrap();
+    let (mine, theirs) = (ours["ate"]["rmse"].as_f64().unwrap(), evo[0]["ate_sim3"]["rmse"].as_f64().unwrap());
+    eprintln!("EuRoC ground truth: our Sim(3) ATE {mine:.9} m (scale {scale:.6}), evo's {theirs:.9} m");
+    assert_eq!(ours["matched"].as_u64(), evo[0]["matched"].as_u64());
+    assert_eq!(ours["matched"].as_u64(), Some(100));
+    assert!((mine - theirs).abs() <= 1e-6 * theirs.max(1e-3), "ours {mine}, evo {theirs}");
+    assert!((scale - 1.25).abs() < 0.01, "the estimate is 0.8 times the truth: scale {scale}");
+}
+
+#[test]
 fn eval_and_infer_refuse_what_evo_and_the_graph_refuse() {
     // No RPE pair, a NaN time window, thresholds outside 0..=1.
     let fixtures = common::repo().join("tests/fixtures/slambook2_trajectories");

@@ -498,23 +498,34 @@ fn read_ground_truth(mav0: &Path) -> Result<Vec<GroundTruth>, Error> {
     let yaml = dir.join("sensor.yaml");
     let body_from_sensor = if yaml.is_file() { SensorYaml::read(&yaml)?.t_bs()? } else { Isometry3::identity() };
     let sensor_from_body = body_from_sensor.inverse();
-    let csv = dir.join("data.csv");
+    let mut out = read_ground_truth_csv(&dir.join("data.csv"))?;
+    for g in &mut out {
+        g.world_from_body *= sensor_from_body;
+    }
+    Ok(out)
+}
+
+/// A EuRoC ground-truth file (`state_groundtruth_estimate0/data.csv`: nanosecond stamp,
+/// `p_RS_R`, `q_RS` as w, x, y, z, `v_RS_R`, the biases) as written: the pose of the sensor it
+/// states (EuRoC's body), as evo's `euroc` format reads it. Errors name the file and line.
+pub fn read_ground_truth_csv(csv: &Path) -> Result<Vec<GroundTruth>, Error> {
     let mut out: Vec<GroundTruth> = Vec::new();
-    for row in read_csv(&csv, 16)? {
-        let v = floats(&csv, &row)?;
+    for row in read_csv(csv, 16)? {
+        let v = floats(csv, &row)?;
         let q = Quaternion::new(v[3], v[4], v[5], v[6]);
         if !v.iter().all(|x| x.is_finite()) || (q.norm() - 1.0).abs() > 1e-3 {
-            return Err(Error::line(&csv, row.line, format!("not finite, or a quaternion of norm {:.6}", q.norm())));
+            return Err(Error::line(csv, row.line, format!("not finite, or a quaternion of norm {:.6}", q.norm())));
         }
         let stamp = seconds(row.ns);
         if out.last().is_some_and(|g| stamp <= g.stamp) {
-            return Err(Error::line(&csv, row.line, "stamp not after the previous line's"));
+            return Err(Error::line(csv, row.line, "stamp not after the previous line's"));
         }
-        let world_from_sensor =
-            Isometry3::from_parts(Translation3::new(v[0], v[1], v[2]), UnitQuaternion::from_quaternion(q));
         out.push(GroundTruth {
             stamp,
-            world_from_body: world_from_sensor * sensor_from_body,
+            world_from_body: Isometry3::from_parts(
+                Translation3::new(v[0], v[1], v[2]),
+                UnitQuaternion::from_quaternion(q),
+            ),
             velocity: Vector3::new(v[7], v[8], v[9]),
         });
     }

@@ -11,7 +11,9 @@ use crate::{EXIT_BAD_INPUT, EXIT_OK};
 /// `dynaflow eval` arguments.
 #[derive(Debug, clap::Args)]
 pub struct EvalArgs {
-    /// Ground-truth trajectory, TUM format (`stamp tx ty tz qx qy qz qw`, T_world_camera).
+    /// Ground-truth trajectory: TUM format (`stamp tx ty tz qx qy qz qw`, T_world_camera), or
+    /// a EuRoC `state_groundtruth_estimate0/data.csv` (the body's pose, read as evo's `euroc`
+    /// format reads it).
     #[arg(long)]
     pub gt: PathBuf,
     /// Estimated trajectory, TUM format.
@@ -45,10 +47,28 @@ fn row(name: &str, unit: &str, s: &Stats) -> String {
     )
 }
 
+/// Whether `path` is a EuRoC ground-truth CSV: its first line that is not blank has commas
+/// (a TUM file separates with spaces).
+fn is_euroc_csv(path: &std::path::Path) -> bool {
+    std::fs::read_to_string(path)
+        .ok()
+        .and_then(|t| t.lines().find(|l| !l.trim().is_empty()).map(|l| l.contains(',')))
+        .unwrap_or(false)
+}
+
 /// Exit 0 with the report, 2 on unreadable or incomparable input.
 pub fn eval(args: &EvalArgs) -> u8 {
     let read = |p: &PathBuf| read_trajectory(p).map_err(|e| eprintln!("error: {e}"));
-    let (Ok(gt), Ok(est)) = (read(&args.gt), read(&args.est)) else { return EXIT_BAD_INPUT };
+    let read_gt = |p: &PathBuf| {
+        if is_euroc_csv(p) {
+            dynaflow_datasets::euroc::read_ground_truth_csv(p)
+                .map(|g| g.into_iter().map(|g| (g.stamp, g.world_from_body)).collect())
+                .map_err(|e| eprintln!("error: {e}"))
+        } else {
+            read(p)
+        }
+    };
+    let (Ok(gt), Ok(est)) = (read_gt(&args.gt), read(&args.est)) else { return EXIT_BAD_INPUT };
     let align = match args.align.as_str() {
         "sim3" => Align::Sim3,
         "none" => Align::None,
@@ -110,9 +130,14 @@ pub fn eval(args: &EvalArgs) -> u8 {
         let _ = writeln!(out, "{}", serde_json::to_string_pretty(&result).unwrap_or_default());
         return EXIT_OK;
     }
+    let scale_error = if align == Align::Sim3 {
+        format!(" (scale error {:.2} %)", (result.scale - 1.0).abs() * 100.0)
+    } else {
+        String::new()
+    };
     let _ = writeln!(
         out,
-        "{} of {} estimated poses matched {} ground-truth poses (max diff {} s); alignment {:?}, scale {:.6}",
+        "{} of {} estimated poses matched {} ground-truth poses (max diff {} s); alignment {:?}, scale {:.6}{scale_error}",
         result.matched, result.poses[1], result.poses[0], args.max_diff, align, result.scale
     );
     let _ = writeln!(

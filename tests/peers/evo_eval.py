@@ -1,5 +1,6 @@
 """evo's side of `tests/eval.rs`: ATE (SE(3), Sim(3) and no alignment) and RPE (translation,
-rotation in degrees) for each trajectory pair of the job, with evo's own association."""
+rotation in degrees) for each trajectory pair of the job, with evo's own association. A
+case with `"gt_format": "euroc"` reads its ground truth as `evo_ape euroc` does."""
 import copy
 import json
 import sys
@@ -9,7 +10,10 @@ from evo.tools import file_interface
 
 out = []
 for case in json.load(open(sys.argv[1])):
-    ref = file_interface.read_tum_trajectory_file(case["gt"])
+    if case.get("gt_format") == "euroc":
+        ref = file_interface.read_euroc_csv_trajectory(case["gt"])
+    else:
+        ref = file_interface.read_tum_trajectory_file(case["gt"])
     est = file_interface.read_tum_trajectory_file(case["est"])
     ref, est = sync.associate_trajectories(ref, est, max_diff=case["max_diff"])
     res = {"matched": ref.num_poses}
