@@ -504,3 +504,48 @@ fn a_euroc_folder_written_by_synth_runs_as_its_tum_twin_and_records_every_imu_sa
         .collect();
     assert_eq!(recorded, written, "each sample once, in order");
 }
+
+#[test]
+fn synth_streams_its_imu_per_frame_and_a_blackout_keeps_the_motion() {
+    // `imu: true`: each frame carries the rig's samples since the previous frame, exactly the
+    // generator's noisy IMU (the scene seed's noise), each sample once. `blackout: 20`: frames
+    // 20-49 are black without depth while the camera keeps moving (no rewind, unlike a kidnap).
+    use dynaflow_datasets::synth::{Generator, Motion, STAMP_BASE, SynthConfig, rig_calibration, scaled_fr3};
+    let (report, sink) = run(
+        "name: s\nnodes:\n  cam: { op: synth, params: { motion: handheld, frames: 60, width: 64, height: 48, seed: 4, imu: true, blackout: 20 } }\n",
+    )
+    .unwrap();
+    assert_eq!(report.status, RunStatus::Completed, "{:?}", report.failures);
+    let g = Generator::new(SynthConfig {
+        motion: Motion::Handheld,
+        seed: 4,
+        intrinsics: scaled_fr3(64, 48),
+        ..SynthConfig::default()
+    });
+    let truth = g.imu(&rig_calibration(), g.time(59), true);
+    let batches = sink.port("cam", "imu");
+    assert_eq!(batches.len(), 60);
+    let mut streamed = Vec::new();
+    for (k, m) in batches.iter().enumerate() {
+        let Body::Imu(b) = &m.body else { panic!("{m:?}") };
+        assert_eq!(b.calibration, rig_calibration());
+        assert!(b.samples.iter().all(|s| s.stamp <= m.header.stamp), "frame {k}: a sample after the frame");
+        streamed.extend(b.samples.iter().copied());
+    }
+    assert_eq!(streamed, truth, "every sample once, in order");
+    assert_eq!(streamed.last().map(|s| s.stamp), Some(STAMP_BASE + 1.965));
+    let black = |k: usize| {
+        let Body::Image(i) = &sink.port("cam", "rgb")[k].body else { panic!() };
+        i.data.iter().all(|&v| v == 0) && depth_of(&sink.port("cam", "depth")[k]).iter().all(|&d| d == 0.0)
+    };
+    assert!(!black(19) && (20..50).all(black) && !black(50));
+    let Body::Pose(p) = &sink.port("cam", "gt_pose")[50].body else { panic!() };
+    assert!(
+        (p.world_from_cam.to_homogeneous() - Motion::Handheld.pose(50.0 / 30.0).to_homogeneous()).abs().max() < 1e-12
+    );
+    // An IMU cannot follow a kidnap's rewind: refused, naming the parameter.
+    let e = run("name: s\nnodes:\n  cam: { op: synth, params: { frames: 3, imu: true, kidnap: 1 } }\n")
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("`imu`") && e.contains("kidnap"), "{e}");
+}

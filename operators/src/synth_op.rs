@@ -2,12 +2,15 @@
 
 use std::path::Path;
 
-use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, PixelFormat, Pose, SegmentationMask, StereoRig};
+use dynaflow_engine::msg::{
+    CameraInfo, DepthImage, Header, Image, ImuBatch, ImuSample, PixelFormat, Pose, SegmentationMask, StereoRig,
+};
 use dynaflow_engine::op::Seeded;
 use dynaflow_engine::op::{Instance, OpError, OpSpec, Out, Outputs, Param, ParamType, Params};
 use dynaflow_engine::params;
 
-use dynaflow_datasets::synth::{Frame, Generator, Motion, PeopleMode, SynthConfig, scaled_fr3};
+use dynaflow_datasets::imu::ImuStream;
+use dynaflow_datasets::synth::{Frame, Generator, Motion, PeopleMode, SynthConfig, rig_calibration, scaled_fr3};
 
 use crate::decode::{OnError, SequenceSource, ground_truth_pose};
 use dynaflow_datasets::Sequence;
@@ -54,6 +57,10 @@ params! {
         kidnap: u64 [0, 1_000_000] = 0,
         /// a rectified right camera this many metres to the right (`right`, `stereo`); 0: none (a zero baseline has no disparity)
         stereo_baseline: f64 [0.0, 10.0] = 0.0,
+        /// cover the camera at this frame: 30 frames black with no depth while the motion goes on (a visual blackout the IMU carries a tracker through); 0: never
+        blackout: u64 [0, 1_000_000] = 0,
+        /// the rig's IMU on `imu`: 200 Hz with EuRoC's ADIS16448 noise and bias walks, the camera mounted as EuRoC's cam0 (what `dynaflow synth --format euroc` writes)
+        imu: bool = false,
     }
 }
 
@@ -64,12 +71,25 @@ const GT_POSE: Out<Pose> = Out::ground_truth("gt_pose", "ground-truth world_from
 const RIGHT: Out<Image> =
     Out::new("right", "RGB8 image of the rectified right camera (with `stereo_baseline` > 0; its own sensor noise)");
 const STEREO: Out<StereoRig> = Out::new("stereo", "the rig (with `stereo_baseline` > 0)");
+const IMU: Out<ImuBatch> = Out::new(
+    "imu",
+    "with `imu`: the IMU samples after the previous frame up to this one (the first frame: from the start), with the rig's calibration",
+);
 const GT_MASK: Out<SegmentationMask> =
     Out::ground_truth("gt_mask", "ground-truth class (0 static, 1 person) and instance masks");
 
 pub(crate) const SYNTH: OpSpec =
     OpSpec::source("synth", "synth", dynaflow_engine::op::doc_line(include_str!("docs/synth.md")), build)
-        .outputs(&[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec, GT_MASK.spec, RIGHT.spec, STEREO.spec])
+        .outputs(&[
+            RGB.spec,
+            DEPTH.spec,
+            CAMERA_INFO.spec,
+            GT_POSE.spec,
+            GT_MASK.spec,
+            RIGHT.spec,
+            STEREO.spec,
+            IMU.spec,
+        ])
         .params(Config::PARAMS)
         .cpu_heavy();
 
@@ -87,13 +107,23 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         image_noise: c.image_noise as f32,
         blur: c.blur,
         kidnap: (c.kidnap > 0).then_some(c.kidnap),
+        blackout: (c.blackout > 0).then_some(c.blackout),
     };
-    let frames = Synth {
+    if c.imu && c.kidnap > 0 {
+        return Err(OpError::Config {
+            key: "imu".into(),
+            message: "with `kidnap`: a kidnap rewinds the camera, a jump no IMU measures (use `blackout` for a covered camera)"
+                .into(),
+        });
+    }
+    let mut frames = Synth {
         generator: Generator::new(config),
         seeded: c.seed.0.is_some(),
         frames: c.frames,
         stereo_baseline: (c.stereo_baseline > 0.0).then_some(c.stereo_baseline),
+        imu: c.imu.then(Vec::new),
     };
+    frames.draw_imu();
     Ok(Instance::Source(Box::new(SequenceSource::new(frames, emit, Path::new("synth"), OnError::Fail))))
 }
 
@@ -104,6 +134,24 @@ struct Synth {
     frames: u64,
     /// The right camera's baseline, metres.
     stereo_baseline: Option<f64>,
+    /// With `imu`: each frame's batch of the rig's samples.
+    imu: Option<Vec<Vec<ImuSample>>>,
+}
+
+impl Synth {
+    /// The IMU's samples over the frames, cut into one batch per frame (drawn again when the
+    /// seed changes: the noise is the scene seed's).
+    fn draw_imu(&mut self) {
+        if self.imu.is_none() {
+            return;
+        }
+        let g = &self.generator;
+        let last = g.time(self.frames.saturating_sub(1));
+        let samples = g.imu(&rig_calibration(), last, true);
+        let stamps: Vec<f64> = (0..self.frames).map(|k| dynaflow_datasets::synth::STAMP_BASE + g.time(k)).collect();
+        let stream = ImuStream { samples, duplicates_dropped: 0, irregular_intervals: 0, longest_interval: 0.0 };
+        self.imu = Some(stream.batches(&stamps));
+    }
 }
 
 impl Sequence for Synth {
@@ -126,6 +174,7 @@ impl Sequence for Synth {
             let mut config = self.generator.config().clone();
             config.seed = seed;
             self.generator = Generator::new(config);
+            self.draw_imu();
         }
     }
 }
@@ -151,6 +200,14 @@ fn emit(synth: &Synth, f: Frame, header: &Header) -> Outputs {
         .send(&RGB, header.clone(), rgb)
         .send(&DEPTH, header.clone(), DepthImage { width: k.width, height: k.height, data: f.depth })
         .send(&CAMERA_INFO, header.clone(), k.clone());
+    if let Some(batches) = &synth.imu {
+        let samples = batches.get(f.index as usize).cloned().unwrap_or_default();
+        out = out.send(
+            &IMU,
+            Header { frame_id: "imu".into(), ..header.clone() },
+            ImuBatch { samples, calibration: rig_calibration() },
+        );
+    }
     ground_truth_pose(&mut out, &GT_POSE, header, Pose { world_from_cam: f.world_from_cam });
     out.send(&GT_MASK, header.clone(), mask)
 }

@@ -42,6 +42,10 @@ pub struct SynthArgs {
     /// 10 s earlier (a place already seen; relocalisation)
     #[arg(long)]
     pub kidnap: Option<u64>,
+    /// Cover the camera at this frame: 30 black frames without depth while the motion goes on
+    /// (the IMU keeps measuring: a visual blackout)
+    #[arg(long)]
+    pub blackout: Option<u64>,
     /// No depth noise, image noise or blur (exact rendering).
     #[arg(long)]
     pub clean: bool,
@@ -76,6 +80,7 @@ pub fn synth(args: &SynthArgs) -> u8 {
         image_noise: if args.clean { 0.0 } else { 2.0 },
         blur: !args.clean,
         kidnap: args.kidnap,
+        blackout: args.blackout,
         ..SynthConfig::default()
     };
     let t = Instant::now();

@@ -61,6 +61,9 @@ pub struct SynthConfig {
     /// (the camera covered and carried away), then the motion resumes [`KIDNAP_REWIND`]
     /// seconds earlier (the camera set down where it was then: a place already seen).
     pub kidnap: Option<u64>,
+    /// Cover the camera at this frame for [`KIDNAP_BLACKOUT`] frames (black, no depth) while
+    /// the motion goes on: what an IMU carries a tracker through.
+    pub blackout: Option<u64>,
 }
 
 /// Frames a kidnapped camera sees nothing (one second at 30 Hz).
@@ -81,6 +84,7 @@ impl Default for SynthConfig {
             image_noise: 2.0,
             blur: true,
             kidnap: None,
+            blackout: None,
         }
     }
 }
@@ -155,9 +159,9 @@ impl Generator {
         }
     }
 
-    /// Is frame `k` blacked out by a kidnap?
+    /// Is frame `k` blacked out (by a kidnap or a blackout)?
     pub fn blacked_out(&self, k: u64) -> bool {
-        self.config.kidnap.is_some_and(|at| (at..at + KIDNAP_BLACKOUT).contains(&k))
+        [self.config.kidnap, self.config.blackout].iter().flatten().any(|&at| (at..at + KIDNAP_BLACKOUT).contains(&k))
     }
 
     /// The people's body parts at frame `k` as oriented boxes (world from box centre, half
