@@ -293,6 +293,7 @@ impl Preintegrated {
 }
 
 pub mod init;
+pub mod propagate;
 
 #[cfg(test)]
 mod tests;
