@@ -294,6 +294,7 @@ impl Preintegrated {
 
 pub mod init;
 pub mod propagate;
+pub mod track;
 
 #[cfg(test)]
 mod tests;

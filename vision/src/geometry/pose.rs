@@ -181,7 +181,9 @@ pub fn observation_jacobian(
     Some((r, j))
 }
 
-fn huber(e2: f64, delta: f64) -> (f64, f64) {
+/// Huber's kernel of a squared error `e2` with threshold `delta`: the robust cost and the
+/// weight of the squared error (1 inside the threshold), as g2o's `RobustKernelHuber`.
+pub fn huber(e2: f64, delta: f64) -> (f64, f64) {
     let e = e2.sqrt();
     if e <= delta { (e2, 1.0) } else { (2.0 * delta * e - delta * delta, delta / e) }
 }
