@@ -271,6 +271,8 @@ pub struct EurocSequence {
     cam0: Stream,
     camera: CameraInfo,
     cam1: Option<(Stream, CameraInfo)>,
+    /// cam1's baseline when it is a rectified partner of cam0 (checked once, at open).
+    rectified_baseline: Option<f64>,
     depth0: Option<(Stream, f64)>,
     calibration: ImuCalibration,
     imu: ImuStream,
@@ -343,7 +345,10 @@ impl EurocSequence {
         };
         let gt = read_ground_truth(&mav0)?;
         let frames = if frames == 0 { cam0.images.len() } else { frames.min(cam0.images.len()) };
-        Ok(Self { mav0, cam0, camera, cam1, depth0, calibration, imu, batches, gt, frames })
+        let mut sequence =
+            Self { mav0, cam0, camera, cam1, rectified_baseline: None, depth0, calibration, imu, batches, gt, frames };
+        sequence.rectified_baseline = sequence.baseline().ok().flatten();
+        Ok(sequence)
     }
 
     /// Frames to read.
@@ -380,6 +385,12 @@ impl EurocSequence {
     /// Whether the folder has `depth0/`.
     pub fn has_depth(&self) -> bool {
         self.depth0.is_some()
+    }
+
+    /// The stereo baseline in metres when `cam1` forms a rectified pair with `cam0` (frames
+    /// carry its image then); `None` otherwise.
+    pub fn stereo_baseline(&self) -> Option<f64> {
+        self.rectified_baseline
     }
 
     /// The stereo baseline in metres when `cam1` forms a rectified pair with `cam0`; `Ok(None)`
@@ -457,7 +468,7 @@ impl EurocSequence {
             Ok(stream.dir.join("data").join(&stream.images[i].1))
         };
         let right = match &self.cam1 {
-            Some((stream, _)) if self.baseline().is_ok() => {
+            Some((stream, _)) if self.rectified_baseline.is_some() => {
                 let path = find(stream)?;
                 let img = load_rgb(&path)?;
                 same_size(path.display(), (img.width, img.height), left_path.display(), (left.width, left.height))?;

@@ -107,20 +107,26 @@ pub fn check(samples: &[(usize, ImuSample)], rate_hz: f64, path: &Path) -> Resul
 }
 
 impl ImuStream {
-    /// One batch per frame stamp (sorted): frame `i` gets the samples in `(t[i-1], t[i]]`,
-    /// the first every sample up to `t[0]`. Samples after the last frame are in no batch.
+    /// One batch per frame stamp (sorted): see [`batches`].
     pub fn batches(&self, frame_stamps: &[f64]) -> Vec<Vec<ImuSample>> {
-        let mut start = 0;
-        frame_stamps
-            .iter()
-            .map(|&t| {
-                let end = start + self.samples[start..].partition_point(|s| s.stamp <= t);
-                let batch = self.samples[start..end].to_vec();
-                start = end;
-                batch
-            })
-            .collect()
+        batches(&self.samples, frame_stamps)
     }
+}
+
+/// One batch of `samples` (in stamp order) per frame stamp (sorted): frame `i` gets the
+/// samples in `(t[i-1], t[i]]`, the first every sample up to `t[0]`. Samples after the last
+/// frame are in no batch.
+pub fn batches(samples: &[ImuSample], frame_stamps: &[f64]) -> Vec<Vec<ImuSample>> {
+    let mut start = 0;
+    frame_stamps
+        .iter()
+        .map(|&t| {
+            let end = start + samples[start..].partition_point(|s| s.stamp <= t);
+            let batch = samples[start..end].to_vec();
+            start = end;
+            batch
+        })
+        .collect()
 }
 
 #[cfg(test)]

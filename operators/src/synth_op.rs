@@ -9,7 +9,6 @@ use dynaflow_engine::op::Seeded;
 use dynaflow_engine::op::{Instance, OpError, OpSpec, Out, Outputs, Param, ParamType, Params};
 use dynaflow_engine::params;
 
-use dynaflow_datasets::imu::ImuStream;
 use dynaflow_datasets::synth::{Frame, Generator, Motion, PeopleMode, SynthConfig, rig_calibration, scaled_fr3};
 
 use crate::decode::{OnError, SequenceSource, ground_truth_pose};
@@ -149,8 +148,7 @@ impl Synth {
         let last = g.time(self.frames.saturating_sub(1));
         let samples = g.imu(&rig_calibration(), last, true);
         let stamps: Vec<f64> = (0..self.frames).map(|k| dynaflow_datasets::synth::STAMP_BASE + g.time(k)).collect();
-        let stream = ImuStream { samples, duplicates_dropped: 0, irregular_intervals: 0, longest_interval: 0.0 };
-        self.imu = Some(stream.batches(&stamps));
+        self.imu = Some(dynaflow_datasets::imu::batches(&samples, &stamps));
     }
 }
 

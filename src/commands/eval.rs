@@ -50,10 +50,11 @@ fn row(name: &str, unit: &str, s: &Stats) -> String {
 /// Whether `path` is a EuRoC ground-truth CSV: its first line that is not blank has commas
 /// (a TUM file separates with spaces).
 fn is_euroc_csv(path: &std::path::Path) -> bool {
-    std::fs::read_to_string(path)
+    use std::io::BufRead;
+    std::fs::File::open(path)
         .ok()
-        .and_then(|t| t.lines().find(|l| !l.trim().is_empty()).map(|l| l.contains(',')))
-        .unwrap_or(false)
+        .and_then(|f| std::io::BufReader::new(f).lines().map_while(Result::ok).find(|l| !l.trim().is_empty()))
+        .is_some_and(|l| l.contains(','))
 }
 
 /// Exit 0 with the report, 2 on unreadable or incomparable input.

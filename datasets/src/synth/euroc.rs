@@ -15,7 +15,7 @@ use dynaflow_msg::ImuCalibration;
 use image::ExtendedColorType;
 use nalgebra::Isometry3;
 
-use super::tum::{DEPTH_FACTOR, png};
+use super::tum::{DEPTH_FACTOR, depth_png, png};
 use super::{Generator, STAMP_BASE};
 use crate::Error;
 
@@ -111,12 +111,7 @@ pub fn write_euroc(generator: &Generator, root: &Path, opts: &EurocWriteOptions)
             png(&mav0.join("cam1/data").join(&name), &right, k.width, k.height, ExtendedColorType::Rgb8)?;
         }
         if opts.depth {
-            let depth: Vec<u8> = f
-                .depth
-                .iter()
-                .flat_map(|&d| ((f64::from(d) * DEPTH_FACTOR).round().clamp(0.0, 65535.0) as u16).to_ne_bytes())
-                .collect();
-            png(&mav0.join("depth0/data").join(&name), &depth, k.width, k.height, ExtendedColorType::L16)?;
+            depth_png(&mav0.join("depth0/data").join(&name), &f.depth, k.width, k.height)?;
         }
         for text in &mut csv {
             let _ = writeln!(text, "{stamp},{name}");

@@ -43,6 +43,15 @@ pub(super) fn png(path: &Path, data: &[u8], w: u32, h: u32, color: ExtendedColor
     .map_err(|e| err(path, e))
 }
 
+/// Depth in metres as a TUM 16-bit PNG ([`DEPTH_FACTOR`] per metre, 0 = no measurement).
+pub(super) fn depth_png(path: &Path, depth: &[f32], w: u32, h: u32) -> Result<(), Error> {
+    let bytes: Vec<u8> = depth
+        .iter()
+        .flat_map(|&d| ((f64::from(d) * DEPTH_FACTOR).round().clamp(0.0, 65535.0) as u16).to_ne_bytes())
+        .collect();
+    png(path, &bytes, w, h, ExtendedColorType::L16)
+}
+
 fn write_flo(path: &Path, flow: &[[f32; 2]], w: u32, h: u32) -> Result<(), Error> {
     let mut bytes = Vec::with_capacity(12 + flow.len() * 8);
     bytes.extend_from_slice(&202_021.25f32.to_le_bytes());
@@ -66,12 +75,7 @@ fn write_frame(dir: &Path, f: &Frame, w: u32, h: u32) -> Result<(), Error> {
     let s = stamp_name(f.stamp);
     let sd = stamp_name(f.stamp + DEPTH_STAMP_OFFSET);
     png(&dir.join(format!("rgb/{s}.png")), &f.rgb, w, h, ExtendedColorType::Rgb8)?;
-    let depth: Vec<u8> = f
-        .depth
-        .iter()
-        .flat_map(|&d| ((f64::from(d) * DEPTH_FACTOR).round().clamp(0.0, 65535.0) as u16).to_ne_bytes())
-        .collect();
-    png(&dir.join(format!("depth/{sd}.png")), &depth, w, h, ExtendedColorType::L16)?;
+    depth_png(&dir.join(format!("depth/{sd}.png")), &f.depth, w, h)?;
     let class: Vec<u8> = f.class.iter().map(|&c| c.min(255) as u8).collect();
     png(&dir.join(format!("mask/{s}.png")), &class, w, h, ExtendedColorType::L8)?;
     let inst: Vec<u8> = f.instance.iter().map(|&c| c.min(255) as u8).collect();

@@ -72,9 +72,7 @@ fn emit(sequence: &EurocSequence, f: EurocFrame, header: &Header) -> Outputs {
         Header { frame_id: "imu".into(), ..header.clone() },
         ImuBatch { samples: f.imu, calibration: *sequence.calibration() },
     );
-    if let Some(right) = f.right
-        && let Ok(Some(baseline)) = sequence.baseline()
-    {
+    if let (Some(right), Some(baseline)) = (f.right, sequence.stereo_baseline()) {
         out = out.send(&RIGHT, header.clone(), right).send(&STEREO, header.clone(), StereoRig { baseline });
     }
     if let Some(depth) = f.depth {
