@@ -14,7 +14,7 @@
 //! bias Jacobians are those of exactly this scheme, so a small bias change is followed to
 //! second-order accuracy.
 
-use nalgebra::{Isometry3, Matrix3, SMatrix, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 
 use dynaflow_msg::{ImuCalibration, ImuSample};
 
@@ -273,6 +273,30 @@ impl Preintegrated {
     pub fn delta_position(&self) -> Vector3<f64> {
         let (dg, da) = self.bias_change();
         self.delta_p + self.j_p_g * dg + self.j_p_a * da
+    }
+
+    /// The inertial residual between the body states at the span's start (`i`) and end (`j`),
+    /// each `(R_wb, position, velocity)` in the world (ORB-SLAM3's `EdgeInertial`, Forster eq.
+    /// 45): rotation in ΔR's tangent space, velocity and position in body `i`'s frame, zero when
+    /// the states agree with the deltas at the bias estimate. Also the rotation error
+    /// `ΔRᵀ·R_iᵀ·R_j` whose logarithm is the first part.
+    pub fn residual(
+        &self,
+        i: (&Matrix3<f64>, &Vector3<f64>, &Vector3<f64>),
+        j: (&Matrix3<f64>, &Vector3<f64>, &Vector3<f64>),
+        gravity_w: &Vector3<f64>,
+    ) -> (SVector<f64, 9>, Matrix3<f64>) {
+        let ((ri, pi, vi), (rj, pj, vj)) = (i, j);
+        let (ri_t, dt) = (ri.transpose(), self.delta_t);
+        let e_rot = self.delta_rotation().to_rotation_matrix().into_inner().transpose() * ri_t * rj;
+        let e_r = UnitQuaternion::from_matrix(&e_rot).scaled_axis();
+        let e_v = ri_t * (vj - vi - gravity_w * dt) - self.delta_velocity();
+        let e_p = ri_t * (pj - pi - vi * dt - 0.5 * gravity_w * dt * dt) - self.delta_position();
+        let mut r = SVector::<f64, 9>::zeros();
+        r.fixed_rows_mut::<3>(0).copy_from(&e_r);
+        r.fixed_rows_mut::<3>(3).copy_from(&e_v);
+        r.fixed_rows_mut::<3>(6).copy_from(&e_p);
+        (r, e_rot)
     }
 
     /// The state at the end of the span from the state at its start (eq. 33): the body's pose

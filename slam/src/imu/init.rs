@@ -234,15 +234,8 @@ pub fn initialise(
             let (vi, vj) = (state.velocities[i], state.velocities[i + 1]);
             let pi = centres[i] * state.scale + levers[i];
             let pj = centres[i + 1] * state.scale + levers[i + 1];
-            let d_r = p.delta_rotation().to_rotation_matrix().into_inner();
-            let e_r_rot = d_r.transpose() * ri_t * rj;
-            let e_r = UnitQuaternion::from_matrix(&e_r_rot).scaled_axis();
-            let e_v = ri_t * (vj - vi - g_w * dt) - p.delta_velocity();
-            let e_p = ri_t * (pj - pi - vi * dt - 0.5 * g_w * dt * dt) - p.delta_position();
-            let mut residual = SVector::<f64, 9>::zeros();
-            residual.fixed_rows_mut::<3>(0).copy_from(&e_r);
-            residual.fixed_rows_mut::<3>(3).copy_from(&e_v);
-            residual.fixed_rows_mut::<3>(6).copy_from(&e_p);
+            let (residual, e_r_rot) = p.residual((&rotations[i], &pi, &vi), (&rj, &pj, &vj), &g_w);
+            let e_r: Vector3<f64> = residual.fixed_rows::<3>(0).into();
             let j = p.jacobians();
             let dbg = p.bias().gyro - p.linearised_bias().gyro;
             let mut global = SMatrix::<f64, 9, GLOBAL>::zeros();

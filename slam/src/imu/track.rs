@@ -56,26 +56,17 @@ pub fn optimize_inertial_pose(
     let r_cb = cam_from_body.rotation.to_rotation_matrix().into_inner();
     let bound = |o: &PoseObservation| if o.depth.is_some() && bf > 0.0 { CHI2_3DOF_95 } else { CHI2_2DOF_95 };
     let info = preintegrated.covariance().try_inverse().unwrap_or_else(Matrix9::zeros);
-    let dt = preintegrated.delta_t();
-    let ri_t = last.world_from_body.rotation.to_rotation_matrix().into_inner().transpose();
+    let ri = last.world_from_body.rotation.to_rotation_matrix().into_inner();
+    let ri_t = ri.transpose();
     let (pi, vi) = (last.world_from_body.translation.vector, last.velocity);
-    let d_r = preintegrated.delta_rotation().to_rotation_matrix().into_inner();
-    let (d_v, d_p) = (preintegrated.delta_velocity(), preintegrated.delta_position());
 
     // The inertial residual and its Jacobian with respect to (δθ, δp, δv).
     let inertial = |s: &NavState| -> (Vector9, Matrix9) {
         let rj = s.world_from_body.rotation.to_rotation_matrix().into_inner();
         let pj = s.world_from_body.translation.vector;
-        let e_rot = d_r.transpose() * ri_t * rj;
-        let e_r = UnitQuaternion::from_matrix(&e_rot).scaled_axis();
-        let e_v = ri_t * (s.velocity - vi - gravity_w * dt) - d_v;
-        let e_p = ri_t * (pj - pi - vi * dt - 0.5 * gravity_w * dt * dt) - d_p;
-        let mut r = Vector9::zeros();
-        r.fixed_rows_mut::<3>(0).copy_from(&e_r);
-        r.fixed_rows_mut::<3>(3).copy_from(&e_v);
-        r.fixed_rows_mut::<3>(6).copy_from(&e_p);
+        let (r, _) = preintegrated.residual((&ri, &pi, &vi), (&rj, &pj, &s.velocity), gravity_w);
         let mut j = Matrix9::zeros();
-        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&right_jacobian_inverse(&e_r));
+        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&right_jacobian_inverse(&r.fixed_rows::<3>(0).into()));
         j.fixed_view_mut::<3, 3>(3, 6).copy_from(&ri_t);
         j.fixed_view_mut::<3, 3>(6, 3).copy_from(&(ri_t * rj));
         (r, j)

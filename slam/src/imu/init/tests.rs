@@ -1,23 +1,10 @@
 #![allow(clippy::unwrap_used)]
 
 use dynaflow_base::rng::SplitMix64;
-use dynaflow_datasets::synth::{Generator, HANDHELD_REST, Motion, STAMP_BASE, SynthConfig};
-use dynaflow_msg::ImuCalibration;
-use nalgebra::{Translation3, UnitQuaternion, Vector3};
+use dynaflow_datasets::synth::{Generator, HANDHELD_REST, Motion, STAMP_BASE, SynthConfig, rig_calibration};
+use nalgebra::{UnitQuaternion, Vector3};
 
 use super::*;
-
-/// A camera mounted off the IMU: turned a quarter about `z`, 7 cm away (a lever arm of the
-/// size of EuRoC's cam0).
-fn calibration() -> ImuCalibration {
-    ImuCalibration {
-        body_from_cam: Isometry3::from_parts(
-            Translation3::new(-0.02, -0.065, 0.01),
-            UnitQuaternion::from_scaled_axis(Vector3::z() * std::f64::consts::FRAC_PI_2),
-        ),
-        ..ImuCalibration::adis16448()
-    }
-}
 
 struct Truth {
     /// Metres per visual unit.
@@ -62,7 +49,7 @@ fn window(seed: u64, seconds: f64, scale: f64, noise: Noise) -> Window {
 /// As [`window`], key frames every `spacing` seconds.
 fn window_every(seed: u64, seconds: f64, spacing: f64, scale: f64, noise: Noise) -> Window {
     let g = Generator::new(SynthConfig { motion: Motion::Handheld, seed, ..SynthConfig::default() });
-    let cal = calibration();
+    let cal = rig_calibration();
     let start = HANDHELD_REST;
     let mut samples = g.imu(&cal, start + seconds + 0.1, noise.imu);
     for s in &mut samples {
@@ -113,7 +100,8 @@ fn errors(init: &InertialInit, truth: &Truth) -> Errors {
 }
 
 fn run(w: &Window, config: &InitConfig) -> InertialInit {
-    initialise(&w.keyframes, &w.preintegrated, &calibration().body_from_cam, calibration().gravity, config).unwrap()
+    initialise(&w.keyframes, &w.preintegrated, &rig_calibration().body_from_cam, rig_calibration().gravity, config)
+        .unwrap()
 }
 
 #[test]
@@ -201,7 +189,7 @@ fn noisy_motion_gives_scale_within_five_percent_after_two_seconds_and_two_after_
 #[test]
 fn malformed_windows_are_refused() {
     let w = window(0, 0.2, 1.0, CLEAN);
-    let cal = calibration();
+    let cal = rig_calibration();
     let config = InitConfig::monocular();
     let err = initialise(&w.keyframes[..2], &w.preintegrated[..1], &cal.body_from_cam, cal.gravity, &config);
     assert!(matches!(err, Err(InitError::TooFewKeyFrames { keyframes: 2, preintegrated: 1 })), "{err:?}");
@@ -216,7 +204,7 @@ fn malformed_windows_are_refused() {
 
 #[test]
 fn at_rest_gravity_and_the_gyro_bias_come_from_the_means_and_motion_is_refused() {
-    let cal = calibration();
+    let cal = rig_calibration();
     let bias = Vector3::new(0.004, -0.003, 0.002);
     for seed in 1..=3 {
         let g = Generator::new(SynthConfig { motion: Motion::Handheld, seed, ..SynthConfig::default() });
