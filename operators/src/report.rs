@@ -295,6 +295,32 @@ pub struct FrameStates {
     pub relocalised: u64,
     /// Lost (no pose).
     pub lost: u64,
+    /// Not tracked by vision, the pose propagated by the IMU.
+    #[serde(default)]
+    pub inertial: u64,
+}
+
+/// A visual-inertial tracker's part of its report.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct InertialReport {
+    /// `static` or `map`; absent: the IMU was never initialised.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init_method: Option<String>,
+    /// Seconds from the first frame to the initialisation.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init_after_s: Option<f64>,
+    /// Key frames the initialisation used.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init_keyframes: Option<usize>,
+    /// The biases at the end: gyroscope (rad/s), accelerometer (m/s²).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gyro_bias: Option<[f64; 3]>,
+    /// See `gyro_bias`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accel_bias: Option<[f64; 3]>,
+    /// Why the last MAP initialisation failed (when it never succeeded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub init_failure: Option<String>,
 }
 
 /// Absolute trajectory error, metres.
@@ -418,4 +444,7 @@ pub struct TrackerReport {
     /// The map started in.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub map_loaded: Option<String>,
+    /// With an IMU: its initialisation and final biases.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub inertial: Option<InertialReport>,
 }

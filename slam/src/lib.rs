@@ -42,4 +42,6 @@ pub mod tracker;
 
 pub use local_map::{LocalMapConfig, LocalMapper};
 pub use map::{Feature, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, SparseMap};
-pub use tracker::{Sensor, TrackState, Tracker, TrackerConfig, TrackingResult};
+pub use tracker::{
+    InertialEstimate, InertialInitInfo, InitMethod, Sensor, TrackState, Tracker, TrackerConfig, TrackingResult,
+};

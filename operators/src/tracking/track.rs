@@ -6,8 +6,8 @@ use std::path::PathBuf;
 use std::sync::Arc;
 
 use dynaflow_engine::msg::{
-    CameraInfo, DepthImage, Header, Keypoints, Message, PointLabels, Pose, Scalars, SegmentationMask, SparseMap,
-    StereoRig, Tracks,
+    CameraInfo, DepthImage, Header, ImuBatch, ImuCalibration, Keypoints, Message, PointLabels, Pose, Scalars,
+    SegmentationMask, SparseMap, StereoRig, Tracks,
 };
 use dynaflow_engine::op::{
     Context, In, InputRole, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, ParamSpec, Params, concat_params,
@@ -19,7 +19,7 @@ use dynaflow_vision::camera::Pinhole;
 use rand_core::Rng;
 
 use super::evaluation::TrajectoryLog;
-use crate::report::{FrameStates, MapSaved, NodeReport, TrackerReport};
+use crate::report::{FrameStates, InertialReport, MapSaved, NodeReport, TrackerReport};
 
 /// A tracker's sensor with what only it has: the depth camera's parameters.
 enum Setup {
@@ -108,6 +108,10 @@ const TRACKS: In<Tracks> = In::optional(
     "tracks",
     "the tracks `labels` index (a keypoint whose nearest labelled track within `label_radius` is dynamic is left out)",
 );
+const IMU: In<ImuBatch> = In::optional(
+    "imu",
+    "the IMU samples since the previous frame with the IMU's calibration (the source's `imu`): wired, the tracker is visual-inertial (ORB-SLAM3's: IMU initialisation, IMU prediction, inertial pose optimisation, IMU-only propagation through frames vision cannot track)",
+);
 const GT_POSE: In<Pose> =
     In::optional("gt_pose", "ground truth, for the ATE in the summary").with_role(InputRole::Evaluation);
 const POSE: Out<Pose> =
@@ -116,13 +120,20 @@ const KEYFRAME: Out<SparseMap> =
     Out::new("keyframe", "a new key frame with its observations and new points (to `local_map`)");
 const STATS: Out<Scalars> = Out::new(
     "stats",
-    "`state` (0 not initialised, 1 new map, 2 tracked, 3 relocalised, 4 lost), `matches`, `inliers`, `map_points`, `map_id`, `keyframe`",
+    "`state` (0 not initialised, 1 new map, 2 tracked, 3 relocalised, 4 lost, 5 propagated by the IMU), `matches`, `inliers`, `map_points`, `map_id`, `keyframe`; with an initialised IMU also `velocity_x/y/z` (m/s, world), `gyro_bias_x/y/z`, `accel_bias_x/y/z`, `gravity_x/y/z` (world) and `position_sigma` (m, the IMU-only propagation's)",
 );
 
 /// The inputs every sensor shares, after its own.
 macro_rules! tracker_inputs {
     ($($own:expr),*) => {
         &[KEYPOINTS.spec, $($own,)* CAMERA_INFO.spec, MAP.spec, LOOP.spec, MASK.spec, LABELS.spec, TRACKS.spec, GT_POSE.spec]
+    };
+}
+
+/// A depth sensor's inputs, with the IMU.
+macro_rules! inertial_inputs {
+    ($($own:expr),*) => {
+        &[KEYPOINTS.spec, $($own,)* CAMERA_INFO.spec, IMU.spec, MAP.spec, LOOP.spec, MASK.spec, LABELS.spec, TRACKS.spec, GT_POSE.spec]
     };
 }
 
@@ -137,7 +148,7 @@ pub const TRACK_RGBD: OpSpec =
     OpSpec::transform("track_rgbd", "pnp_ba", dynaflow_engine::op::doc_line(include_str!("docs/track_rgbd.md")), |p| {
         build(p, Sensor::Rgbd)
     })
-    .inputs(tracker_inputs!(DEPTH_CAMERA.spec))
+    .inputs(inertial_inputs!(DEPTH_CAMERA.spec))
     .outputs(OUTPUTS)
     .params(&RGBD_PARAMS)
     .cpu_heavy()
@@ -150,7 +161,7 @@ pub const TRACK_STEREO: OpSpec = OpSpec::transform(
     dynaflow_engine::op::doc_line(include_str!("docs/track_stereo.md")),
     |p| build(p, Sensor::Stereo),
 )
-.inputs(tracker_inputs!(STEREO_DEPTH.spec, RIG.spec))
+.inputs(inertial_inputs!(STEREO_DEPTH.spec, RIG.spec))
 .outputs(OUTPUTS)
 .params(Common::PARAMS)
 .cpu_heavy()
@@ -225,7 +236,8 @@ fn build(p: &Params, sensor: Sensor) -> Result<Instance, OpError> {
         loaded,
         tracker: None,
         log: TrajectoryLog::default(),
-        counts: [0; 5],
+        counts: [0; 6],
+        first_stamp: None,
         last_map: None,
         last_loop: None,
         best_usable: 0,
@@ -245,7 +257,9 @@ struct Track {
     /// The poses sent and the ground truth, scored at the end.
     log: TrajectoryLog,
     /// Frames per state code.
-    counts: [u64; 5],
+    counts: [u64; 6],
+    /// The first frame's time (the inertial initialisation's is reported after it).
+    first_stamp: Option<f64>,
     /// The map batch last applied (a `latest` join may repeat it).
     last_map: Option<Arc<Message>>,
     /// The loop correction last applied.
@@ -287,7 +301,13 @@ fn dynamic_keypoints(inputs: &Inputs, points: &[[f32; 2]], label_radius: f32) ->
 impl Track {
     /// The tracker for this camera, made on the first frame (a loaded map gets its camera
     /// here; one made with another camera's images is refused, naming the file).
-    fn start(&mut self, ctx: &mut Context, k: &CameraInfo, rig: Option<&StereoRig>) -> Result<Tracker, OpError> {
+    fn start(
+        &mut self,
+        ctx: &mut Context,
+        k: &CameraInfo,
+        rig: Option<&StereoRig>,
+        imu: Option<&ImuCalibration>,
+    ) -> Result<Tracker, OpError> {
         let mut tc = match (&self.setup, rig) {
             (Setup::Mono, _) => TrackerConfig::monocular(k.fx),
             (Setup::Stereo, Some(rig)) => TrackerConfig::stereo(k.fx, crate::frontend::stereo_baseline(rig)?),
@@ -306,6 +326,9 @@ impl Track {
         let cam = Pinhole::from(k);
         let mut tracker = Tracker::new(tc, cam, k.width as usize, k.height as usize, ctx.rng.next_u64())
             .with_vocabulary(self.vocabulary.clone());
+        if let Some(calibration) = imu {
+            tracker = tracker.with_imu(*calibration);
+        }
         if let Some(map) = self.loaded.take() {
             let outside = map
                 .kfs
@@ -346,10 +369,28 @@ impl Operator for Track {
             )));
         }
         let descriptors = crate::frontend::orb_descriptors(kp)?;
+        let imu = IMU.get(inputs)?;
         if self.tracker.is_none() {
-            self.tracker = Some(self.start(ctx, k, rig)?);
+            self.tracker = Some(self.start(ctx, k, rig, imu.map(|b| &b.calibration))?);
         }
         let Some(tracker) = self.tracker.as_mut() else { return Ok(Outputs::new()) };
+        // An inertial tracker needs every sample: a frame without its batch would integrate
+        // through a gap, so it stops the run (and a batch after a first frame without one).
+        match (imu, tracker.inertial()) {
+            (Some(batch), true) => tracker.add_imu(&batch.samples),
+            (None, false) => {}
+            (Some(_), false) => {
+                return Err(OpError::Input(
+                    "`imu` gave its first batch after the first frame: the tracker started without an IMU (wire the source's `imu`, which sends one with every frame)".into(),
+                ));
+            }
+            (None, true) => {
+                return Err(OpError::Input(format!(
+                    "no `imu` batch with the frame at {:.6} s: a visual-inertial tracker needs the samples of every frame (a dropped batch would be integrated as a gap)",
+                    msg.header.stamp
+                )));
+            }
+        }
         if let Some(update) = super::fresh(MAP.find(inputs)?, &mut self.last_map) {
             tracker.apply_map_update(update);
         }
@@ -380,6 +421,7 @@ impl Operator for Track {
         let usable = features.iter().filter(|f| !f.dynamic && f.depth.is_some_and(|z| z <= max_depth)).count();
         self.best_usable = self.best_usable.max(usable);
         let stamp = msg.header.stamp;
+        self.first_stamp.get_or_insert(stamp);
         let r = tracker.track(stamp, &features);
         self.counts[r.state.code() as usize] += 1;
         if r.world_from_cam.is_some() && self.first_pose_frame.is_none() {
@@ -398,6 +440,20 @@ impl Operator for Track {
             ("map_id".into(), f64::from(r.map_id)),
             ("keyframe".into(), if r.keyframe.is_some() { 1.0 } else { 0.0 }),
         ];
+        let mut stats = stats;
+        if let Some(e) = tracker.inertial_estimate() {
+            for (name, v) in [
+                ("velocity", e.velocity),
+                ("gyro_bias", e.bias.gyro),
+                ("accel_bias", e.bias.accel),
+                ("gravity", e.gravity_w),
+            ] {
+                for (axis, x) in ["x", "y", "z"].iter().zip(v.iter()) {
+                    stats.push((format!("{name}_{axis}").into(), *x));
+                }
+            }
+            stats.push(("position_sigma".into(), e.position_sigma));
+        }
         let mut out = Outputs::new().send(&STATS, header.clone(), Scalars { values: stats });
         // A lost frame's pose is the motion model's guess, not an estimate: it is left out of
         // the pose stream and the trajectory, as ORB-SLAM2's SaveTrajectoryTUM and the TUM tools
@@ -420,14 +476,15 @@ impl Operator for Track {
         let final_trajectory = self.tracker.as_ref().map(Tracker::keyframe_trajectory).unwrap_or_default();
         let written = self.log.write(ctx, &final_trajectory);
         let saved = self.save_map();
-        let [not_initialised, new_map, tracked, relocalised, lost] = self.counts;
+        let [not_initialised, new_map, tracked, relocalised, lost, inertial] = self.counts;
         let sensor = self.setup.sensor();
         let mut report = TrackerReport {
-            frames: FrameStates { not_initialised, new_map, tracked, relocalised, lost },
+            frames: FrameStates { not_initialised, new_map, tracked, relocalised, lost, inertial },
             maps: self.tracker.as_ref().map_or(0, Tracker::map_id),
             map_relocalisations: self.tracker.as_ref().map_or(0, Tracker::map_relocalisations),
             sensor: sensor_name(sensor).to_owned(),
             first_pose_frame: self.first_pose_frame,
+            inertial: self.tracker.as_ref().filter(|t| t.inertial()).map(|t| self.inertial_report(t)),
             ..TrackerReport::default()
         };
         if let Some(why) = self.never_initialised_because() {
@@ -457,12 +514,32 @@ impl Operator for Track {
 }
 
 impl Track {
+    /// The IMU's initialisation and its final biases.
+    fn inertial_report(&self, tracker: &Tracker) -> InertialReport {
+        let init = tracker.inertial_init();
+        let estimate = tracker.inertial_estimate();
+        InertialReport {
+            init_method: init.map(|i| {
+                match i.method {
+                    dynaflow_slam::InitMethod::Static => "static",
+                    dynaflow_slam::InitMethod::Map => "map",
+                }
+                .to_owned()
+            }),
+            init_after_s: init.zip(self.first_stamp).map(|(i, t0)| i.stamp - t0),
+            init_keyframes: init.map(|i| i.keyframes),
+            gyro_bias: estimate.map(|e| e.bias.gyro.into()),
+            accel_bias: estimate.map(|e| e.bias.accel.into()),
+            init_failure: if init.is_none() { tracker.inertial_init_failure().map(str::to_owned) } else { None },
+        }
+    }
+
     /// Why no frame ever had a pose (`None` when one did).
     fn never_initialised_because(&self) -> Option<String> {
         if self.first_pose_frame.is_some() {
             return None;
         }
-        let [not_initialised, _, _, _, lost] = self.counts;
+        let [not_initialised, _, _, _, lost, _] = self.counts;
         Some(if matches!(self.setup, Setup::Mono) {
             let last = self.tracker.as_ref().and_then(Tracker::init_failure).unwrap_or("no frame");
             format!(

@@ -40,6 +40,12 @@ pub struct InitConfig {
     pub accel_prior: f64,
     /// Levenberg-Marquardt iterations at most.
     pub max_iterations: usize,
+    /// Hold gravity at this `R_wg` instead of estimating its direction: a refinement of
+    /// velocities and biases over a window of an initialised map.
+    pub gravity: Option<UnitQuaternion<f64>>,
+    /// The biases the priors pull towards (zero for a first initialisation; the current
+    /// estimate for a refinement).
+    pub prior_bias: Bias,
 }
 
 impl InitConfig {
@@ -47,7 +53,14 @@ impl InitConfig {
     /// 1e10)`: the accelerometer bias held at zero; two seconds of motion cannot tell it from a
     /// tilt of gravity).
     pub fn monocular() -> Self {
-        Self { fix_scale: false, gyro_prior: 1e2, accel_prior: 1e10, max_iterations: 200 }
+        Self {
+            fix_scale: false,
+            gyro_prior: 1e2,
+            accel_prior: 1e10,
+            max_iterations: 200,
+            gravity: None,
+            prior_bias: Bias::default(),
+        }
     }
 
     /// ORB-SLAM3's first refinement of a monocular map, once its key frames span 5 s
@@ -218,7 +231,8 @@ pub fn initialise(
             (centres[b] + levers[b] - centres[a] - levers[a]) / (keyframes[b].stamp - keyframes[a].stamp)
         })
         .collect();
-    let mut state = State { r_wg, scale: 1.0, bias: Bias::default(), velocities };
+    let r_wg = config.gravity.unwrap_or(r_wg);
+    let mut state = State { r_wg, scale: 1.0, bias: config.prior_bias, velocities };
 
     let dim = GLOBAL + 3 * n;
     let evaluate = |state: &State, pre: &mut [Preintegrated]| -> (f64, Vec<Edge>) {
@@ -257,8 +271,8 @@ pub fn initialise(
             cost += (residual.transpose() * info[i] * residual)[(0, 0)];
             edges.push(Edge { residual, global, v_i, v_j });
         }
-        cost +=
-            config.gyro_prior * state.bias.gyro.norm_squared() + config.accel_prior * state.bias.accel.norm_squared();
+        let (dbg, dba) = (state.bias.gyro - config.prior_bias.gyro, state.bias.accel - config.prior_bias.accel);
+        cost += config.gyro_prior * dbg.norm_squared() + config.accel_prior * dba.norm_squared();
         (cost, edges)
     };
 
@@ -291,17 +305,19 @@ pub fn initialise(
         }
         for k in 0..3 {
             h[(3 + k, 3 + k)] += config.gyro_prior;
-            b[3 + k] += config.gyro_prior * state.bias.gyro[k];
+            b[3 + k] += config.gyro_prior * (state.bias.gyro[k] - config.prior_bias.gyro[k]);
             h[(6 + k, 6 + k)] += config.accel_prior;
-            b[6 + k] += config.accel_prior * state.bias.accel[k];
+            b[6 + k] += config.accel_prior * (state.bias.accel[k] - config.prior_bias.accel[k]);
         }
-        if config.fix_scale {
+        // Held parameters: their rows and columns out, a unit diagonal, no step.
+        let held = [(2, config.fix_scale), (0, config.gravity.is_some()), (1, config.gravity.is_some())];
+        for (p, _) in held.iter().filter(|(_, hold)| *hold) {
             for k in 0..dim {
-                h[(2, k)] = 0.0;
-                h[(k, 2)] = 0.0;
+                h[(*p, k)] = 0.0;
+                h[(k, *p)] = 0.0;
             }
-            h[(2, 2)] = 1.0;
-            b[2] = 0.0;
+            h[(*p, *p)] = 1.0;
+            b[*p] = 0.0;
         }
         hessian = h.clone();
         // Levenberg-Marquardt: damp, solve, accept if the cost falls.
@@ -347,7 +363,8 @@ pub fn initialise(
         .map(|c| c.inverse())
         .ok_or_else(|| InitError::Diverged("the information matrix at the solution is singular".into()))?;
     let scale_sigma = if config.fix_scale { 0.0 } else { covariance[(2, 2)].max(0.0).sqrt() };
-    let gravity_sigma = (covariance[(0, 0)] + covariance[(1, 1)]).max(0.0).sqrt();
+    let gravity_sigma =
+        if config.gravity.is_some() { 0.0 } else { (covariance[(0, 0)] + covariance[(1, 1)]).max(0.0).sqrt() };
     Ok(InertialInit {
         scale: state.scale,
         world_from_gravity: state.r_wg,

@@ -4,7 +4,13 @@
 use super::*;
 
 impl Tracker {
-    pub(super) fn need_keyframe(&self, features: &[Feature], fit: &Fit) -> bool {
+    pub(super) fn need_keyframe(&self, stamp: f64, features: &[Feature], fit: &Fit) -> bool {
+        let visual = self.need_visual_keyframe(features, fit);
+        self.inertial_keyframe_rule(stamp, visual).unwrap_or(visual)
+    }
+
+    /// ORB-SLAM2's rules.
+    fn need_visual_keyframe(&self, features: &[Feature], fit: &Fit) -> bool {
         if self.config.sensor == Sensor::Monocular {
             // ORB-SLAM2, monocular: fewer than 90 % of the reference's points tracked (local
             // mapping is always idle in lockstep, so its other conditions hold).
@@ -124,6 +130,7 @@ impl Tracker {
                 places.db.add(kf, bow);
             }
         }
+        self.imu_keyframe(id, stamp);
         batch
     }
 

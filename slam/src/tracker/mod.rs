@@ -20,7 +20,12 @@
 //! mapping as a [`SparseMap`] batch, whose triangulation adds the rest. A single camera starts
 //! its map from two views ([`monocular`]). Every observation with a depth is an RGB-D
 //! observation in BA (pixel plus virtual right coordinate), as in ORB-SLAM2.
+//!
+//! With an IMU ([`Tracker::with_imu`], [`inertial`]) the stereo and RGB-D trackers follow
+//! ORB-SLAM3's visual-inertial modes: IMU initialisation, IMU prediction, and IMU-only
+//! propagation through frames vision cannot track.
 
+mod inertial;
 mod keyframe;
 mod monocular;
 mod relocalise;
@@ -40,6 +45,11 @@ use nalgebra::{Isometry3, Point3};
 use crate::bow::Vocabulary;
 use crate::keyframe_map::KeyFrameMap;
 use crate::map::{Feature, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, SparseMap, sigma};
+
+pub use inertial::{
+    IMU_ONLY_LIMIT, INERTIAL_KEYFRAME_INTERVAL, INERTIAL_WINDOW, INIT_KEYFRAME_INTERVAL, INIT_MIN_KEYFRAMES,
+    INIT_MIN_SPAN, InertialEstimate, InertialInitInfo, InitMethod,
+};
 
 /// Tracking settings (defaults: ORB-SLAM2's for an RGB-D camera, see [`TrackerConfig::rgbd`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -155,10 +165,14 @@ pub enum TrackState {
     Relocalised,
     /// Not tracked: the pose follows the motion model.
     Lost,
+    /// Not tracked by vision: the pose is the IMU's propagation (an initialised
+    /// visual-inertial tracker, for up to [`IMU_ONLY_LIMIT`] seconds).
+    Inertial,
 }
 
 impl TrackState {
-    /// A number for plots: 0 not initialised, 1 new map, 2 tracked, 3 relocalised, 4 lost.
+    /// A number for plots: 0 not initialised, 1 new map, 2 tracked, 3 relocalised, 4 lost,
+    /// 5 propagated by the IMU.
     pub fn code(self) -> f64 {
         match self {
             TrackState::NotInitialised => 0.0,
@@ -166,6 +180,7 @@ impl TrackState {
             TrackState::Tracked => 2.0,
             TrackState::Relocalised => 3.0,
             TrackState::Lost => 4.0,
+            TrackState::Inertial => 5.0,
         }
     }
 }
@@ -265,6 +280,8 @@ pub struct Tracker {
     mapping: bool,
     /// A loaded map the tracker has not yet found itself in.
     unlocated: bool,
+    /// With an IMU ([`Tracker::with_imu`]): its pre-integration and inertial state.
+    imu: Option<Box<inertial::Inertial>>,
 }
 
 /// The points the key frames `kfs` of the whole map see, as tracking holds its local map.
@@ -314,6 +331,7 @@ impl Tracker {
             relocalisations: 0,
             mapping: true,
             unlocated: false,
+            imu: None,
         }
     }
 
@@ -425,7 +443,11 @@ impl Tracker {
 
     /// Track one frame.
     pub fn track(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
+        self.imu_advance(stamp);
         let r = self.track_frame(stamp, features);
+        if matches!(r.state, TrackState::Tracked | TrackState::Relocalised | TrackState::NewMap) {
+            self.imu_try_static(stamp);
+        }
         // Lost frames (a dead-reckoned guess) stay out of the trajectory, as in ORB-SLAM2.
         if let (Some(pose), Some(k), false) = (r.world_from_cam, self.reference, r.state == TrackState::Lost)
             && let Some(kp) = self.keyframe_poses.get(&k)

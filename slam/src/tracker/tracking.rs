@@ -28,7 +28,8 @@ impl Tracker {
                 matched: f.matched,
             };
         }
-        let predicted = self.last.map(|l| renormalised(&(l * self.velocity)));
+        // With an initialised IMU its prediction; otherwise the constant-velocity model.
+        let predicted = self.imu_prediction().or_else(|| self.last.map(|l| renormalised(&(l * self.velocity))));
         if !self.initialised {
             let origin = predicted.unwrap_or_else(Isometry3::identity);
             if self.config.sensor == Sensor::Monocular {
@@ -58,6 +59,7 @@ impl Tracker {
         };
         match fit.filter(|f| f.inliers >= self.config.min_inliers && finite(f)) {
             Some(f) => {
+                self.inertial_follow(&f, stamp);
                 self.lost_run = 0;
                 // After a relocalisation the motion since the last frame is unknown (ORB-SLAM
                 // tracks the next frame against the reference key frame, without velocity).
@@ -70,8 +72,8 @@ impl Tracker {
                 if !self.mapping {
                     self.follow_loaded_map(&f.matched);
                 }
-                let keyframe =
-                    (self.mapping && self.need_keyframe(features, &f)).then(|| self.make_keyframe(stamp, features, &f));
+                let keyframe = (self.mapping && self.need_keyframe(stamp, features, &f))
+                    .then(|| self.make_keyframe(stamp, features, &f));
                 TrackingResult {
                     world_from_cam: Some(f.world_from_cam),
                     state,
@@ -84,6 +86,10 @@ impl Tracker {
                 }
             }
             None => {
+                // An initialised IMU carries the pose through what vision cannot track.
+                if let Some(r) = self.imu_only(stamp, features.len()) {
+                    return r;
+                }
                 // Only frames that show something count towards a new map: a blacked-out or
                 // covered camera keeps trying to relocalise in the map it has.
                 if features.iter().filter(|f| !f.dynamic).count() >= self.config.min_init_points {

@@ -1,0 +1,90 @@
+//! Visual-inertial tracking (issue 51's done-when 2 and 3) on EuRoC folders written by
+//! `dynaflow synth --format euroc --motion handheld` (a hand-held camera that rests for 1 s,
+//! then moves along and about every axis; a 200 Hz IMU with EuRoC's ADIS16448 noise and bias
+//! walks), read back through `--input`. Seeds 5 and 7: never run while the tracker was built.
+//! The bounds are the issue's: on a static scene the stereo-inertial ATE within 1 cm, the IMU
+//! initialised within 2 s of the motion's start (its other bound, no worse than stereo alone,
+//! is not met: the pose is vision's, see `dynaflow_slam::tracker`'s inertial module); with walking
+//! people YSAG's culling on the stereo-inertial tracker cuts the no-culling row's ATE by 80 %,
+//! and through a 30-frame blackout the inertial tracker keeps one map (no relocalisation)
+//! and stays within 2 cm, where the visual tracker loses the frames and relocalises.
+#![allow(clippy::unwrap_used, clippy::panic)]
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use dynaflow::summary::Summary;
+use dynaflow_datasets::synth::HANDHELD_REST;
+
+/// Write a EuRoC folder; return its `mav0`.
+fn euroc(dir: &Path, name: &str, extra: &[&str]) -> PathBuf {
+    let root = dir.join(name);
+    let o = common::bin()
+        .args(["synth", "--format", "euroc", "--motion", "handheld", "--frames", "300", "--out"])
+        .arg(&root)
+        .args(extra)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    root.join("mav0")
+}
+
+/// Run `graph --variant variant` on `input`; its summary.
+fn run(graph: &str, variant: &str, input: &Path, out: &Path) -> Summary {
+    let out = out.join(format!("{graph}-{variant}"));
+    let o = common::bin()
+        .args(["run", "--no-progress", "--record", "none", "--variant", variant, "--input"])
+        .arg(input)
+        .arg("--out")
+        .arg(&out)
+        .arg(common::repo().join(format!("graphs/{graph}.yaml")))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(0), "{graph} {variant}: {}", String::from_utf8_lossy(&o.stderr));
+    common::summary(&out.join(format!("{graph}-{variant}.summary.json")))
+}
+
+#[test]
+fn stereo_inertial_meets_the_bounds_on_a_static_scene() {
+    let dir = common::TempDir::new("inertial-static");
+    let input = euroc(dir.path(), "static", &["--people", "0", "--seed", "5"]);
+    let stereo = run("orb_baseline", "stereo", &input, dir.path());
+    let inertial = run("orb_baseline", "stereo_inertial", &input, dir.path());
+    let (s, i) = (stereo.ate.clone().unwrap(), inertial.ate.clone().unwrap());
+    let report = inertial.tracker("track").unwrap();
+    let imu = report.inertial.clone().unwrap();
+    let after = imu.init_after_s.unwrap();
+    eprintln!(
+        "static scene: stereo ATE {:.4} m, stereo-inertial {:.4} m; IMU initialised ({:?}) at {after:.2} s",
+        s.rmse, i.rmse, imu.init_method
+    );
+    assert_eq!(i.pairs, 300, "every frame has a pose");
+    assert!(i.rmse <= 0.01, "stereo-inertial ATE {} m over 1 cm", i.rmse);
+    assert!(after <= HANDHELD_REST + 2.0, "initialised {after} s after the first frame: over 2 s of motion");
+}
+
+#[test]
+fn culling_and_the_imu_carry_stereo_inertial_through_people_and_a_blackout() {
+    let dir = common::TempDir::new("inertial-walking");
+    let input = euroc(dir.path(), "walking", &["--people", "2", "--seed", "7", "--blackout", "150"]);
+    let baseline = run("orb_baseline", "stereo_inertial", &input, dir.path());
+    let ysag = run("ysag", "stereo_inertial", &input, dir.path());
+    let visual = run("ysag", "stereo", &input, dir.path());
+    let (b, y) = (baseline.ate.clone().unwrap(), ysag.ate.clone().unwrap());
+    let (yr, vr) = (ysag.tracker("track").unwrap(), visual.tracker("track").unwrap());
+    eprintln!(
+        "walking people, blackout at frame 150: no culling ATE {:.4} m, ysag stereo-inertial {:.4} m ({:?}), ysag stereo {:?}",
+        b.rmse, y.rmse, yr.frames, vr.frames
+    );
+    assert!(y.rmse <= 0.2 * b.rmse, "ysag {} m vs no culling {} m: less than 80 % better", y.rmse, b.rmse);
+    // The blackout: 30 frames the IMU alone carries, one map, no relocalisation, every frame
+    // posed and the whole run within 2 cm.
+    assert_eq!(yr.frames.inertial, 30, "{:?}", yr.frames);
+    assert_eq!((yr.maps, yr.frames.relocalised, yr.map_relocalisations), (1, 0, 0), "{:?}", yr.frames);
+    assert_eq!(y.pairs, 300);
+    assert!(y.rmse <= 0.02, "ysag stereo-inertial ATE {} m over 2 cm", y.rmse);
+    // The visual tracker loses the covered frames and has to relocalise.
+    assert!(vr.frames.lost >= 30, "{:?}", vr.frames);
+    assert!(vr.frames.relocalised + vr.map_relocalisations as u64 >= 1, "{:?}", vr.frames);
+}
