@@ -369,7 +369,8 @@ impl Operator for Track {
             )));
         }
         let descriptors = crate::frontend::orb_descriptors(kp)?;
-        let imu = IMU.get(inputs)?;
+        // (`track_mono` has no `imu` port: its monocular-inertial form is not built.)
+        let imu = if matches!(self.setup, Setup::Mono) { None } else { IMU.get(inputs)? };
         if self.tracker.is_none() {
             self.tracker = Some(self.start(ctx, k, rig, imu.map(|b| &b.calibration))?);
         }
