@@ -47,13 +47,19 @@ fn row(name: &str, unit: &str, s: &Stats) -> String {
     )
 }
 
-/// Whether `path` is a EuRoC ground-truth CSV: its first line that is not blank has commas
-/// (a TUM file separates with spaces).
+/// Whether `path` is a EuRoC ground-truth CSV: its first data line (not blank, not a `#`
+/// comment, which may hold commas in either format) has commas (a TUM file separates with
+/// spaces).
 fn is_euroc_csv(path: &std::path::Path) -> bool {
     use std::io::BufRead;
     std::fs::File::open(path)
         .ok()
-        .and_then(|f| std::io::BufReader::new(f).lines().map_while(Result::ok).find(|l| !l.trim().is_empty()))
+        .and_then(|f| {
+            std::io::BufReader::new(f).lines().map_while(Result::ok).find(|l| {
+                let l = l.trim();
+                !l.is_empty() && !l.starts_with('#')
+            })
+        })
         .is_some_and(|l| l.contains(','))
 }
 
@@ -150,4 +156,24 @@ pub fn eval(args: &EvalArgs) -> u8 {
     let _ = writeln!(out, "{}", row(&format!("RPE trans ({delta})"), "m", &result.rpe_translation));
     let _ = writeln!(out, "{}", row(&format!("RPE rot ({delta})"), "deg", &result.rpe_rotation_deg));
     EXIT_OK
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn a_tum_file_with_a_comma_in_its_comment_is_not_euroc() {
+        let dir = std::env::temp_dir().join(format!("dynaflow-eval-sniff-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (tum, csv) = (dir.join("gt.txt"), dir.join("data.csv"));
+        // The header dynaflow's own ground-truth files carry, and EuRoC's.
+        std::fs::write(
+            &tum,
+            "# timestamp tx ty tz qx qy qz qw (world_from_cam, dynaflow groundtruth)\n1.0 0 0 0 0 0 0 1\n",
+        )
+        .unwrap();
+        std::fs::write(&csv, "#timestamp, p_RS_R_x [m]\n1000,0,0,0,1,0,0,0,0,0,0,0,0,0,0,0,0\n").unwrap();
+        assert!(!super::is_euroc_csv(&tum));
+        assert!(super::is_euroc_csv(&csv));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

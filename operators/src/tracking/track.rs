@@ -126,13 +126,6 @@ const STATS: Out<Scalars> = Out::new(
 /// The inputs every sensor shares, after its own.
 macro_rules! tracker_inputs {
     ($($own:expr),*) => {
-        &[KEYPOINTS.spec, $($own,)* CAMERA_INFO.spec, MAP.spec, LOOP.spec, MASK.spec, LABELS.spec, TRACKS.spec, GT_POSE.spec]
-    };
-}
-
-/// A depth sensor's inputs, with the IMU.
-macro_rules! inertial_inputs {
-    ($($own:expr),*) => {
         &[KEYPOINTS.spec, $($own,)* CAMERA_INFO.spec, IMU.spec, MAP.spec, LOOP.spec, MASK.spec, LABELS.spec, TRACKS.spec, GT_POSE.spec]
     };
 }
@@ -148,7 +141,7 @@ pub const TRACK_RGBD: OpSpec =
     OpSpec::transform("track_rgbd", "pnp_ba", dynaflow_engine::op::doc_line(include_str!("docs/track_rgbd.md")), |p| {
         build(p, Sensor::Rgbd)
     })
-    .inputs(inertial_inputs!(DEPTH_CAMERA.spec))
+    .inputs(tracker_inputs!(DEPTH_CAMERA.spec))
     .outputs(OUTPUTS)
     .params(&RGBD_PARAMS)
     .cpu_heavy()
@@ -161,7 +154,7 @@ pub const TRACK_STEREO: OpSpec = OpSpec::transform(
     dynaflow_engine::op::doc_line(include_str!("docs/track_stereo.md")),
     |p| build(p, Sensor::Stereo),
 )
-.inputs(inertial_inputs!(STEREO_DEPTH.spec, RIG.spec))
+.inputs(tracker_inputs!(STEREO_DEPTH.spec, RIG.spec))
 .outputs(OUTPUTS)
 .params(Common::PARAMS)
 .cpu_heavy()
@@ -369,8 +362,7 @@ impl Operator for Track {
             )));
         }
         let descriptors = crate::frontend::orb_descriptors(kp)?;
-        // (`track_mono` has no `imu` port: its monocular-inertial form is not built.)
-        let imu = if matches!(self.setup, Setup::Mono) { None } else { IMU.get(inputs)? };
+        let imu = IMU.get(inputs)?;
         if self.tracker.is_none() {
             self.tracker = Some(self.start(ctx, k, rig, imu.map(|b| &b.calibration))?);
         }
@@ -481,7 +473,7 @@ impl Operator for Track {
         let sensor = self.setup.sensor();
         let mut report = TrackerReport {
             frames: FrameStates { not_initialised, new_map, tracked, relocalised, lost, inertial },
-            maps: self.tracker.as_ref().map_or(0, Tracker::map_id),
+            maps: self.tracker.as_ref().map_or(0, Tracker::maps),
             map_relocalisations: self.tracker.as_ref().map_or(0, Tracker::map_relocalisations),
             sensor: sensor_name(sensor).to_owned(),
             first_pose_frame: self.first_pose_frame,
@@ -493,7 +485,9 @@ impl Operator for Track {
             report.initialised = Some(false);
             report.not_initialised_because = Some(why);
         }
-        let align = if sensor == Sensor::Monocular { Align::Sim3 } else { Align::Se3 };
+        // A single camera's map has no scale, unless an IMU made it metric.
+        let metric = self.tracker.as_ref().is_some_and(|t| t.inertial_init().is_some());
+        let align = if sensor == Sensor::Monocular && !metric { Align::Sim3 } else { Align::Se3 };
         self.log.score(&final_trajectory, align, &mut report);
         match &saved {
             Ok(Some((keyframes, points))) => {

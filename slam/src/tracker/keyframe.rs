@@ -131,7 +131,8 @@ impl Tracker {
             }
         }
         self.imu_keyframe(id, stamp);
-        batch
+        // A monocular map just made metric goes to local mapping whole.
+        self.imu_rescale().unwrap_or(batch)
     }
 
     /// Start a map at `world_from_cam` from this frame's points with depth.

@@ -21,9 +21,9 @@
 //! its map from two views ([`monocular`]). Every observation with a depth is an RGB-D
 //! observation in BA (pixel plus virtual right coordinate), as in ORB-SLAM2.
 //!
-//! With an IMU ([`Tracker::with_imu`], [`inertial`]) the stereo and RGB-D trackers follow
-//! ORB-SLAM3's visual-inertial modes: IMU initialisation, IMU prediction, and IMU-only
-//! propagation through frames vision cannot track.
+//! With an IMU ([`Tracker::with_imu`], [`inertial`]) the trackers follow ORB-SLAM3's
+//! visual-inertial modes: IMU initialisation (a single camera's map made metric by it), IMU
+//! prediction, and IMU-only propagation through frames vision cannot track.
 
 mod inertial;
 mod keyframe;
