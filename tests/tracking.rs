@@ -238,9 +238,10 @@ fn baseline_is_deterministic_in_lockstep_and_runs_in_realtime() {
         assert!(a[port].count > 0, "{port}: {a:?}");
     }
     assert_eq!(a, b, "two lockstep runs differ");
-    // The stereo and monocular modes too, on the static scene (the monocular map starts at
-    // frame 8 and local mapping triangulates and fuses from there).
-    for variant in ["stereo", "mono"] {
+    // The stereo, monocular and stereo-inertial modes too, on the static scene (the monocular
+    // map starts at frame 8 and local mapping triangulates and fuses from there; the
+    // stereo-inertial tracker initialises its IMU at rest by frame 9 and tracks with it).
+    for variant in ["stereo", "mono", "stereo_inertial"] {
         let digests = |sub: &str| {
             let out = dir.path().join(format!("{variant}-{sub}"));
             let extra = ["--digest", "--frames", "60", "--set", "camera.people=0", "--variant", variant];
@@ -248,6 +249,9 @@ fn baseline_is_deterministic_in_lockstep_and_runs_in_realtime() {
         };
         let (a, b) = (digests("a"), digests("b"));
         assert!(a["mapping/points"].count > 0, "{variant}: {a:?}");
+        if variant == "stereo_inertial" {
+            assert_eq!(a["camera/imu"].count, 60, "{a:?}");
+        }
         assert_eq!(a, b, "{variant}: two lockstep runs differ");
     }
 
