@@ -43,9 +43,6 @@ pub struct InitConfig {
     /// Hold gravity at this `R_wg` instead of estimating its direction: a refinement of
     /// velocities and biases over a window of an initialised map.
     pub gravity: Option<UnitQuaternion<f64>>,
-    /// The biases the priors pull towards (zero for a first initialisation; the current
-    /// estimate for a refinement).
-    pub prior_bias: Bias,
 }
 
 impl InitConfig {
@@ -53,14 +50,7 @@ impl InitConfig {
     /// 1e10)`: the accelerometer bias held at zero; two seconds of motion cannot tell it from a
     /// tilt of gravity).
     pub fn monocular() -> Self {
-        Self {
-            fix_scale: false,
-            gyro_prior: 1e2,
-            accel_prior: 1e10,
-            max_iterations: 200,
-            gravity: None,
-            prior_bias: Bias::default(),
-        }
+        Self { fix_scale: false, gyro_prior: 1e2, accel_prior: 1e10, max_iterations: 200, gravity: None }
     }
 
     /// ORB-SLAM3's first refinement of a monocular map, once its key frames span 5 s
@@ -232,7 +222,7 @@ pub fn initialise(
         })
         .collect();
     let r_wg = config.gravity.unwrap_or(r_wg);
-    let mut state = State { r_wg, scale: 1.0, bias: config.prior_bias, velocities };
+    let mut state = State { r_wg, scale: 1.0, bias: Bias::default(), velocities };
 
     let dim = GLOBAL + 3 * n;
     let evaluate = |state: &State, pre: &mut [Preintegrated]| -> (f64, Vec<Edge>) {
@@ -271,8 +261,8 @@ pub fn initialise(
             cost += (residual.transpose() * info[i] * residual)[(0, 0)];
             edges.push(Edge { residual, global, v_i, v_j });
         }
-        let (dbg, dba) = (state.bias.gyro - config.prior_bias.gyro, state.bias.accel - config.prior_bias.accel);
-        cost += config.gyro_prior * dbg.norm_squared() + config.accel_prior * dba.norm_squared();
+        cost +=
+            config.gyro_prior * state.bias.gyro.norm_squared() + config.accel_prior * state.bias.accel.norm_squared();
         (cost, edges)
     };
 
@@ -305,9 +295,9 @@ pub fn initialise(
         }
         for k in 0..3 {
             h[(3 + k, 3 + k)] += config.gyro_prior;
-            b[3 + k] += config.gyro_prior * (state.bias.gyro[k] - config.prior_bias.gyro[k]);
+            b[3 + k] += config.gyro_prior * state.bias.gyro[k];
             h[(6 + k, 6 + k)] += config.accel_prior;
-            b[6 + k] += config.accel_prior * (state.bias.accel[k] - config.prior_bias.accel[k]);
+            b[6 + k] += config.accel_prior * state.bias.accel[k];
         }
         // Held parameters: their rows and columns out, a unit diagonal, no step.
         let held = [(2, config.fix_scale), (0, config.gravity.is_some()), (1, config.gravity.is_some())];

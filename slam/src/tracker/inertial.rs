@@ -40,9 +40,9 @@
 //! - At each key frame at least 0.25 s after the previous window key frame, the velocities
 //!   and biases of the newest 10 such key frames (ORB-SLAM3's inertial window) are refined by
 //!   the inertial-only optimisation with the key-frame poses held as local mapping refined
-//!   them and gravity held (ORB-SLAM3's `InertialOptimization`), the bias priors centred on
-//!   the current estimate. The accelerometer bias is held near its initial value (ORB-SLAM3's
-//!   prior of 1e5 for stereo), left to a future visual-inertial BA.
+//!   them and gravity held (ORB-SLAM3's `InertialOptimization`, its bias priors centred on
+//!   zero). The accelerometer bias is held near zero (ORB-SLAM3's prior of 1e5 for stereo),
+//!   left to a future visual-inertial BA.
 
 use dynaflow_msg::{ImuCalibration, ImuSample};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -381,11 +381,11 @@ impl Tracker {
                 if kfs.len() < 3 {
                     return;
                 }
-                let config = InitConfig {
-                    gravity: Some(nav.world_from_gravity),
-                    prior_bias: nav.bias,
-                    ..InitConfig::with_depth()
-                };
+                // The bias priors centred on zero, as ORB-SLAM3's `InertialOptimization` sets
+                // them: centred on the last estimate they would let the biases walk without
+                // bound wherever vision misleads the window (tested: walking people seen as
+                // static drove the accelerometer bias to 4.7 m/s²).
+                let config = InitConfig { gravity: Some(nav.world_from_gravity), ..InitConfig::with_depth() };
                 let Ok(r) = initialise(&kfs, &imu.between, &calibration.body_from_cam, calibration.gravity, &config)
                 else {
                     return;
