@@ -10,9 +10,12 @@
 //! and is not built yet.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
+#[path = "../slam/src/imu/track/observations.rs"]
+mod observations;
 #[path = "common/timing.rs"]
 mod timing;
 
+use observations::observations;
 use timing::median_ms;
 
 use dynaflow_datasets::synth::{FR3, Generator, HANDHELD_REST, Motion, STAMP_BASE, SynthConfig, rig_calibration};
@@ -21,8 +24,8 @@ use dynaflow_slam::imu::propagate::{Matrix15, NavState, propagate_covariance};
 use dynaflow_slam::imu::track::optimize_inertial_pose;
 use dynaflow_slam::imu::{Bias, Preintegrated};
 use dynaflow_vision::camera::Pinhole;
-use dynaflow_vision::geometry::{PoseObservation, SplitMix64, optimize_pose};
-use nalgebra::{Point3, Vector3};
+use dynaflow_vision::geometry::{SplitMix64, optimize_pose};
+use nalgebra::Vector3;
 
 fn main() {
     let reps: usize = std::env::args().skip(1).find_map(|a| a.parse().ok()).unwrap_or(200);
@@ -54,20 +57,7 @@ fn main() {
     since_kf.integrate_span(&samples, STAMP_BASE + ti, STAMP_BASE + tk);
     let cam = Pinhole { fx: FR3.fx, fy: FR3.fy, cx: FR3.cx, cy: FR3.cy };
     let world_from_cam = g.body_pose(tk, &cal) * cal.body_from_cam;
-    let mut rng = SplitMix64::new(1);
-    let obs: Vec<PoseObservation> = (0..100)
-        .map(|k| {
-            let (u, v, z) = (rng.uniform() * 600.0 + 20.0, rng.uniform() * 440.0 + 20.0, 1.5 + rng.uniform() * 2.5);
-            let pc = Point3::new((u - cam.cx) / cam.fx * z, (v - cam.cy) / cam.fy * z, z);
-            let off = if k % 10 == 9 { 30.0 } else { 0.0 };
-            PoseObservation {
-                point: world_from_cam * pc,
-                uv: [u + rng.normal() + off, v + rng.normal()],
-                sigma: 1.0,
-                depth: None,
-            }
-        })
-        .collect();
+    let obs = observations(&world_from_cam, &cam, 100, &mut SplitMix64::new(1));
     let predicted = state.predict(&since_kf, &gravity);
     let track = median_ms(reps, || {
         std::hint::black_box(optimize_inertial_pose(

@@ -155,4 +155,6 @@ pub fn optimize_inertial_pose(
 }
 
 #[cfg(test)]
+mod observations;
+#[cfg(test)]
 mod tests;

@@ -215,6 +215,38 @@ impl Inertial {
         self.window.last().map(|w| w.1)
     }
 
+    /// The IMU is initialised: gravity's direction, the state of the frame it happened at
+    /// (its biases the estimate), the window's velocities; the pre-integrations follow the
+    /// biases.
+    fn begin(
+        &mut self,
+        world_from_gravity: UnitQuaternion<f64>,
+        frame: NavState,
+        kf_velocity: BTreeMap<u64, Vector3<f64>>,
+        stamp: f64,
+        method: InitMethod,
+        keyframes: usize,
+    ) {
+        self.nav = Some(Nav {
+            world_from_gravity,
+            gravity_w: world_from_gravity * Vector3::new(0.0, 0.0, -self.calibration.gravity),
+            bias: frame.bias,
+            kf_velocity,
+            frame,
+            covariance: Matrix15::zeros(),
+            last_visual: stamp,
+        });
+        self.rest = None;
+        self.set_bias(frame.bias);
+        self.init = Some(InertialInitInfo {
+            stamp,
+            method,
+            keyframes,
+            gyro_bias: frame.bias.gyro.into(),
+            accel_bias: frame.bias.accel.into(),
+        });
+    }
+
     /// Set a new bias estimate everywhere it is used.
     fn set_bias(&mut self, bias: Bias) {
         for p in &mut self.between {
@@ -382,9 +414,9 @@ impl Tracker {
                     return;
                 }
                 // The bias priors centred on zero, as ORB-SLAM3's `InertialOptimization` sets
-                // them: centred on the last estimate they would let the biases walk without
-                // bound wherever vision misleads the window (tested: walking people seen as
-                // static drove the accelerometer bias to 4.7 m/s²).
+                // them (centred on the last estimate they let the biases walk from one window
+                // to the next: 4.7 m/s² of accelerometer bias where walking people were taken
+                // for static; centred on zero, 2.9 m/s² there: no gate yet on a misled window).
                 let config = InitConfig { gravity: Some(nav.world_from_gravity), ..InitConfig::with_depth() };
                 let Ok(r) = initialise(&kfs, &imu.between, &calibration.body_from_cam, calibration.gravity, &config)
                 else {
@@ -399,33 +431,16 @@ impl Tracker {
                 let config = if mono { InitConfig::monocular() } else { InitConfig::with_depth() };
                 match initialise(&kfs, &imu.between, &calibration.body_from_cam, calibration.gravity, &config) {
                     Ok(r) => {
-                        let cam_from_body = calibration.body_from_cam.inverse();
-                        let velocity = r.velocities[r.velocities.len() - 1];
                         if mono {
                             imu.pending_scale = Some(r.scale);
                         }
-                        imu.nav = Some(Nav {
-                            world_from_gravity: r.world_from_gravity,
-                            gravity_w: r.world_from_gravity * Vector3::new(0.0, 0.0, -calibration.gravity),
+                        let frame = NavState {
+                            world_from_body: kfs[kfs.len() - 1].world_from_cam * calibration.body_from_cam.inverse(),
+                            velocity: r.velocities[r.velocities.len() - 1],
                             bias: r.bias,
-                            kf_velocity: imu.window.iter().map(|w| w.0).zip(r.velocities.iter().copied()).collect(),
-                            frame: NavState {
-                                world_from_body: kfs[kfs.len() - 1].world_from_cam * cam_from_body,
-                                velocity,
-                                bias: r.bias,
-                            },
-                            covariance: Matrix15::zeros(),
-                            last_visual: stamp,
-                        });
-                        imu.rest = None;
-                        imu.set_bias(r.bias);
-                        imu.init = Some(InertialInitInfo {
-                            stamp,
-                            method: InitMethod::Map,
-                            keyframes: kfs.len(),
-                            gyro_bias: r.bias.gyro.into(),
-                            accel_bias: r.bias.accel.into(),
-                        });
+                        };
+                        let velocities = imu.window.iter().map(|w| w.0).zip(r.velocities.iter().copied()).collect();
+                        imu.begin(r.world_from_gravity, frame, velocities, stamp, InitMethod::Map, kfs.len());
                     }
                     Err(e) => imu.init_failure = Some(e.to_string()),
                 }
@@ -455,6 +470,7 @@ impl Tracker {
         self.last = self.last.map(|p| scaled(&p));
         self.velocity = scaled(&self.velocity);
         if let Some(imu) = self.imu.as_mut() {
+            imu.rescales += 1;
             let body_from_cam = imu.calibration.body_from_cam;
             if let Some(nav) = imu.nav.as_mut() {
                 // The camera's position scales; the lever arm to the body is metric.
@@ -466,9 +482,6 @@ impl Tracker {
             a.2 = scaled(&a.2);
         }
         self.map_id += 1;
-        if let Some(imu) = &mut self.imu {
-            imu.rescales += 1;
-        }
         let mut batch = SparseMap { map_id: self.map_id, ..SparseMap::default() };
         let Some(places) = &mut self.places else {
             // Without the whole map (no vocabulary): the tracker's own points and poses.
@@ -516,33 +529,18 @@ impl Tracker {
         let (Some(last), true, false) = (self.last, self.initialised, self.config.sensor == Sensor::Monocular) else {
             return;
         };
-        let window_len = self.imu.as_ref().map_or(0, |i| i.window.len());
         let Some(imu) = self.imu.as_mut() else { return };
-        if imu.nav.is_some() || imu.rest.as_ref().is_none_or(|r| r.len() < REST_MIN_SAMPLES) || window_len == 0 {
+        if imu.nav.is_some() || imu.rest.as_ref().is_none_or(|r| r.len() < REST_MIN_SAMPLES) || imu.window.is_empty() {
             return;
         }
         let samples = imu.rest.take().unwrap_or_default();
         let Ok(s) = static_initialise(&samples, &imu.calibration) else { return };
-        let g = imu.calibration.gravity;
         let world_from_body = last * imu.calibration.body_from_cam.inverse();
         let world_from_gravity = world_from_body.rotation * s.gravity_from_body.inverse();
         let bias = Bias { gyro: s.gyro_bias, accel: Vector3::zeros() };
-        imu.nav = Some(Nav {
-            world_from_gravity,
-            gravity_w: world_from_gravity * Vector3::new(0.0, 0.0, -g),
-            bias,
-            kf_velocity: imu.window.iter().map(|w| (w.0, Vector3::zeros())).collect(),
-            frame: NavState { world_from_body, velocity: Vector3::zeros(), bias },
-            covariance: Matrix15::zeros(),
-            last_visual: stamp,
-        });
-        imu.set_bias(bias);
-        imu.init = Some(InertialInitInfo {
-            stamp,
-            method: InitMethod::Static,
-            keyframes: window_len,
-            gyro_bias: bias.gyro.into(),
-            accel_bias: [0.0; 3],
-        });
+        let frame = NavState { world_from_body, velocity: Vector3::zeros(), bias };
+        let velocities = imu.window.iter().map(|w| (w.0, Vector3::zeros())).collect();
+        let keyframes = imu.window.len();
+        imu.begin(world_from_gravity, frame, velocities, stamp, InitMethod::Static, keyframes);
     }
 }

@@ -3,7 +3,6 @@
 use dynaflow_base::rng::SplitMix64;
 use dynaflow_datasets::synth::{FR3, Generator, Motion, STAMP_BASE, SynthConfig, rig_calibration};
 use dynaflow_vision::geometry::optimize_pose;
-use nalgebra::Point3;
 
 use super::*;
 use crate::imu::Bias;
@@ -60,23 +59,9 @@ impl Scene {
     }
 }
 
-/// `n` points 1.5-4 m in front of the true camera, seen with 1 px noise; every tenth 30 px off.
+/// [`observations`] of the true camera.
 fn observations(s: &Scene, n: usize, rng: &mut SplitMix64) -> Vec<PoseObservation> {
-    let world_from_cam = s.truth.world_from_body * s.body_from_cam;
-    (0..n)
-        .map(|k| {
-            let (u, v) = (rng.uniform() * 600.0 + 20.0, rng.uniform() * 440.0 + 20.0);
-            let z = 1.5 + rng.uniform() * 2.5;
-            let pc = Point3::new((u - s.cam.cx) / s.cam.fx * z, (v - s.cam.cy) / s.cam.fy * z, z);
-            let off = if k % 10 == 9 { 30.0 } else { 0.0 };
-            PoseObservation {
-                point: world_from_cam * pc,
-                uv: [u + rng.normal() + off, v + rng.normal()],
-                sigma: 1.0,
-                depth: None,
-            }
-        })
-        .collect()
+    super::observations::observations(&(s.truth.world_from_body * s.body_from_cam), &s.cam, n, rng)
 }
 
 #[test]
