@@ -47,7 +47,7 @@ timeout 120 "$venv/bin/rerun" analytics disable </dev/null >/dev/null 2>&1 || tr
 deb_version() { dpkg-query -W -f='${Version}' "$1" 2>/dev/null || echo "missing"; }
 py_versions="$("$venv/bin/python" - <<'PY'
 from importlib.metadata import version
-names = ["rerun-sdk", "mcap", "protobuf", "opencv-python-headless", "evo", "onnxruntime", "numpy", "websocket-client"]
+names = ["rerun-sdk", "mcap", "protobuf", "opencv-python-headless", "evo", "onnxruntime", "numpy", "websocket-client", "rosbags"]
 print(", ".join(f"{n} {version(n)}" for n in names))
 PY
 )"
