@@ -85,6 +85,8 @@ enum Command {
     Infer(commands::infer::InferArgs),
     /// Run an ONNX segmenter on images: per image a class-id PNG and a JSON of class pixel counts.
     Segment(commands::segment::SegmentArgs),
+    /// List a ROS 1 or ROS 2 bag: topics, types, counts, rates, and the topics a run would use.
+    Inspect(commands::inspect::InspectArgs),
     /// Summarise an OctoMap file (.ot, .bt) as JSON; `--plot` draws it from above.
     Octree(commands::octree::OctreeArgs),
     /// Generate a semi-synthetic dynamic RGB-D sequence in the TUM layout, with ground truth.
@@ -271,6 +273,7 @@ fn main() -> ExitCode {
         Command::Segment(args) => commands::segment::segment(&args),
         Command::Bench(args) => commands::bench::bench(&args),
         Command::Octree(args) => commands::octree::octree(&args),
+        Command::Inspect(args) => commands::inspect::inspect(&args),
         Command::View { file } => commands::view::view(&file),
         Command::Graph { graph, format, variant } => {
             commands::graph::graph(&graph, matches!(format, GraphFormat::Dot), variant)

@@ -191,6 +191,25 @@ fn graph_renders_mermaid_and_dot() {
     assert!(text.starts_with("digraph \"engine_smoke\"") && text.contains("\"camera\" -> \"keyframes\""), "{text}");
 }
 
+#[test]
+fn inspect_refuses_what_is_not_a_whole_bag_naming_the_file() {
+    // The listing itself is checked against rosbags-written bags in ros/tests/rosbags.rs.
+    let dir = common::TempDir::new("inspect");
+    let cases: [(&str, &[u8], &str); 3] = [
+        ("notes.txt", b"hello", "not a ROS bag"),
+        // A ROS 1 bag cut inside its first record.
+        ("cut.bag", b"#ROSBAG V2.0\n\x20\x00\x00\x00op=", "truncated"),
+        ("cut.mcap", b"\x89MCAP0\r\n\x01", "MCAP"),
+    ];
+    for (name, bytes, want) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let (code, _, err) = dynaflow(&["inspect", path.to_str().unwrap()], &[]);
+        assert_eq!(code, Some(2), "{name}: {err}");
+        assert!(err.contains(path.to_str().unwrap()) && err.contains(want), "{name}: {err}");
+    }
+}
+
 /// Run `dynaflow` with `args`, returning (exit code, stdout, stderr).
 fn dynaflow(args: &[&str], env: &[(&str, &str)]) -> (Option<i32>, String, String) {
     let mut cmd = common::bin();
@@ -446,7 +465,7 @@ fn the_libraries_build_without_the_engine_gpu_inference_or_an_async_runtime() {
     // A user generates or reads a sequence, or culls points, without the engine,
     // wgpu, rten or tokio.
     let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    for krate in ["dynaflow-datasets", "dynaflow-culling", "dynaflow-msg", "dynaflow-vision"] {
+    for krate in ["dynaflow-datasets", "dynaflow-culling", "dynaflow-msg", "dynaflow-vision", "dynaflow-ros"] {
         let out = std::process::Command::new(&cargo)
             .args(["tree", "--offline", "-e", "normal", "--prefix", "none", "-p", krate])
             .current_dir(common::repo())

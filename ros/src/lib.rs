@@ -4,6 +4,7 @@
 //!
 //! - [`msgdef`]: message definitions (`.msg` text with its `MSG:` sections) into a registry.
 //! - [`decode`]: ROS 1 and CDR bytes into value trees, every length checked.
+//! - [`inspect`]: a bag's topics, counts and rates, and the topic each role of a run would take.
 //! - [`known`]: the ROS 2 sensor types' definitions, for `.db3` bags that do not store theirs.
 //! - [`Bag`]: `.bag` (format 2.0; bz2 and lz4 chunks), a rosbag2 folder (`metadata.yaml` with
 //!   MCAP or SQLite storage), or a bare `.mcap` / `.db3` file.
@@ -15,6 +16,7 @@
 mod bag1;
 mod bag2;
 pub mod decode;
+pub mod inspect;
 pub mod known;
 pub mod msgdef;
 pub mod sensor;

@@ -168,3 +168,25 @@ fn bags_cut_short_end_in_an_error_naming_the_file() {
         }
     }
 }
+
+#[test]
+fn inspect_counts_rates_and_roles() {
+    let Some(dir) = bags("inspect lists what rosbags wrote") else { return };
+    for name in ["ros1_lz4.bag", "ros2_mcap", "ros2_sqlite"] {
+        let inv = dynaflow_ros::inspect::inspect(&Bag::open(&dir.path().join(name)).unwrap()).unwrap();
+        let t = |topic: &str| inv.topics.iter().find(|t| t.topic == topic).unwrap_or_else(|| panic!("{name}: {topic}"));
+        assert_eq!(inv.topics.len(), 8, "{name}");
+        assert_eq!((t("/cam/color").count, t("/imu").count), (3, 18), "{name}");
+        // Header stamps 33.333 ms apart: 30 Hz; the IMU's 5 ms steps within each frame.
+        assert!((t("/cam/color").rate_hz - 30.0).abs() < 1e-6, "{name}: {:?}", t("/cam/color"));
+        assert_eq!(t("/cam/depth").content.as_deref(), Some("depth"), "{name}");
+        // Two colour topics and two pose topics: a run must be told which; the rest are clear.
+        assert_eq!(inv.candidates["rgb"], ["/cam/bgr", "/cam/color"], "{name}");
+        assert_eq!(inv.chosen("rgb"), None);
+        assert_eq!(inv.candidates["gt"], ["/odom", "/pose"], "{name}");
+        assert_eq!(
+            (inv.chosen("depth"), inv.chosen("imu"), inv.chosen("camera_info")),
+            (Some("/cam/depth"), Some("/imu"), Some("/cam/info"))
+        );
+    }
+}

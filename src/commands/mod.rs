@@ -6,6 +6,7 @@ pub mod diff;
 pub mod eval;
 pub mod graph;
 pub mod infer;
+pub mod inspect;
 pub mod merge;
 pub mod octree;
 pub mod ops;
