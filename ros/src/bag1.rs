@@ -190,18 +190,16 @@ impl Bag1Messages {
         }
         let out = match compression.as_str() {
             "none" => data,
-            "bz2" => {
+            "bz2" | "lz4" => {
+                let mut decoder: Box<dyn Read + '_> = if compression == "bz2" {
+                    Box::new(bzip2::read::BzDecoder::new(data.as_slice()))
+                } else {
+                    Box::new(lz4_flex::frame::FrameDecoder::new(data.as_slice()))
+                };
                 let mut out = Vec::with_capacity(size);
-                bzip2::read::BzDecoder::new(data.as_slice())
+                decoder
                     .read_to_end(&mut out)
-                    .map_err(|e| Error::at(&self.path, at, format!("bz2 chunk: {e}")))?;
-                out
-            }
-            "lz4" => {
-                let mut out = Vec::with_capacity(size);
-                lz4_flex::frame::FrameDecoder::new(data.as_slice())
-                    .read_to_end(&mut out)
-                    .map_err(|e| Error::at(&self.path, at, format!("lz4 chunk: {e}")))?;
+                    .map_err(|e| Error::at(&self.path, at, format!("{compression} chunk: {e}")))?;
                 out
             }
             other => {

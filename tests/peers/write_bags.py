@@ -116,6 +116,15 @@ def expected_of(msgs):
     return rows
 
 
+def write_all(writer, store, msgs, serialize):
+    """Each message on its topic's connection (added on first use), at its record time."""
+    conns = {}
+    for topic, msgtype, log, msg, _ in msgs:
+        if topic not in conns:
+            conns[topic] = writer.add_connection(topic, msgtype, typestore=store)
+        writer.write(conns[topic], log, serialize(msg, msgtype))
+
+
 def write_ros1(path, fmt):
     store = typestore(Stores.ROS1_NOETIC)
     msgs, _ = messages(store)
@@ -123,11 +132,7 @@ def write_ros1(path, fmt):
     if fmt != "none":
         w.set_compression({"bz2": Writer1.CompressionFormat.BZ2, "lz4": Writer1.CompressionFormat.LZ4}[fmt])
     with w:
-        conns = {}
-        for topic, msgtype, log, msg, _ in msgs:
-            if topic not in conns:
-                conns[topic] = w.add_connection(topic, msgtype, typestore=store)
-            w.write(conns[topic], log, store.serialize_ros1(msg, msgtype))
+        write_all(w, store, msgs, store.serialize_ros1)
     return expected_of(msgs)
 
 
@@ -135,11 +140,7 @@ def write_ros2(path, plugin):
     store = typestore(Stores.ROS2_HUMBLE)
     msgs, _ = messages(store)
     with Writer2(path, version=9, storage_plugin=plugin) as w:
-        conns = {}
-        for topic, msgtype, log, msg, _ in msgs:
-            if topic not in conns:
-                conns[topic] = w.add_connection(topic, msgtype, typestore=store)
-            w.write(conns[topic], log, store.serialize_cdr(msg, msgtype))
+        write_all(w, store, msgs, store.serialize_cdr)
     return expected_of(msgs)
 
 
