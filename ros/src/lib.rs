@@ -6,6 +6,7 @@
 //! - [`decode`]: ROS 1 and CDR bytes into value trees, every length checked.
 //! - [`inspect`]: a bag's topics, counts and rates, and the topic each role of a run would take.
 //! - [`known`]: the ROS 2 sensor types' definitions, for `.db3` bags that do not store theirs.
+//! - [`tf`]: the transform tree of `/tf` and `/tf_static`, looked up at a time as tf2 does.
 //! - [`Bag`]: `.bag` (format 2.0; bz2 and lz4 chunks), a rosbag2 folder (`metadata.yaml` with
 //!   MCAP or SQLite storage), or a bare `.mcap` / `.db3` file.
 //!
@@ -20,6 +21,7 @@ pub mod inspect;
 pub mod known;
 pub mod msgdef;
 pub mod sensor;
+pub mod tf;
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
