@@ -113,30 +113,33 @@ impl Bag1Messages {
     /// The next top-level record, or `None` at a clean end of file.
     fn read_record(&mut self) -> Result<Option<(Fields, Vec<u8>)>, Error> {
         let start = self.offset;
-        let mut len = [0u8; 4];
-        match read_full(&mut self.file, &mut len) {
-            Ok(0) => return Ok(None),
-            Ok(4) => {}
-            Ok(n) => {
-                return Err(Error::at(&self.path, start, format!("truncated: the file ends {n} bytes into a record")));
-            }
-            Err(e) => return Err(Error::io(&self.path, &e)),
-        }
-        let header = self.read_part(u32::from_le_bytes(len) as usize, start, "record header")?;
+        let Some(header) = self.read_part(start, "record header")? else { return Ok(None) };
         let fields = Fields::parse(&header).ok_or_else(|| Error::at(&self.path, start, "malformed record header"))?;
-        let mut len = [0u8; 4];
-        if read_full(&mut self.file, &mut len).map_err(|e| Error::io(&self.path, &e))? != 4 {
-            return Err(Error::at(&self.path, start, "truncated: the file ends before the record's data length"));
-        }
-        let data = self.read_part(u32::from_le_bytes(len) as usize, start, "record data")?;
+        let data = self
+            .read_part(start, "record data")?
+            .ok_or_else(|| Error::at(&self.path, start, "truncated: the file ends before the record's data"))?;
         Ok(Some((fields, data)))
     }
 
-    fn read_part(&mut self, len: usize, start: u64, what: &str) -> Result<Vec<u8>, Error> {
+    /// One length-prefixed part of the record at `start`; `None` when the file ends before its
+    /// first byte.
+    fn read_part(&mut self, start: u64, what: &str) -> Result<Option<Vec<u8>>, Error> {
+        let mut len = [0u8; 4];
+        match read_full(&mut self.file, &mut len).map_err(|e| Error::io(&self.path, &e))? {
+            0 => return Ok(None),
+            4 => {}
+            n => {
+                return Err(Error::at(
+                    &self.path,
+                    start,
+                    format!("truncated: the file ends {n} bytes into the {what}'s length"),
+                ));
+            }
+        }
+        let len = u32::from_le_bytes(len) as usize;
         if len > MAX_RECORD {
             return Err(Error::at(&self.path, start, format!("{what} of {len} bytes: corrupt length")));
         }
-        self.offset += 4;
         let mut buf = vec![0u8; len];
         let got = read_full(&mut self.file, &mut buf).map_err(|e| Error::io(&self.path, &e))?;
         if got != len {
@@ -146,8 +149,8 @@ impl Bag1Messages {
                 format!("truncated: {what} of {len} bytes, the file ends after {got}"),
             ));
         }
-        self.offset += len as u64;
-        Ok(buf)
+        self.offset += 4 + len as u64;
+        Ok(Some(buf))
     }
 
     fn connection(&mut self, fields: &Fields, data: &[u8], at: u64) -> Result<(), Error> {
@@ -244,7 +247,7 @@ impl Bag1Messages {
         Ok(())
     }
 
-    /// The next record inside the current chunk, with its offset in the chunk.
+    /// The next record inside the current chunk, with the chunk's file offset (errors name it).
     fn chunk_record(&mut self) -> Result<Option<(Fields, Vec<u8>, u64)>, Error> {
         let Some((buf, pos, at)) = self.chunk.as_mut() else { return Ok(None) };
         if *pos >= buf.len() {
@@ -280,18 +283,17 @@ impl Bag1Messages {
                 self.check_complete()?;
                 return Ok(None);
             };
+            // Records at or after the index offset are the index `check_complete` counts.
             let in_index = self.promised.is_some_and(|(index, _, _)| index > 0 && at >= index);
-            match fields.u8("op") {
-                Some(OP_CONNECTION) if in_index => self.indexed.0 += 1,
-                Some(OP_CHUNK_INFO) if in_index => self.indexed.1 += 1,
-                _ => {}
-            }
             match fields.u8("op") {
                 Some(OP_CHUNK) => {
                     let bytes = self.decompress(&fields, data, at)?;
                     self.chunk = Some((bytes, 0, at));
                 }
-                Some(OP_CONNECTION) => self.connection(&fields, &data, at)?,
+                Some(OP_CONNECTION) => {
+                    self.indexed.0 += u32::from(in_index);
+                    self.connection(&fields, &data, at)?;
+                }
                 Some(OP_MSG_DATA) => return self.message(&fields, data, at).map(Some),
                 Some(OP_BAG_HEADER) => {
                     let index = fields.get("index_pos").and_then(|v| Some(u64::from_le_bytes(v.try_into().ok()?)));
@@ -306,7 +308,8 @@ impl Bag1Messages {
                         }
                     }
                 }
-                Some(OP_INDEX_DATA | OP_CHUNK_INFO) => {}
+                Some(OP_CHUNK_INFO) => self.indexed.1 += u32::from(in_index),
+                Some(OP_INDEX_DATA) => {}
                 Some(op) => return Err(Error::at(&self.path, at, format!("unknown record op {op:#04x}"))),
                 None => return Err(Error::at(&self.path, at, "record without `op`")),
             }

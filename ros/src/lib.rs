@@ -166,21 +166,6 @@ impl Bag {
         Ok(Bag { path: path.to_path_buf(), format, files: vec![path.to_path_buf()] })
     }
 
-    /// Whether `path` is a bag (a `.bag`, a rosbag2 folder, an MCAP with ROS schemas or a
-    /// `.db3`); the MCAP check reads its first channel only, so a dynaflow recording is not one.
-    pub fn is_bag(path: &Path) -> bool {
-        if path.is_dir() {
-            return path.join("metadata.yaml").is_file();
-        }
-        match sniff(path) {
-            Ok(Some(Format::Ros2(Storage::Mcap))) => {
-                bag2::McapMessages::open(path).ok().and_then(|mut m| m.next()).is_some_and(|m| m.is_ok())
-            }
-            Ok(Some(_)) => true,
-            _ => false,
-        }
-    }
-
     /// The path it was opened from.
     pub fn path(&self) -> &Path {
         &self.path
