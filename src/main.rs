@@ -126,10 +126,16 @@ pub struct RunArgs {
     /// Override a parameter: `node.param=value` (repeatable).
     #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
     pub set: Vec<String>,
-    /// Run on a recorded sequence instead of the graph's own source: a TUM RGB-D folder or a
-    /// folder of images (detected from the files).
+    /// Run on a recorded sequence instead of the graph's own source: a TUM RGB-D folder, a KITTI
+    /// odometry sequence, a EuRoC MAV folder, a folder of images, or a ROS 1 / ROS 2 bag
+    /// (detected from the files).
     #[arg(long)]
     pub input: Option<PathBuf>,
+    /// The topics of a bag given to `--input`, where it has several candidates for a role:
+    /// `rgb=/camera/color/image_raw,depth=...,camera_info=...,gt=...` (`gt=tf:PARENT:CHILD`;
+    /// `dynaflow inspect BAG` shows the candidates).
+    #[arg(long)]
+    pub topics: Option<String>,
     /// Camera of `--input`: `fr1`, `fr2`, `fr3` or `fx,fy,cx,cy[,k1,k2,p1,p2,k3]` (TUM folders
     /// named `rgbd_dataset_freiburgN_*` need none).
     #[arg(long)]
@@ -143,7 +149,8 @@ pub struct RunArgs {
     /// Stop after this many frames (at least 1).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub frames: Option<u64>,
-    /// Recorders (comma-separated): `rrd` (rerun), `mcap`, `jsonl` (message log); `none` records nothing.
+    /// Recorders (comma-separated): `rrd` (rerun), `mcap` (Foxglove schemas), `ros2` (a rosbag2 bag
+    /// ROS tools replay: `<stem>.ros2/`), `jsonl` (message log); `none` records nothing.
     #[arg(long, default_value = "rrd,mcap", value_delimiter = ',')]
     pub record: Vec<String>,
     /// How colour images are stored in recordings: `jpeg` (quality 90), lossless `png`, or

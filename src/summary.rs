@@ -7,8 +7,8 @@ use std::path::Path;
 use dynaflow_engine::runtime::RunReport;
 pub use dynaflow_engine::sink::PortDigest;
 pub use dynaflow_operators::report::{
-    Ate, GateReport, InferenceReport, LabelAccuracyReport, LocalMappingReport, LoopClosingReport, LoopReport,
-    MaskAccuracyReport, NodeReport, OctomapReport, ReportKind, TrackerReport,
+    Ate, BagReport, GateReport, InferenceReport, LabelAccuracyReport, LocalMappingReport, LoopClosingReport,
+    LoopReport, MaskAccuracyReport, NodeReport, OctomapReport, ReportKind, SourceReport, TrackerReport,
 };
 
 /// Everything a run wrote about itself.

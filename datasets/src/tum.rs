@@ -146,15 +146,32 @@ pub struct Associated {
 /// Associate by nearest timestamp within `max_difference`, each entry used at most once,
 /// closest pairs first (the algorithm of TUM's `associate.py`), sorted by colour time.
 pub fn associate(rgb: &[(f64, String)], depth: &[(f64, String)], max_difference: f64) -> Vec<Associated> {
+    let rgb_t: Vec<f64> = rgb.iter().map(|r| r.0).collect();
+    let depth_t: Vec<f64> = depth.iter().map(|d| d.0).collect();
+    associate_stamps(&rgb_t, &depth_t, max_difference)
+        .into_iter()
+        .map(|(i, j)| Associated {
+            rgb_stamp: rgb[i].0,
+            rgb: rgb[i].1.clone(),
+            depth_stamp: depth[j].0,
+            depth: depth[j].1.clone(),
+        })
+        .collect()
+}
+
+/// [`associate`] on bare stamps (each list in increasing order): the `(colour, depth)` index
+/// pairs, by colour stamp. Every source that pairs two streams by time (TUM folders, bags)
+/// pairs them with this one rule.
+pub fn associate_stamps(rgb: &[f64], depth: &[f64], max_difference: f64) -> Vec<(usize, usize)> {
     let mut candidates: Vec<(f64, usize, usize)> = Vec::new();
     let mut lo = 0;
-    for (i, (t, _)) in rgb.iter().enumerate() {
-        while lo < depth.len() && depth[lo].0 < t - max_difference {
+    for (i, t) in rgb.iter().enumerate() {
+        while lo < depth.len() && depth[lo] < t - max_difference {
             lo += 1;
         }
         let mut j = lo;
-        while j < depth.len() && depth[j].0 < t + max_difference {
-            candidates.push(((t - depth[j].0).abs(), i, j));
+        while j < depth.len() && depth[j] < t + max_difference {
+            candidates.push(((t - depth[j]).abs(), i, j));
             j += 1;
         }
     }
@@ -167,14 +184,9 @@ pub fn associate(rgb: &[(f64, String)], depth: &[(f64, String)], max_difference:
         }
         used_rgb[i] = true;
         used_depth[j] = true;
-        out.push(Associated {
-            rgb_stamp: rgb[i].0,
-            rgb: rgb[i].1.clone(),
-            depth_stamp: depth[j].0,
-            depth: depth[j].1.clone(),
-        });
+        out.push((i, j));
     }
-    out.sort_by(|a, b| a.rgb_stamp.total_cmp(&b.rgb_stamp));
+    out.sort_by(|a, b| rgb[a.0].total_cmp(&rgb[b.0]));
     out
 }
 

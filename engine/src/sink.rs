@@ -66,6 +66,9 @@ pub struct RunInfo {
     /// The point labels tracking decides with (`node/port` of each point-labels output that
     /// feeds a node with a pose output): what a viewer draws on the camera image.
     pub decisions: Vec<String>,
+    /// The estimated (not ground-truth) pose outputs, `node/port` in graph order: the first is
+    /// the trajectory a run reports first, and the camera a ROS recording puts in its tf tree.
+    pub estimates: Vec<String>,
 }
 
 /// The point-labels outputs that feed a tracker (a node with a pose output).
@@ -134,6 +137,16 @@ impl RunInfo {
             machine: None,
             graph_digest: format!("{:016x}", graph.digest()),
             decisions: decisions(graph),
+            estimates: graph
+                .nodes
+                .iter()
+                .flat_map(|n| {
+                    n.outputs
+                        .iter()
+                        .filter(|o| o.ty == PortType::Pose && !o.ground_truth)
+                        .map(move |o| format!("{}/{}", n.id, o.name))
+                })
+                .collect(),
         }
     }
 }

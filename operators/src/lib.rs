@@ -28,6 +28,7 @@ pub fn registry() -> Registry {
     util::register(&mut r);
     r.register(synth_op::SYNTH);
     r.register(decode::TUM_RGBD);
+    r.register(decode::ROSBAG);
     r.register(decode::IMAGE_FOLDER);
     r.register(decode::RGBD_FOLDER);
     r.register(decode::KITTI_ODOMETRY);

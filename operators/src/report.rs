@@ -6,6 +6,8 @@ use std::collections::BTreeMap;
 
 use serde::{Deserialize, Serialize};
 
+pub use dynaflow_ros::sequence::BagReport;
+
 /// A node's report, by kind.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
@@ -26,6 +28,8 @@ pub enum NodeReport {
     Octomap(OctomapReport),
     /// `detect`, `segment`: the executor that ran the model.
     Inference(InferenceReport),
+    /// A source that skipped frames (`on_error: skip`) or read a bag.
+    Source(SourceReport),
 }
 
 /// Typed access to one kind of report: `Summary::report_as::<LoopClosingReport>("closing")`.
@@ -65,6 +69,7 @@ report_kinds! {
     Gate(GateReport),
     Octomap(OctomapReport),
     Inference(InferenceReport),
+    Source(SourceReport),
 }
 
 impl NodeReport {
@@ -227,6 +232,16 @@ pub struct GateReport {
     pub inferred_share: f64,
     /// Frames per deciding rule (the first is "skipped").
     pub rules: BTreeMap<String, u64>,
+}
+
+/// A source's report: frames it skipped, and for a bag what the run read and left out.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct SourceReport {
+    /// Frames skipped as unreadable (`on_error: skip`).
+    pub frames_skipped: u64,
+    /// A bag's topics and the messages its pairing left out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub bag: Option<BagReport>,
 }
 
 /// The occupancy map at the end of the run.

@@ -51,6 +51,28 @@ impl Inventory {
 
 /// Reads the whole bag once (every message's stamp; the first image of each topic decoded).
 pub fn inspect(bag: &Bag) -> Result<Inventory, Error> {
+    scan(bag, |_, _, _| {})
+}
+
+/// [`inspect`], handing each message to `each` as it goes: the message, its decoding, and its
+/// header stamp (record time without a header), nanoseconds. A run's source reads what it needs
+/// (image stamps, calibration, poses) in the same pass.
+/// The `CameraInfo` topics of `infos` beside image topic `image`: in its namespace, where
+/// image_transport puts them (`/cam/color/camera_info` beside `/cam/color/image_raw` and its
+/// `/cam/color/image_raw/compressed`).
+pub(crate) fn beside(image: &str, infos: &[String]) -> Vec<String> {
+    let base = ["/compressed", "/compressedDepth", "/theora", "/zstd"]
+        .iter()
+        .find_map(|t| image.strip_suffix(t))
+        .unwrap_or(image);
+    let Some((ns, _)) = base.rsplit_once('/') else { return Vec::new() };
+    infos.iter().filter(|i| i.rsplit_once('/').is_some_and(|(n, _)| n == ns)).cloned().collect()
+}
+
+pub(crate) fn scan(
+    bag: &Bag,
+    mut each: impl FnMut(&crate::RawMessage, &Result<crate::decode::Message, String>, i64),
+) -> Result<Inventory, Error> {
     struct Acc {
         ty: String,
         count: u64,
@@ -59,8 +81,17 @@ pub fn inspect(bag: &Bag) -> Result<Inventory, Error> {
         content: Option<String>,
     }
     let mut acc: BTreeMap<String, Acc> = BTreeMap::new();
+    // Where a cut or corrupt bag stops: after the last message read.
+    let mut last: Option<(String, i64)> = None;
     for raw in bag.messages()? {
-        let raw = raw?;
+        let raw = raw.map_err(|e| match (e, &last) {
+            (Error::File { path, offset, message }, Some((topic, ns))) => Error::File {
+                path,
+                offset,
+                message: format!("{message} (after topic {topic} at {} s)", sensor::stamp_text(*ns)),
+            },
+            (e, _) => e,
+        })?;
         let ty = raw.connection.type_name();
         let decoded = raw.decode();
         let stamp =
@@ -89,6 +120,8 @@ pub fn inspect(bag: &Bag) -> Result<Inventory, Error> {
                 }
             });
         }
+        each(&raw, &decoded, stamp);
+        last = Some((raw.connection.topic.clone(), stamp));
         a.count += 1;
         a.first = a.first.min(stamp);
         a.last = a.last.max(stamp);
@@ -114,26 +147,25 @@ pub fn inspect(bag: &Bag) -> Result<Inventory, Error> {
     candidates.insert("rgb".to_string(), of(&|t| t.content.as_deref() == Some("colour")));
     candidates.insert("depth".to_string(), of(&|t| t.content.as_deref() == Some("depth")));
     candidates.insert("imu".to_string(), of(&|t| t.ty == "sensor_msgs/Imu"));
+    // Ground truth: a pose topic; odometry is an estimate, never taken as ground truth unless
+    // named (`gt=/odom`).
     candidates.insert(
         "gt".to_string(),
         of(&|t| {
             matches!(
                 t.ty.as_str(),
-                "geometry_msgs/PoseStamped" | "nav_msgs/Odometry" | "geometry_msgs/TransformStamped"
+                "geometry_msgs/PoseStamped"
+                    | "geometry_msgs/TransformStamped"
+                    | "geometry_msgs/PoseWithCovarianceStamped"
             )
         }),
     );
-    // Camera info: the one topic, or the one beside the chosen colour topic (same namespace).
+    // Camera info: the one topic, or the one beside the only colour topic.
     let infos: Vec<String> = of(&|t| t.ty == "sensor_msgs/CameraInfo");
-    let rgb_ns = match candidates["rgb"].as_slice() {
-        [one] => one.rsplit_once('/').map(|(ns, _)| ns.to_string()),
-        _ => None,
+    let near = match candidates["rgb"].as_slice() {
+        [one] => beside(one, &infos),
+        _ => Vec::new(),
     };
-    let beside: Vec<String> = infos
-        .iter()
-        .filter(|i| rgb_ns.as_deref().is_some_and(|ns| i.rsplit_once('/').is_some_and(|(n, _)| n == ns)))
-        .cloned()
-        .collect();
-    candidates.insert("camera_info".to_string(), if beside.len() == 1 { beside } else { infos });
+    candidates.insert("camera_info".to_string(), if near.len() == 1 { near } else { infos });
     Ok(Inventory { topics, candidates })
 }

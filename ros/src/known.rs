@@ -1,6 +1,7 @@
-//! The ROS 2 sensor types a SLAM run reads, for bags that do not store their definitions
-//! (rosbag2's SQLite storage before Iron). Written from the field lists of `common_interfaces`
-//! (sensor_msgs, geometry_msgs, nav_msgs, std_msgs), `builtin_interfaces` and `tf2_msgs`, in the
+//! The ROS 2 types a SLAM run reads, for bags that do not store their definitions (rosbag2's
+//! SQLite storage before Iron), and those it records ([`crate::encode`]). Written from the
+//! field lists of `common_interfaces` (sensor_msgs, geometry_msgs, nav_msgs, std_msgs,
+//! visualization_msgs), `builtin_interfaces` and `tf2_msgs`, in the
 //! `ros2msg` form a bag stores: a definition here must match the wire layout exactly, so each is
 //! also checked against bags `rosbags` writes (the integration tests).
 
@@ -39,6 +40,19 @@ const DEFINITIONS: &[(&str, &str)] = &[
         "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n",
     ),
     ("tf2_msgs/TFMessage", "geometry_msgs/TransformStamped[] transforms\n"),
+    ("nav_msgs/Path", "std_msgs/Header header\ngeometry_msgs/PoseStamped[] poses\n"),
+    ("sensor_msgs/PointField", "string name\nuint32 offset\nuint8 datatype\nuint32 count\n"),
+    (
+        "sensor_msgs/PointCloud2",
+        "std_msgs/Header header\nuint32 height\nuint32 width\nsensor_msgs/PointField[] fields\nbool is_bigendian\nuint32 point_step\nuint32 row_step\nuint8[] data\nbool is_dense\n",
+    ),
+    ("std_msgs/ColorRGBA", "float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n"),
+    ("builtin_interfaces/Duration", "int32 sec\nuint32 nanosec\n"),
+    (
+        "visualization_msgs/ImageMarker",
+        "std_msgs/Header header\nstring ns\nint32 id\nint32 type\nint32 action\ngeometry_msgs/Point position\nfloat32 scale\nstd_msgs/ColorRGBA outline_color\nuint8 filled\nstd_msgs/ColorRGBA fill_color\nbuiltin_interfaces/Duration lifetime\ngeometry_msgs/Point[] points\nstd_msgs/ColorRGBA[] outline_colors\n",
+    ),
+    ("std_msgs/String", "string data\n"),
     (
         "nav_msgs/Odometry",
         "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/PoseWithCovariance pose\ngeometry_msgs/TwistWithCovariance twist\n",

@@ -4,8 +4,11 @@
 //!
 //! - [`msgdef`]: message definitions (`.msg` text with its `MSG:` sections) into a registry.
 //! - [`decode`]: ROS 1 and CDR bytes into value trees, every length checked.
+//! - [`encode`]: ROS 2 messages out (CDR), for recordings ROS tools replay.
 //! - [`inspect`]: a bag's topics, counts and rates, and the topic each role of a run would take.
 //! - [`known`]: the ROS 2 sensor types' definitions, for `.db3` bags that do not store theirs.
+//! - [`sequence`]: a bag as a run's frames: topics chosen, colour and depth paired by header
+//!   stamp, calibration and ground truth, every message left out counted.
 //! - [`tf`]: the transform tree of `/tf` and `/tf_static`, looked up at a time as tf2 does.
 //! - [`Bag`]: `.bag` (format 2.0; bz2 and lz4 chunks), a rosbag2 folder (`metadata.yaml` with
 //!   MCAP or SQLite storage), or a bare `.mcap` / `.db3` file.
@@ -17,10 +20,12 @@
 mod bag1;
 mod bag2;
 pub mod decode;
+pub mod encode;
 pub mod inspect;
 pub mod known;
 pub mod msgdef;
 pub mod sensor;
+pub mod sequence;
 pub mod tf;
 
 use std::path::{Path, PathBuf};

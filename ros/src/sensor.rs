@@ -19,10 +19,25 @@ pub struct Stamped {
 }
 
 impl Stamped {
-    /// The stamp in seconds.
+    /// The stamp in seconds: [`seconds`].
     pub fn seconds(&self) -> f64 {
-        self.stamp_ns as f64 * 1e-9
+        seconds(self.stamp_ns)
     }
+}
+
+/// Nanoseconds as seconds: the double nearest the exact decimal `sec.nnnnnnnnn`, so a stamp
+/// written to a bag from a text file's `1305031102.175304` reads back as the very double that
+/// parsing the text gives (`ns as f64 * 1e-9` rounds twice and can miss it by an ulp, and a
+/// TUM folder and its bag would then differ in every stamp).
+pub fn seconds(ns: i64) -> f64 {
+    stamp_text(ns).parse().unwrap_or(ns as f64 / 1e9)
+}
+
+/// Nanoseconds as the exact decimal `sec.nnnnnnnnn`, as errors name a stamp (a double near
+/// 1.7e9 s holds only ~0.2 us, so printing [`seconds`] to nine places would show noise).
+pub fn stamp_text(ns: i64) -> String {
+    let (sign, abs) = if ns < 0 { ("-", ns.unsigned_abs()) } else { ("", ns.unsigned_abs()) };
+    format!("{sign}{}.{:09}", abs / 1_000_000_000, abs % 1_000_000_000)
 }
 
 /// What an image message holds.

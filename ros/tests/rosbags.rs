@@ -66,7 +66,10 @@ fn check(m: &Message, row: &Json, what: &str) {
             let s = sensor::imu(m).unwrap();
             assert_eq!(s.gyro.as_slice(), floats(&row["gyro"]).as_slice(), "{what}");
             assert_eq!(s.accel.as_slice(), floats(&row["accel"]).as_slice(), "{what}");
-            assert_eq!(s.stamp, row["stamp_ns"].as_i64().unwrap() as f64 * 1e-9, "{what}");
+            // The double nearest the decimal stamp (what parsing `sec.nnnnnnnnn` gives).
+            let ns = row["stamp_ns"].as_i64().unwrap();
+            let decimal: f64 = format!("{}.{:09}", ns / 1_000_000_000, ns % 1_000_000_000).parse().unwrap();
+            assert_eq!(s.stamp, decimal, "{what}");
         }
         "/tf" | "/pose" | "/odom" => {
             let (child, pose) = if topic == "/tf" {

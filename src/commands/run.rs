@@ -11,7 +11,7 @@ use dynaflow_engine::sink::{DigestSink, Sink};
 use dynaflow_engine::spec::{Override, ResolvedGraph};
 use dynaflow_engine::{LoadRequest, SourceOverride};
 use dynaflow_recordings::mcap::DEFAULT_FLUSH_INTERVAL;
-use dynaflow_recordings::{EncodeCache, ImageCodec, LiveSink, McapSink, MessageLog, RrdSink};
+use dynaflow_recordings::{EncodeCache, ImageCodec, LiveSink, McapSink, MessageLog, Ros2Sink, RrdSink};
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, RunArgs};
 
@@ -113,6 +113,9 @@ fn bad_input(e: &str) -> u8 {
 fn load_request(args: &RunArgs) -> Result<LoadRequest, String> {
     let overrides = args.set.iter().map(|s| Override::parse(s).map_err(|e| e.to_string())).collect::<Result<_, _>>()?;
     let source = match &args.input {
+        None if args.topics.is_some() => {
+            return Err("`--topics` names the topics of a bag given to `--input`; there is no `--input`".into());
+        }
         None => None,
         // Relative to the working directory, as typed (graph params resolve against the graph
         // file's folder, so the source gets an absolute path).
@@ -120,6 +123,7 @@ fn load_request(args: &RunArgs) -> Result<LoadRequest, String> {
             let layout = dynaflow_operators::decode::detect_layout(
                 &std::path::absolute(dir).unwrap_or_else(|_| dir.clone()),
                 args.intrinsics.as_deref(),
+                args.topics.as_deref(),
             )
             .map_err(|e| e.to_string())?;
             Some(SourceOverride {
@@ -192,7 +196,7 @@ fn recorders(args: &RunArgs, files: &RunFiles) -> Result<(Vec<Box<dyn Sink>>, Di
     let codec = ImageCodec::from_name(&args.image_format).unwrap_or(ImageCodec::Jpeg(90));
     let live_url = live_stream(args);
     let image_recorders =
-        names.iter().filter(|r| matches!(**r, "rrd" | "mcap")).count() + usize::from(live_url.is_some());
+        names.iter().filter(|r| matches!(**r, "rrd" | "mcap" | "ros2")).count() + usize::from(live_url.is_some());
     let cache = EncodeCache::new(image_recorders);
     let mut sinks: Vec<Box<dyn Sink>> = Vec::new();
     for r in names {
@@ -207,8 +211,11 @@ fn recorders(args: &RunArgs, files: &RunFiles) -> Result<(Vec<Box<dyn Sink>>, Di
                     .with_cache(cache.clone())
                     .with_chunking(args.mcap_chunk_kib.saturating_mul(1024), DEFAULT_FLUSH_INTERVAL),
             )),
+            "ros2" => {
+                sinks.push(Box::new(Ros2Sink::new(files.run_file("ros2")).with_codec(codec).with_cache(cache.clone())))
+            }
             "none" | "" => {}
-            other => return Err(format!("unknown recorder `{other}` (available: rrd, mcap, jsonl, none)")),
+            other => return Err(format!("unknown recorder `{other}` (available: rrd, mcap, ros2, jsonl, none)")),
         }
     }
     if let Some(url) = live_url {

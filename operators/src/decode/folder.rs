@@ -100,16 +100,36 @@ pub struct Layout {
     pub params: Vec<(&'static str, String)>,
 }
 
-/// Detect a TUM RGB-D folder, a KITTI odometry sequence, a EuRoC MAV folder or an image
-/// folder; the error says what was expected.
-pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, dynaflow_datasets::Error> {
-    if !dir.is_dir() {
-        return Err(dynaflow_datasets::Error::file(dir, "not a folder"));
-    }
+/// Detect a ROS bag (a `.bag`, `.mcap` or `.db3` file, or a rosbag2 folder), a TUM RGB-D
+/// folder, a KITTI odometry sequence, a EuRoC MAV folder or an image folder; the error says
+/// what was expected. `topics` (a bag's `role=topic` pairs) is an error for anything else.
+pub fn detect_layout(
+    dir: &Path,
+    intrinsics: Option<&str>,
+    topics: Option<&str>,
+) -> Result<Layout, dynaflow_datasets::Error> {
     let path = dir.display().to_string();
     let mut params = vec![("path", path)];
     if let Some(i) = intrinsics {
         params.push(("intrinsics", i.to_owned()));
+    }
+    let is_bag = if dir.is_dir() { dir.join("metadata.yaml").is_file() } else { dir.is_file() };
+    if is_bag {
+        // Its first bytes tell the format; what they are not is said naming the file.
+        dynaflow_ros::Bag::open(dir).map_err(|e| dynaflow_datasets::Error::Data(e.to_string()))?;
+        if let Some(t) = topics {
+            params.push(("topics", t.to_owned()));
+        }
+        return Ok(Layout { op: "rosbag", params });
+    }
+    if let Some(t) = topics {
+        return Err(dynaflow_datasets::Error::file(
+            dir,
+            format!("`--topics {t}` names the topics of a ROS bag, and this is not one"),
+        ));
+    }
+    if !dir.is_dir() {
+        return Err(dynaflow_datasets::Error::file(dir, "not a folder or a bag"));
     }
     if dir.join("rgb.txt").is_file() && dir.join("depth.txt").is_file() {
         return Ok(Layout { op: "tum_rgbd", params });
@@ -135,6 +155,6 @@ pub fn detect_layout(dir: &Path, intrinsics: Option<&str>) -> Result<Layout, dyn
     }
     Err(dynaflow_datasets::Error::file(
         dir,
-        "not a TUM RGB-D folder (rgb.txt + depth.txt), a KITTI odometry sequence (calib.txt + times.txt), a EuRoC MAV folder (mav0/cam0 + mav0/imu0) or a folder of images (*.png, *.jpg)",
+        "not a TUM RGB-D folder (rgb.txt + depth.txt), a KITTI odometry sequence (calib.txt + times.txt), a EuRoC MAV folder (mav0/cam0 + mav0/imu0), a rosbag2 folder (metadata.yaml) or a folder of images (*.png, *.jpg)",
     ))
 }

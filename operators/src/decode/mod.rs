@@ -1,11 +1,12 @@
 //! The reader operators: TUM RGB-D folders (`tum_rgbd`), image folders (`image_folder`),
-//! KITTI odometry sequences (`kitti_odometry`), EuRoC MAV folders (`euroc`), and layout detection for `--input`. Each is a
+//! KITTI odometry sequences (`kitti_odometry`), EuRoC MAV folders (`euroc`), ROS 1 and ROS 2 bags (`rosbag`), and layout detection for `--input`. Each is a
 //! thin wrapper over its reader in `dynaflow-datasets`, which does the file work, streamed by
 //! the one source skeleton in `sequence` (which `synth` uses too).
 
 mod euroc;
 mod folder;
 mod kitti;
+mod rosbag;
 mod sequence;
 mod tum;
 
@@ -16,6 +17,7 @@ pub(crate) use euroc::EUROC;
 pub(crate) use folder::{IMAGE_FOLDER, RGBD_FOLDER};
 pub use folder::{Layout, detect_layout};
 pub(crate) use kitti::KITTI_ODOMETRY;
+pub(crate) use rosbag::ROSBAG;
 pub(crate) use sequence::{OnError, SequenceSource, ground_truth_pose};
 pub(crate) use tum::TUM_RGBD;
 

@@ -10,6 +10,8 @@ use dynaflow_engine::msg::{Header, Pose};
 use dynaflow_engine::op::{Context, OpError, Out, Outputs, Source};
 use dynaflow_engine::param_enum;
 
+use crate::report::{BagReport, NodeReport, SourceReport};
+
 param_enum! {
     /// What an unreadable frame does.
     pub enum OnError { Fail = "fail", Skip = "skip" }
@@ -33,13 +35,22 @@ pub(crate) struct SequenceSource<S: Sequence> {
     on_error: OnError,
     skipped: u64,
     frame_id: Arc<str>,
+    /// What a bag's pairing left out, for the node's report.
+    bag_report: Option<fn(&S) -> BagReport>,
 }
 
 impl<S: Sequence> SequenceSource<S> {
     /// Streams `sequence` (read from `origin`) in the `camera` frame.
     pub(crate) fn new(sequence: S, emit: Emit<S>, origin: &std::path::Path, on_error: OnError) -> Self {
         let origin = origin.display().to_string();
-        Self { sequence, emit, origin, on_error, skipped: 0, frame_id: "camera".into() }
+        Self { sequence, emit, origin, on_error, skipped: 0, frame_id: "camera".into(), bag_report: None }
+    }
+
+    /// Adds what `report` says of the sequence (a bag's topics and left-out messages) to the
+    /// node's report.
+    pub(crate) fn with_bag_report(mut self, report: fn(&S) -> BagReport) -> Self {
+        self.bag_report = Some(report);
+        self
     }
 }
 
@@ -65,9 +76,13 @@ impl<S: Sequence> Source for SequenceSource<S> {
         }
     }
 
-    fn stop(&mut self, _ctx: &mut Context) -> Result<(), OpError> {
+    fn stop(&mut self, ctx: &mut Context) -> Result<(), OpError> {
         if self.skipped > 0 {
             tracing::warn!("{}: skipped {} of {} frames", self.origin, self.skipped, self.sequence.len());
+        }
+        let bag = self.bag_report.map(|f| f(&self.sequence));
+        if self.skipped > 0 || bag.is_some() {
+            ctx.report = Some(NodeReport::from(SourceReport { frames_skipped: self.skipped, bag }).to_json());
         }
         Ok(())
     }

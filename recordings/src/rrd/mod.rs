@@ -694,6 +694,7 @@ mod tests {
             machine: None,
             graph_digest: String::new(),
             decisions: Vec::new(),
+            estimates: Vec::new(),
         };
         let cache = EncodeCache::new(2);
         let mut rrd = RrdSink::new(dir.join("t.rrd")).with_cache(cache.clone());
