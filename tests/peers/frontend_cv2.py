@@ -133,4 +133,14 @@ if "distortion" in job:
         und = cv2.undistortPoints(np.float64(case["distorted"]).reshape(-1, 1, 2), eye, d)
         res[case["name"]] = {"distorted": dist.reshape(-1, 2).tolist(), "undistorted": und.reshape(-1, 2).tolist()}
     out["distortion"] = res
+if "fisheye" in job:
+    res = {}
+    for case in job["fisheye"]:
+        K = np.float64(case["K"]).reshape(3, 3)
+        D = np.float64(case["D"]).reshape(4, 1)
+        obj = np.float64(case["points"]).reshape(-1, 1, 3)
+        px, _ = cv2.fisheye.projectPoints(obj, np.zeros(3), np.zeros(3), K, D)
+        und = cv2.fisheye.undistortPoints(np.float64(case["pixels"]).reshape(-1, 1, 2), K, D)
+        res[case["name"]] = {"projected": px.reshape(-1, 2).tolist(), "undistorted": und.reshape(-1, 2).tolist()}
+    out["fisheye"] = res
 print(json.dumps(out))

@@ -1,6 +1,7 @@
-//! The camera model: a pinhole with projection and unprojection, and Brown-Conrady lens
-//! distortion (OpenCV's `[k1, k2, p1, p2, k3]`) as hooks applied to normalised coordinates.
-//! Every crate that projects a point uses this one type.
+//! The camera model: a pinhole with projection and unprojection, Brown-Conrady lens
+//! distortion (OpenCV's `[k1, k2, p1, p2, k3]`) as hooks applied to normalised coordinates, and
+//! the Kannala-Brandt (equidistant) fisheye model ([`KannalaBrandt`]: OpenCV's `fisheye`
+//! module, ORB-SLAM3's `KannalaBrandt8`). Every crate that projects a point uses these.
 
 use nalgebra::Point3;
 
@@ -77,6 +78,123 @@ pub fn undistort(k: &[f64; 5], xd: [f64; 2]) -> [f64; 2] {
     [x, y]
 }
 
+/// The Kannala-Brandt fisheye model with four coefficients (Kannala and Brandt, "A generic
+/// camera model and calibration method for conventional, wide-angle, and fish-eye lenses",
+/// TPAMI 2006; OpenCV's `fisheye` module and ROS's `equidistant` use the same
+/// parameterisation): a ray at angle `theta` from the optical axis lands at distance
+/// `theta_d = theta (1 + k1 theta^2 + k2 theta^4 + k3 theta^6 + k4 theta^8)` from the
+/// principal point in normalised units, in the ray's azimuth; `theta` is measured with
+/// `atan2`, so rays past 90 degrees off the axis project (pixels unproject to at most 90).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct KannalaBrandt {
+    /// Focal lengths and principal point.
+    pub pinhole: Pinhole,
+    /// `[k1, k2, k3, k4]`.
+    pub k: [f64; 4],
+}
+
+/// Newton steps [`KannalaBrandt::unproject_normalised`] takes at most, and the step below which
+/// it stops: OpenCV's `fisheye::undistortPoints` defaults (`TermCriteria(COUNT + EPS, 10, 1e-8)`).
+const KB_MAX_STEPS: usize = 10;
+const KB_STEP_EPS: f64 = 1e-8;
+
+impl KannalaBrandt {
+    /// A camera.
+    pub const fn new(pinhole: Pinhole, k: [f64; 4]) -> Self {
+        Self { pinhole, k }
+    }
+
+    /// `theta_d` of `theta` and its derivative.
+    fn radius(&self, theta: f64) -> (f64, f64) {
+        let [k1, k2, k3, k4] = self.k;
+        let t2 = theta * theta;
+        let poly = 1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)));
+        let dpoly = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)));
+        (theta * poly, dpoly)
+    }
+
+    /// Pixel of a point in the camera frame (`None` on the optical axis behind the camera,
+    /// where the azimuth is undefined).
+    pub fn project(&self, p: &Point3<f64>) -> Option<[f64; 2]> {
+        let r = p.x.hypot(p.y);
+        let Pinhole { fx, fy, cx, cy } = self.pinhole;
+        if r < 1e-12 {
+            return (p.z > 0.0).then_some([cx, cy]);
+        }
+        let (theta_d, _) = self.radius(r.atan2(p.z));
+        Some([fx * theta_d * p.x / r + cx, fy * theta_d * p.y / r + cy])
+    }
+
+    /// `d(u, v) / d(x, y, z)` of [`project`](Self::project) at `p` (rows u, v), for
+    /// Gauss-Newton and BA.
+    pub fn project_jacobian(&self, p: &Point3<f64>) -> [[f64; 3]; 2] {
+        let Pinhole { fx, fy, .. } = self.pinhole;
+        let (x, y, z) = (p.x, p.y, p.z);
+        let r2 = x * x + y * y;
+        let r = r2.sqrt();
+        if r < 1e-12 {
+            // On the axis the model is a pinhole to first order.
+            return [[fx / z, 0.0, 0.0], [0.0, fy / z, 0.0]];
+        }
+        let (theta_d, dtheta_d) = self.radius(r.atan2(z));
+        let rho2 = r2 + z * z;
+        let (a, b) = (dtheta_d * z / (r2 * rho2), theta_d / (r2 * r));
+        [
+            [fx * (a * x * x + b * y * y), fx * (a - b) * x * y, -fx * dtheta_d * x / rho2],
+            [fy * (a - b) * x * y, fy * (a * y * y + b * x * x), -fy * dtheta_d * y / rho2],
+        ]
+    }
+
+    /// The normalised pinhole coordinates (`x / z`, `y / z`) of the ray seen at pixel `uv`:
+    /// `theta` solved from `theta_d` by Newton's method as OpenCV's
+    /// `fisheye::undistortPoints` does (at most 10 steps, stopping below 1e-8; `theta_d`
+    /// clamped to pi/2, as OpenCV and ORB-SLAM3 clamp it: a pixel is unprojected to at most
+    /// 90 degrees off the axis).
+    pub fn unproject_normalised(&self, uv: [f64; 2]) -> [f64; 2] {
+        let (theta, [dx, dy], theta_d) = self.solve(uv);
+        if theta_d == 0.0 {
+            return [dx, dy];
+        }
+        let scale = theta.tan() / theta_d;
+        [dx * scale, dy * scale]
+    }
+
+    /// The unit ray seen at pixel `uv` (at most 90 degrees off the axis, as
+    /// [`unproject_normalised`](Self::unproject_normalised)).
+    pub fn bearing(&self, uv: [f64; 2]) -> nalgebra::Vector3<f64> {
+        let (theta, [dx, dy], theta_d) = self.solve(uv);
+        if theta_d == 0.0 {
+            return nalgebra::Vector3::z();
+        }
+        let s = theta.sin() / theta_d;
+        nalgebra::Vector3::new(dx * s, dy * s, theta.cos())
+    }
+
+    /// The point at depth `z` (along the optical axis) seen at pixel `uv`.
+    pub fn unproject(&self, uv: [f64; 2], z: f64) -> Point3<f64> {
+        let [x, y] = self.unproject_normalised(uv);
+        Point3::new(x * z, y * z, z)
+    }
+
+    /// `(theta, distorted normalised point, theta_d)` of a pixel.
+    fn solve(&self, uv: [f64; 2]) -> (f64, [f64; 2], f64) {
+        let [dx, dy] = self.pinhole.normalised(uv);
+        let theta_d = dx.hypot(dy).clamp(-std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_2);
+        let mut theta = theta_d;
+        if theta_d > KB_STEP_EPS {
+            for _ in 0..KB_MAX_STEPS {
+                let (f, df) = self.radius(theta);
+                let step = (f - theta_d) / df;
+                theta -= step;
+                if step.abs() < KB_STEP_EPS {
+                    break;
+                }
+            }
+        }
+        (theta, [dx, dy], theta_d)
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -101,5 +219,45 @@ mod tests {
             assert!((back[0] - xn[0]).abs() < 1e-5 && (back[1] - xn[1]).abs() < 1e-5, "{xn:?} -> {back:?}");
         }
         assert_eq!(distort(&[0.0; 5], [0.3, 0.2]), [0.3, 0.2]);
+    }
+
+    #[test]
+    fn kannala_brandt_round_trips_and_its_jacobian_is_the_derivative() {
+        // TUM-VI cam0's published equidistant calibration (Schubert et al., IROS 2018).
+        let cam = KannalaBrandt::new(
+            Pinhole::new(190.978_477, 190.973_307, 254.931_706, 256.897_443),
+            [0.003_482_389, 0.000_715_034, -0.002_053_236, 0.000_202_936],
+        );
+        for p in [
+            Point3::new(0.3, -0.2, 1.0),
+            Point3::new(-1.5, 0.8, 0.6),
+            Point3::new(0.0, 0.0, 2.0),
+            Point3::new(2.0, 1.0, -0.2),
+        ] {
+            let uv = cam.project(&p).unwrap_or_default();
+            // Unprojection reaches 90 degrees (OpenCV's and ORB-SLAM3's clamp); projection
+            // goes past it.
+            if p.z > 0.0 {
+                let b = cam.bearing(uv);
+                assert!((b - p.coords.normalize()).norm() < 1e-9, "{p} -> {uv:?} -> {b}");
+                let q = cam.unproject(uv, p.z);
+                assert!((q - p).norm() < 1e-9, "{p} -> {q}");
+            }
+            let j = cam.project_jacobian(&p);
+            for axis in 0..3 {
+                let mut d = nalgebra::Vector3::zeros();
+                d[axis] = 1e-6;
+                let (a, b) = (cam.project(&(p + d)).unwrap_or_default(), cam.project(&(p - d)).unwrap_or_default());
+                for row in 0..2 {
+                    let numeric = (a[row] - b[row]) / 2e-6;
+                    assert!(
+                        (numeric - j[row][axis]).abs() < 1e-5 * (1.0 + numeric.abs()),
+                        "{p} d{row}/d{axis}: {numeric} vs {}",
+                        j[row][axis]
+                    );
+                }
+            }
+        }
+        assert!(cam.project(&Point3::new(0.0, 0.0, -1.0)).is_none());
     }
 }

@@ -438,3 +438,65 @@ fn distortion_and_its_inverse_agree_with_opencv() {
         }
     }
 }
+
+#[test]
+fn kannala_brandt_projection_and_unprojection_agree_with_opencv_fisheye() {
+    use dynaflow_vision::camera::{KannalaBrandt, Pinhole};
+    let Some(python) = frontend::cv2_python("camera: Kannala-Brandt vs OpenCV fisheye") else {
+        return;
+    };
+    let dir = common::TempDir::new("fisheye-cv2");
+    // TUM-VI cam0's published equidistant calibration, and a stronger lens (EuRoC-like focal
+    // length, larger coefficients); points from the axis to 80 degrees off it, all azimuths.
+    let cases = [
+        (
+            "tumvi",
+            KannalaBrandt::new(
+                Pinhole::new(190.978477, 190.973307, 254.931706, 256.897443),
+                [0.003482389, 0.000715034, -0.002053236, 0.000202936],
+            ),
+        ),
+        ("strong", KannalaBrandt::new(Pinhole::new(458.6, 457.3, 367.2, 248.4), [-0.05, 0.02, -0.01, 0.002])),
+    ];
+    let points: Vec<[f64; 3]> = (1..9)
+        .flat_map(|i| {
+            (0..6).map(move |j| {
+                let theta = f64::from(i) * 10f64.to_radians();
+                let phi = f64::from(j) * 1.1;
+                let depth = 0.5 + 0.3 * f64::from(j);
+                [depth * theta.sin() * phi.cos(), depth * theta.sin() * phi.sin(), depth * theta.cos()]
+            })
+        })
+        .collect();
+    let pixels = |cam: &KannalaBrandt| -> Vec<[f64; 2]> {
+        points.iter().map(|p| cam.project(&nalgebra::Point3::from(*p)).unwrap()).collect()
+    };
+    let job = json!({
+        "fisheye": cases.iter().map(|(name, cam)| json!({
+            "name": name,
+            "K": [cam.pinhole.fx, 0.0, cam.pinhole.cx, 0.0, cam.pinhole.fy, cam.pinhole.cy, 0.0, 0.0, 1.0],
+            "D": cam.k,
+            "points": points,
+            "pixels": pixels(cam),
+        })).collect::<Vec<_>>(),
+    });
+    let cv = frontend::run_cv2(&python, dir.path(), &job);
+    for (name, cam) in &cases {
+        let theirs = &cv["fisheye"][name];
+        for (i, (p, uv)) in points.iter().zip(pixels(cam)).enumerate() {
+            let (u, v) = (theirs["projected"][i][0].as_f64().unwrap(), theirs["projected"][i][1].as_f64().unwrap());
+            assert!(
+                (uv[0] - u).abs() < 1e-9 && (uv[1] - v).abs() < 1e-9,
+                "{name} project {p:?}: ours {uv:?}, OpenCV [{u}, {v}]"
+            );
+            let n = cam.unproject_normalised(uv);
+            let (x, y) = (theirs["undistorted"][i][0].as_f64().unwrap(), theirs["undistorted"][i][1].as_f64().unwrap());
+            assert!(
+                (n[0] - x).abs() < 1e-9 && (n[1] - y).abs() < 1e-9,
+                "{name} unproject {uv:?}: ours {n:?}, OpenCV [{x}, {y}]"
+            );
+            // And the ray itself, to the model's own accuracy.
+            assert!((n[0] - p[0] / p[2]).abs() < 1e-7 && (n[1] - p[1] / p[2]).abs() < 1e-7, "{name} {p:?} -> {n:?}");
+        }
+    }
+}
