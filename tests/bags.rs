@@ -143,6 +143,7 @@ fn a_robot_bag_runs_mg_slam_with_topics_and_nothing_else() {
         depth_factor: 1000.0,
         frames: 0,
         intrinsics: None,
+        imu: dynaflow_ros::sequence::ImuOptions::default(),
     };
     let mut bag =
         dynaflow_ros::sequence::BagSequence::open(dynaflow_ros::Bag::open(&robot).unwrap(), &options).unwrap();
@@ -304,4 +305,83 @@ fn a_ros2_recording_reads_back_in_rosbags_and_rerun() {
         Some(&count("mapping/points")),
         "{print}"
     );
+}
+
+#[test]
+fn a_bags_imu_runs_rgbd_inertial_as_the_euroc_folder_it_was_written_from() {
+    let python = common::peers::venv().join("bin/python3");
+    let probe = || {
+        let ok = Command::new(&python).args(["-c", "import rosbags, cv2"]).output().is_ok_and(|o| o.status.success());
+        if ok { Ok(()) } else { Err(format!("{} cannot import rosbags and cv2", python.display())) }
+    };
+    if !common::peers::peer_runs("rosbags", "bags: a bag's IMU runs visual-inertial", probe) {
+        return;
+    }
+    let dir = common::TempDir::new("bags-imu");
+    let root = dir.path().join("euroc");
+    let o = common::bin()
+        .args(["synth", "--format", "euroc", "--motion", "handheld", "--frames", "150", "--people", "0", "--seed", "5"])
+        .arg("--out")
+        .arg(&root)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "synth: {}", String::from_utf8_lossy(&o.stderr));
+    let mav0 = root.join("mav0");
+    let bag = dir.path().join("rig_bag");
+    let o = Command::new(&python)
+        .arg(common::repo().join("tests/peers/euroc_to_bag.py"))
+        .arg(&mav0)
+        .arg(&bag)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "euroc_to_bag.py: {}", String::from_utf8_lossy(&o.stderr));
+    let variant = ["--variant", "rgbd_inertial"];
+    let out = dir.path().join("folder");
+    let o = run("orb_baseline.yaml", &mav0, &variant, &out);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let folder = common::summary(&out.join("orb_baseline-rgbd_inertial.summary.json"));
+    // The noise is the folder's imu0/sensor.yaml (EuRoC's ADIS16448 figures, which synth uses);
+    // the mounting comes from /tf_static, the ground truth through /tf.
+    let noise = "camera.imu_noise=1.6968e-4,2e-3,1.9393e-5,3e-3";
+    let args =
+        [&variant[..], &["--topics", "gt=tf:world:cam0", "--set", "camera.depth_factor=5000", "--set", noise]].concat();
+    let out = dir.path().join("bag");
+    let o = run("orb_baseline.yaml", &bag, &args, &out);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let from_bag = common::summary(&out.join("orb_baseline-rgbd_inertial.summary.json"));
+    let (a, b) = (folder.tracker("track").unwrap(), from_bag.tracker("track").unwrap());
+    let (ia, ib) = (a.inertial.clone().unwrap(), b.inertial.clone().unwrap());
+    assert_eq!(ia.init_method, ib.init_method);
+    assert!((ia.init_after_s.unwrap() - ib.init_after_s.unwrap()).abs() < 1e-3, "{ia:?} vs {ib:?}");
+    for (x, y) in ia
+        .gyro_bias
+        .unwrap()
+        .iter()
+        .chain(&ia.accel_bias.unwrap())
+        .zip(ib.gyro_bias.unwrap().iter().chain(&ib.accel_bias.unwrap()))
+    {
+        assert!((x - y).abs() < 1e-6, "biases: {ia:?} vs {ib:?}");
+    }
+    let (ea, eb) = (a.ate.unwrap(), b.ate.unwrap());
+    assert_eq!(ea.pairs, eb.pairs);
+    assert!((ea.rmse - eb.rmse).abs() < 1e-4, "ATE {} m from the bag, {} m from the folder", eb.rmse, ea.rmse);
+    // The samples after the last frame are counted, not lost silently.
+    let r = bag_report(&from_bag);
+    assert_eq!(r.topics["imu"], "/imu0");
+    let stamps = |f: &str| -> Vec<i64> {
+        std::fs::read_to_string(mav0.join(f))
+            .unwrap()
+            .lines()
+            .filter(|l| !l.starts_with('#') && !l.is_empty())
+            .map(|l| l.split(',').next().unwrap().parse().unwrap())
+            .collect()
+    };
+    let last = *stamps("cam0/data.csv").last().unwrap();
+    let after = stamps("imu0/data.csv").iter().filter(|&&s| s > last).count() as u64;
+    assert_eq!(r.dropped.get("/imu0: after the last frame").copied().unwrap_or(0), after, "{r:?}");
+    // Naming the IMU without its noise is an error saying what to give.
+    let o = run("orb_baseline.yaml", &bag, &["--topics", "imu=/imu0,gt=none"], &dir.path().join("no-noise"));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(err.contains("rig_bag") && err.contains("/imu0") && err.contains("imu_noise"), "{err}");
 }

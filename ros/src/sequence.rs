@@ -1,8 +1,9 @@
 //! A bag as a run's sequence of frames ([`BagSequence`]): the topic for each role chosen (the
 //! only candidate, or named in [`Topics`]), colour and depth paired by header stamp with the
 //! rule TUM folders use (nearest first, one to one, within a tolerance; never by record time),
-//! intrinsics from `CameraInfo`, ground truth from a pose topic or the tf tree, and every
-//! message the pairing leaves out counted by reason ([`BagSequence::report`]).
+//! intrinsics from `CameraInfo`, ground truth from a pose topic or the tf tree, an IMU's
+//! samples in one batch per frame (`imu`), and every message the pairing leaves out counted by
+//! reason ([`BagSequence::report`]).
 //!
 //! Opening reads the bag once (the inventory, every image's stamp, the calibration, the poses);
 //! the frames are then read in one more pass, holding only the images whose partner has not
@@ -13,7 +14,7 @@ use std::collections::{BTreeMap, HashMap, HashSet};
 use dynaflow_datasets::Error;
 use dynaflow_datasets::intrinsics::Intrinsics;
 use dynaflow_datasets::tum::{GT_MAX_DIFF_S, associate_stamps, nearest_pose};
-use dynaflow_msg::{CameraInfo, DepthImage, Image};
+use dynaflow_msg::{CameraInfo, DepthImage, Image, ImuBatch};
 use dynaflow_vision::camera::Pinhole;
 use nalgebra::Isometry3;
 
@@ -23,8 +24,12 @@ use crate::sensor::{self, Picture, seconds, stamp_text};
 use crate::tf::TfTree;
 use crate::{Bag, Messages};
 
+mod collect;
+mod imu;
 mod topics;
 
+use collect::{Collected, POSE_TYPES, collect};
+pub use imu::ImuOptions;
 pub use topics::{GroundTruth, TOPIC_ROLES, Topics};
 use topics::{none_for, pick, pick_camera_info};
 
@@ -41,6 +46,8 @@ pub struct BagOptions {
     pub frames: usize,
     /// Intrinsics to use instead of the bag's `CameraInfo`.
     pub intrinsics: Option<Intrinsics>,
+    /// The IMU's noise and mounting, which a bag does not hold.
+    pub imu: ImuOptions,
 }
 
 /// What a run read from a bag and what it left out (the source's entry in the run summary).
@@ -73,6 +80,8 @@ pub struct BagFrame {
     pub camera: CameraInfo,
     /// Ground-truth `world_from_cam`, where the bag has one for this frame.
     pub gt_pose: Option<Isometry3<f64>>,
+    /// The IMU samples since the previous frame, when the run reads an IMU topic.
+    pub imu: Option<ImuBatch>,
 }
 
 /// A colour stamp and its depth partner's, nanoseconds.
@@ -113,77 +122,12 @@ pub struct BagSequence {
     frames_without_pose: u64,
     /// Topics no role reads, with their message counts.
     unused: BTreeMap<String, u64>,
+    imu: Option<imu::Plan>,
 }
 
 impl std::fmt::Debug for BagSequence {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("BagSequence").field("bag", &self.bag.path()).field("frames", &self.frames.len()).finish()
-    }
-}
-
-/// A pose topic's `(stamp ns, world_from_cam)`.
-type Poses = Vec<(i64, Isometry3<f64>)>;
-
-/// What the first pass keeps.
-#[derive(Default)]
-struct Collected {
-    /// Header stamps per image topic, in record order.
-    image_stamps: HashMap<String, Vec<i64>>,
-    /// Per `CameraInfo` topic: the first calibration, and the stamp of the first that differs.
-    infos: HashMap<String, (Result<CameraInfo, String>, Option<i64>)>,
-    /// Per pose topic: its poses (or the first error).
-    poses: HashMap<String, Result<Poses, String>>,
-    tf: TfTree,
-    tf_error: Option<String>,
-}
-
-const POSE_TYPES: [&str; 4] = [
-    "geometry_msgs/PoseStamped",
-    "nav_msgs/Odometry",
-    "geometry_msgs/TransformStamped",
-    "geometry_msgs/PoseWithCovarianceStamped",
-];
-
-fn collect(raw: &crate::RawMessage, decoded: &Result<Message, String>, stamp: i64, c: &mut Collected) {
-    let Ok(m) = decoded else { return };
-    let topic = &raw.connection.topic;
-    match raw.connection.type_name().as_str() {
-        "sensor_msgs/Image" | "sensor_msgs/CompressedImage" => {
-            c.image_stamps.entry(topic.clone()).or_default().push(stamp);
-        }
-        "sensor_msgs/CameraInfo" => {
-            let info = sensor::camera_info(m);
-            match c.infos.get_mut(topic) {
-                None => {
-                    c.infos.insert(topic.clone(), (info, None));
-                }
-                Some((first, changed @ None)) if info.as_ref().ok() != first.as_ref().ok() => *changed = Some(stamp),
-                Some(_) => {}
-            }
-        }
-        "tf2_msgs/TFMessage" => match sensor::transforms(m) {
-            Ok(list) => {
-                let is_static = topic.ends_with("tf_static");
-                for (h, child, pose) in list {
-                    if let Err(e) = c.tf.insert(&h.frame_id, &child, h.stamp_ns, pose, is_static) {
-                        c.tf_error.get_or_insert_with(|| format!("topic {topic} at {} s: {e}", stamp_text(h.stamp_ns)));
-                    }
-                }
-            }
-            Err(e) => {
-                c.tf_error.get_or_insert_with(|| format!("topic {topic}: {e}"));
-            }
-        },
-        ty if POSE_TYPES.contains(&ty) => {
-            let entry = c.poses.entry(topic.clone()).or_insert_with(|| Ok(Vec::new()));
-            if let Ok(list) = entry {
-                match sensor::stamped_pose(m) {
-                    Ok((h, _, pose)) => list.push((h.stamp_ns, pose)),
-                    Err(e) => *entry = Err(format!("at {} s: {e}", stamp_text(stamp))),
-                }
-            }
-        }
-        _ => {}
     }
 }
 
@@ -329,6 +273,37 @@ impl BagSequence {
         if options.frames > 0 {
             frames.truncate(options.frames);
         }
+        // The IMU: named, or the only one when its noise is given.
+        let imu_topic = match t.imu.as_deref() {
+            Some("none") => None,
+            Some(given) => pick(&inventory, "imu", Some(given), &["sensor_msgs/Imu"]).map_err(fail)?,
+            None if options.imu.noise.is_some() => pick(&inventory, "imu", None, &["sensor_msgs/Imu"]).map_err(fail)?,
+            None => {
+                if inventory.candidates.get("imu").is_some_and(|c| !c.is_empty()) {
+                    tracing::info!(
+                        "{}: the IMU is not read without its noise figures (`imu_noise`); a visual-inertial graph needs them",
+                        path.display()
+                    );
+                }
+                None
+            }
+        };
+        let imu = match imu_topic {
+            None => None,
+            Some(topic) => {
+                let stamps: Vec<(f64, i64)> = frames.iter().map(|f| (seconds(f.rgb), f.rgb)).collect();
+                let camera_frame = c.image_frames.get(&rgb).cloned().unwrap_or_default();
+                let plan =
+                    imu::plan(&path, &topic, &mut c.imu, &camera_frame, &c.tf, &options.imu, &stamps).map_err(fail)?;
+                if plan.after_last > 0 {
+                    dropped.insert(format!("{topic}: after the last frame"), plan.after_last);
+                }
+                if plan.repeats > 0 {
+                    dropped.insert(format!("{topic}: repeats a sample"), plan.repeats);
+                }
+                Some(plan)
+            }
+        };
         let used: Vec<Option<&str>> = vec![
             Some(rgb.as_str()),
             depth.as_deref(),
@@ -337,6 +312,7 @@ impl BagSequence {
                 GroundTruth::Topic(t) => Some(t.as_str()),
                 _ => None,
             },
+            imu.as_ref().map(|p| p.topic.as_str()),
         ];
         let tf_used = matches!(gt_from, GroundTruth::Tf { .. });
         let unused = inventory
@@ -362,6 +338,7 @@ impl BagSequence {
             dropped,
             frames_without_pose: 0,
             unused,
+            imu,
         };
         seq.frames_without_pose = (0..seq.frames.len()).filter(|&i| seq.gt_pose(i).is_none()).count() as u64;
         if seq.frames_without_pose as usize == seq.frames.len() && seq.gt_from != GroundTruth::Off {
@@ -401,6 +378,9 @@ impl BagSequence {
         }
         if self.gt_from != GroundTruth::Off {
             out.push(("gt", self.gt_name()));
+        }
+        if let Some(p) = &self.imu {
+            out.push(("imu", p.topic.clone()));
         }
         out
     }
@@ -537,6 +517,10 @@ impl BagSequence {
             rgb,
             depth,
             gt_pose: self.gt_pose(index),
+            imu: self.imu.as_ref().map(|p| ImuBatch {
+                samples: p.batches.get(index).cloned().unwrap_or_default(),
+                calibration: p.calibration,
+            }),
         }))
     }
 

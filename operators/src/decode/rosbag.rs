@@ -2,9 +2,9 @@
 
 use std::path::PathBuf;
 
-use dynaflow_ros::sequence::{BagFrame, BagOptions, BagSequence, Topics};
+use dynaflow_ros::sequence::{BagFrame, BagOptions, BagSequence, ImuOptions, Topics};
 
-use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, Pose};
+use dynaflow_engine::msg::{CameraInfo, DepthImage, Header, Image, ImuBatch, Pose};
 use dynaflow_engine::op::{Instance, OpError, OpSpec, Out, Outputs, ParamType, Params};
 use dynaflow_engine::params;
 
@@ -30,6 +30,44 @@ impl dynaflow_engine::op::Param for TopicsParam {
     }
 }
 
+/// `imu_noise`: Kalibr's four noise figures, checked as written (empty: the IMU is not read).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ImuNoiseParam(pub String);
+
+impl dynaflow_engine::op::Param for ImuNoiseParam {
+    const TYPE: ParamType = ParamType::Text {
+        what: "`GYRO_NOISE,ACCEL_NOISE,GYRO_WALK,ACCEL_WALK` (Kalibr's imu.yaml: rad/s/√Hz, m/s²/√Hz, rad/s²/√Hz, m/s³/√Hz), or empty",
+        check: |s| ImuOptions::parse_noise(s).map(|_| ()),
+    };
+    fn from_json(value: &serde_json::Value, _: &Params) -> Result<Self, String> {
+        let text = value.as_str().ok_or_else(|| format!("expected four numbers, found {value}"))?;
+        ImuOptions::parse_noise(text)?;
+        Ok(Self(text.to_string()))
+    }
+    fn to_json(&self) -> serde_json::Value {
+        self.0.clone().into()
+    }
+}
+
+/// `imu_extrinsic`: the camera's pose in the IMU frame, checked as written (empty: from tf).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ExtrinsicParam(pub String);
+
+impl dynaflow_engine::op::Param for ExtrinsicParam {
+    const TYPE: ParamType = ParamType::Text {
+        what: "`TX,TY,TZ,QX,QY,QZ,QW`: the camera's pose in the IMU frame (Kalibr's T_imu_cam), or empty for the tf tree's",
+        check: |s| ImuOptions::parse_extrinsic(s).map(|_| ()),
+    };
+    fn from_json(value: &serde_json::Value, _: &Params) -> Result<Self, String> {
+        let text = value.as_str().ok_or_else(|| format!("expected seven numbers, found {value}"))?;
+        ImuOptions::parse_extrinsic(text)?;
+        Ok(Self(text.to_string()))
+    }
+    fn to_json(&self) -> serde_json::Value {
+        self.0.clone().into()
+    }
+}
+
 params! {
     struct Config {
         /// the bag: a `.bag` file, a rosbag2 folder, or a `.mcap` / `.db3` file
@@ -46,6 +84,10 @@ params! {
         on_error: OnError = OnError::Fail,
         /// read at most this many frames (0 = all)
         frames: u64 [0, i64::MAX] = 0,
+        /// the IMU's noise (a bag does not hold it): `GYRO_NOISE,ACCEL_NOISE,GYRO_WALK,ACCEL_WALK`; empty: the IMU is not read unless `topics` names it (then an error)
+        imu_noise: ImuNoiseParam = ImuNoiseParam::default(),
+        /// the camera's pose in the IMU frame `TX,TY,TZ,QX,QY,QZ,QW`; empty: the tf tree's (IMU frame <- the images' frame)
+        imu_extrinsic: ExtrinsicParam = ExtrinsicParam::default(),
     }
 }
 
@@ -54,6 +96,10 @@ const RGB: Out<Image> =
 const DEPTH: Out<DepthImage> =
     Out::new("depth", "depth in metres, the image paired with the colour one (absent in a monocular run)");
 const CAMERA_INFO: Out<CameraInfo> = Out::new("camera_info", "intrinsics with distortion, from the CameraInfo topic");
+const IMU: Out<ImuBatch> = Out::new(
+    "imu",
+    "the IMU samples since the previous frame (header stamps), with the calibration (`imu_noise`, the mounting from tf or `imu_extrinsic`, the stream's median rate); only when the run reads an IMU topic",
+);
 const GT_POSE: Out<Pose> = Out::ground_truth(
     "gt_pose",
     "ground-truth world_from_cam: the pose topic's nearest pose within 10 ms, or the tf lookup at the frame's stamp (absent where none is)",
@@ -61,7 +107,7 @@ const GT_POSE: Out<Pose> = Out::ground_truth(
 
 pub(crate) const ROSBAG: OpSpec =
     OpSpec::source("rosbag", "decode", dynaflow_engine::op::doc_line(include_str!("docs/rosbag.md")), build)
-        .outputs(&[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, GT_POSE.spec])
+        .outputs(&[RGB.spec, DEPTH.spec, CAMERA_INFO.spec, IMU.spec, GT_POSE.spec])
         .params(Config::PARAMS)
         .cpu_heavy();
 
@@ -77,6 +123,12 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         intrinsics: match c.intrinsics {
             CameraParam::Given(k) => Some(k),
             CameraParam::Auto => None,
+        },
+        imu: ImuOptions {
+            noise: ImuOptions::parse_noise(&c.imu_noise.0)
+                .map_err(|e| OpError::Config { key: "imu_noise".into(), message: e })?,
+            body_from_cam: ImuOptions::parse_extrinsic(&c.imu_extrinsic.0)
+                .map_err(|e| OpError::Config { key: "imu_extrinsic".into(), message: e })?,
         },
     };
     let sequence = BagSequence::open(bag, &options).map_err(OpError::library)?;
@@ -99,6 +151,9 @@ fn emit(_: &BagSequence, f: BagFrame, header: &Header) -> Outputs {
     let mut out = Outputs::new().send(&RGB, header.clone(), f.rgb).send(&CAMERA_INFO, header.clone(), f.camera);
     if let Some(depth) = f.depth {
         DEPTH.push(&mut out, header.clone(), depth);
+    }
+    if let Some(batch) = f.imu {
+        IMU.push(&mut out, header.clone(), batch);
     }
     if let Some(pose) = f.gt_pose {
         ground_truth_pose(&mut out, &GT_POSE, header, Pose { world_from_cam: pose });

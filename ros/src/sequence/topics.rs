@@ -31,14 +31,16 @@ pub struct Topics {
     pub camera_info: Option<String>,
     /// Ground truth.
     pub gt: Option<GroundTruth>,
+    /// The IMU (`Some("none")`: not read).
+    pub imu: Option<String>,
 }
 
 /// The roles [`Topics::parse`] reads.
-pub const TOPIC_ROLES: &str = "rgb, depth, camera_info, gt";
+pub const TOPIC_ROLES: &str = "rgb, depth, camera_info, gt, imu";
 
 impl Topics {
     /// `rgb=/camera/color/image_raw,depth=/camera/depth/image_raw,gt=/mocap/pose`: each role at
-    /// most once; `depth=none` and `gt=none` leave a role out; `gt=tf:PARENT:CHILD` takes the
+    /// most once; `depth=none`, `gt=none` and `imu=none` leave a role out; `gt=tf:PARENT:CHILD` takes the
     /// ground truth from the transform tree. Empty text names nothing.
     pub fn parse(text: &str) -> Result<Self, String> {
         let mut t = Topics::default();
@@ -68,11 +70,7 @@ impl Topics {
                     };
                     t.gt.replace(gt).is_some()
                 }
-                "imu" => {
-                    return Err(format!(
-                        "`{part}`: IMU topics are not read from bags yet (their noise figures are not in the bag); convert to a EuRoC folder for visual-inertial runs"
-                    ));
-                }
+                "imu" => t.imu.replace(topic.to_string()).is_some(),
                 other => return Err(format!("`{part}`: unknown role `{other}` (roles: {TOPIC_ROLES})")),
             };
             if slot_taken {
@@ -170,13 +168,14 @@ mod tests {
         assert_eq!(t.gt, Some(GroundTruth::Tf { parent: "world".into(), child: "cam".into() }));
         assert_eq!(Topics::parse("").unwrap(), Topics::default());
         assert_eq!(Topics::parse("gt=none").unwrap().gt, Some(GroundTruth::Off));
+        assert_eq!(Topics::parse("imu=/camera/imu").unwrap().imu.as_deref(), Some("/camera/imu"));
         for (bad, says) in [
             ("rgb=/a,rgb=/b", "named twice"),
             ("colour=/a", "unknown role `colour`"),
             ("rgb", "expected ROLE=TOPIC"),
             ("gt=tf:world", "gt=tf:PARENT:CHILD"),
             ("depth=", "no topic"),
-            ("imu=/imu", "not read from bags yet"),
+            ("imu=/a,imu=/b", "named twice"),
         ] {
             let e = Topics::parse(bad).unwrap_err();
             assert!(e.contains(says), "{bad}: {e}");
