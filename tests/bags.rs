@@ -19,17 +19,20 @@ use std::process::{Command, Output};
 
 use dynaflow::summary::{BagReport, SourceReport, Summary};
 
-/// The TUM folder (40 frames, two people, seed 21: a seed nothing was chosen on) and the bags
-/// `tum_to_bags.py` wrote from it; `None` when the peer is skipped.
-fn sequence(dir: &Path, comparison: &str) -> Option<(PathBuf, PathBuf)> {
+/// The peers' Python with `rosbags` and OpenCV, when the `rosbags` comparison runs.
+fn rosbags_python(comparison: &str) -> Option<PathBuf> {
     let python = common::peers::venv().join("bin/python3");
     let probe = || {
         let ok = Command::new(&python).args(["-c", "import rosbags, cv2"]).output().is_ok_and(|o| o.status.success());
         if ok { Ok(()) } else { Err(format!("{} cannot import rosbags and cv2", python.display())) }
     };
-    if !common::peers::peer_runs("rosbags", comparison, probe) {
-        return None;
-    }
+    common::peers::peer_runs("rosbags", comparison, probe).then_some(python)
+}
+
+/// The TUM folder (40 frames, two people, seed 21: a seed nothing was chosen on) and the bags
+/// `tum_to_bags.py` wrote from it; `None` when the peer is skipped.
+fn sequence(dir: &Path, comparison: &str) -> Option<(PathBuf, PathBuf)> {
+    let python = rosbags_python(comparison)?;
     let tum = dir.join("tum");
     let o = common::bin()
         .args(["synth", "--frames", "40", "--people", "2", "--seed", "21", "--out"])
@@ -215,15 +218,8 @@ fn rrd_rows(print: &str, column: &str) -> std::collections::BTreeMap<String, u64
 
 #[test]
 fn a_ros2_recording_reads_back_in_rosbags_and_rerun() {
-    let python = common::peers::venv().join("bin/python3");
+    let Some(python) = rosbags_python("bags: a ROS 2 recording reads back in rosbags") else { return };
     let rerun = common::peers::venv().join("bin/rerun");
-    let probe = || {
-        let ok = Command::new(&python).args(["-c", "import rosbags"]).output().is_ok_and(|o| o.status.success());
-        if ok { Ok(()) } else { Err(format!("{} cannot import rosbags", python.display())) }
-    };
-    if !common::peers::peer_runs("rosbags", "bags: a ROS 2 recording reads back in rosbags", probe) {
-        return;
-    }
     let dir = common::TempDir::new("bags-ros2");
     let out = dir.path();
     let o = common::bin()
@@ -309,14 +305,7 @@ fn a_ros2_recording_reads_back_in_rosbags_and_rerun() {
 
 #[test]
 fn a_bags_imu_runs_rgbd_inertial_as_the_euroc_folder_it_was_written_from() {
-    let python = common::peers::venv().join("bin/python3");
-    let probe = || {
-        let ok = Command::new(&python).args(["-c", "import rosbags, cv2"]).output().is_ok_and(|o| o.status.success());
-        if ok { Ok(()) } else { Err(format!("{} cannot import rosbags and cv2", python.display())) }
-    };
-    if !common::peers::peer_runs("rosbags", "bags: a bag's IMU runs visual-inertial", probe) {
-        return;
-    }
+    let Some(python) = rosbags_python("bags: a bag's IMU runs visual-inertial") else { return };
     let dir = common::TempDir::new("bags-imu");
     let root = dir.path().join("euroc");
     let o = common::bin()

@@ -11,62 +11,45 @@ use dynaflow_engine::params;
 use super::CameraParam;
 use super::sequence::{OnError, SequenceSource, ground_truth_pose};
 
-/// The `topics` parameter: `role=topic` pairs, checked as written.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct TopicsParam(pub String);
+/// A text parameter kept as written and checked by `$check` (which says what is wrong).
+macro_rules! checked_text {
+    ($(#[$doc:meta])* $name:ident, $what:literal, $check:expr) => {
+        $(#[$doc])*
+        #[derive(Clone, Debug, Default, PartialEq)]
+        pub struct $name(pub String);
 
-impl dynaflow_engine::op::Param for TopicsParam {
-    const TYPE: ParamType = ParamType::Text {
-        what: "`role=topic` pairs: `rgb=/camera/color/image_raw,depth=...,camera_info=...,gt=...` (`gt=tf:PARENT:CHILD`, `depth=none`, `gt=none`)",
-        check: |s| Topics::parse(s).map(|_| ()),
+        impl dynaflow_engine::op::Param for $name {
+            const TYPE: ParamType = ParamType::Text { what: $what, check: |s| $check(s).map(|_| ()) };
+            fn from_json(value: &serde_json::Value, _: &Params) -> Result<Self, String> {
+                let text = value.as_str().ok_or_else(|| format!("expected {}, found {value}", $what))?;
+                $check(text)?;
+                Ok(Self(text.to_string()))
+            }
+            fn to_json(&self) -> serde_json::Value {
+                self.0.clone().into()
+            }
+        }
     };
-    fn from_json(value: &serde_json::Value, _: &Params) -> Result<Self, String> {
-        let text = value.as_str().ok_or_else(|| format!("expected `role=topic` pairs, found {value}"))?;
-        Topics::parse(text)?;
-        Ok(TopicsParam(text.to_string()))
-    }
-    fn to_json(&self) -> serde_json::Value {
-        self.0.clone().into()
-    }
 }
 
-/// `imu_noise`: Kalibr's four noise figures, checked as written (empty: the IMU is not read).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ImuNoiseParam(pub String);
-
-impl dynaflow_engine::op::Param for ImuNoiseParam {
-    const TYPE: ParamType = ParamType::Text {
-        what: "`GYRO_NOISE,ACCEL_NOISE,GYRO_WALK,ACCEL_WALK` (Kalibr's imu.yaml: rad/s/√Hz, m/s²/√Hz, rad/s²/√Hz, m/s³/√Hz), or empty",
-        check: |s| ImuOptions::parse_noise(s).map(|_| ()),
-    };
-    fn from_json(value: &serde_json::Value, _: &Params) -> Result<Self, String> {
-        let text = value.as_str().ok_or_else(|| format!("expected four numbers, found {value}"))?;
-        ImuOptions::parse_noise(text)?;
-        Ok(Self(text.to_string()))
-    }
-    fn to_json(&self) -> serde_json::Value {
-        self.0.clone().into()
-    }
-}
-
-/// `imu_extrinsic`: the camera's pose in the IMU frame, checked as written (empty: from tf).
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct ExtrinsicParam(pub String);
-
-impl dynaflow_engine::op::Param for ExtrinsicParam {
-    const TYPE: ParamType = ParamType::Text {
-        what: "`TX,TY,TZ,QX,QY,QZ,QW`: the camera's pose in the IMU frame (Kalibr's T_imu_cam), or empty for the tf tree's",
-        check: |s| ImuOptions::parse_extrinsic(s).map(|_| ()),
-    };
-    fn from_json(value: &serde_json::Value, _: &Params) -> Result<Self, String> {
-        let text = value.as_str().ok_or_else(|| format!("expected seven numbers, found {value}"))?;
-        ImuOptions::parse_extrinsic(text)?;
-        Ok(Self(text.to_string()))
-    }
-    fn to_json(&self) -> serde_json::Value {
-        self.0.clone().into()
-    }
-}
+checked_text!(
+    /// The `topics` parameter: `role=topic` pairs.
+    TopicsParam,
+    "`role=topic` pairs: `rgb=/camera/color/image_raw,depth=...,camera_info=...,gt=...,imu=...` (`gt=tf:PARENT:CHILD`, `depth=none`, `gt=none`, `imu=none`)",
+    Topics::parse
+);
+checked_text!(
+    /// `imu_noise`: Kalibr's four noise figures (empty: the IMU is not read).
+    ImuNoiseParam,
+    "`GYRO_NOISE,ACCEL_NOISE,GYRO_WALK,ACCEL_WALK` (Kalibr's imu.yaml: rad/s/√Hz, m/s²/√Hz, rad/s²/√Hz, m/s³/√Hz), or empty",
+    ImuOptions::parse_noise
+);
+checked_text!(
+    /// `imu_extrinsic`: the camera's pose in the IMU frame (empty: from tf).
+    ExtrinsicParam,
+    "`TX,TY,TZ,QX,QY,QZ,QW`: the camera's pose in the IMU frame (Kalibr's T_imu_cam), or empty for the tf tree's",
+    ImuOptions::parse_extrinsic
+);
 
 params! {
     struct Config {
