@@ -136,8 +136,8 @@ pub struct RunArgs {
     /// `dynaflow inspect BAG` shows the candidates).
     #[arg(long)]
     pub topics: Option<String>,
-    /// Camera of `--input`: `fr1`, `fr2`, `fr3` or `fx,fy,cx,cy[,k1,k2,p1,p2,k3]` (TUM folders
-    /// named `rgbd_dataset_freiburgN_*` need none).
+    /// Camera of `--input`: `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy[,k1,k2,p1,p2,k3]` or a fisheye
+    /// `kb:fx,fy,cx,cy,k1,k2,k3,k4` (TUM folders named `rgbd_dataset_freiburgN_*` need none).
     #[arg(long)]
     pub intrinsics: Option<String>,
     /// Override the graph seed.

@@ -246,6 +246,22 @@ fn input_flag_points_the_default_graph_at_a_folder() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("not a TUM RGB-D folder"));
+    // A fisheye (Kannala-Brandt) camera is read and recorded as one, and the tracker refuses
+    // it by name rather than tracking it as a pinhole.
+    let out = common::bin()
+        .args(["run", "--no-progress", "--record", "mcap", "--out"])
+        .arg(dir.path().join("fisheye"))
+        .args(["--intrinsics", "kb:100,100,79.5,59.5,0.0035,0.0007,-0.0021,0.0002", "--input"])
+        .arg(&seq)
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("node `track` failed") && err.contains("Kannala-Brandt"), "{err}");
+    let rec = dynaflow_recordings::diff::read_mcap(&dir.path().join("fisheye/orb_baseline.mcap")).unwrap();
+    let info = &rec.topics["/camera/camera_info"].frames[&0];
+    assert_eq!(info["data"]["model"], "kannala_brandt", "{info}");
 }
 
 #[test]

@@ -4,7 +4,8 @@
 //!
 //! - `cam0/` (required): `data.csv` is `#timestamp [ns],filename`, images under `data/`;
 //!   `sensor.yaml` gives `resolution`, `camera_model: pinhole`, `intrinsics: [fu, fv, cu, cv]`,
-//!   `distortion_model: radial-tangential` with `[k1, k2, p1, p2]`.
+//!   `distortion_model: radial-tangential` with `[k1, k2, p1, p2]`, or Kalibr's `equidistant`
+//!   (a Kannala-Brandt fisheye) with `[k1, k2, k3, k4]`.
 //! - `cam1/` (optional): the second camera of a stereo pair. Only a rectified pair is
 //!   streamed as stereo (same intrinsics, no distortion, the same orientation, offset along
 //!   cam0's `x`); EuRoC's own raw pairs are not rectified and are refused by
@@ -24,7 +25,7 @@
 use std::path::{Path, PathBuf};
 
 use dynaflow_base::yaml::{self, Yaml, YamlKind};
-use dynaflow_msg::{CameraInfo, DepthImage, Image, ImuCalibration, ImuSample, STANDARD_GRAVITY};
+use dynaflow_msg::{CameraInfo, DepthImage, Image, ImuCalibration, ImuSample, LensModel, STANDARD_GRAVITY};
 use nalgebra::{Isometry3, Matrix3, Quaternion, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use crate::Error;
@@ -192,13 +193,16 @@ fn read_stream(dir: &Path) -> Result<(Stream, SensorYaml), Error> {
     Ok((Stream { dir: dir.to_path_buf(), body_from_sensor, images }, sensor))
 }
 
-/// A camera's `sensor.yaml` model: pinhole with radial-tangential (or no) distortion.
+/// A camera's `sensor.yaml` model: pinhole with radial-tangential (or no) distortion, or
+/// Kalibr's `equidistant` (Kannala-Brandt, four coefficients: TUM-VI, EuRoC's fisheye rigs).
 fn camera_info(sensor: &SensorYaml) -> Result<CameraInfo, Error> {
     let model = sensor.string("camera_model").unwrap_or("pinhole");
     if model != "pinhole" {
         return Err(Error::file(
             &sensor.path,
-            format!("camera_model `{model}`: only `pinhole` is read (fisheye models are a separate issue)"),
+            format!(
+                "camera_model `{model}`: only `pinhole` (with `radial-tangential` or `equidistant` distortion) is read"
+            ),
         ));
     }
     let resolution = sensor.numbers(sensor.get("resolution")?, "resolution")?;
@@ -214,21 +218,30 @@ fn camera_info(sensor: &SensorYaml) -> Result<CameraInfo, Error> {
     }
     let mut distortion = [0.0; 5];
     let d_model = sensor.string("distortion_model").unwrap_or("radial-tangential");
+    let lens = match d_model {
+        "equidistant" => LensModel::KannalaBrandt,
+        _ => LensModel::BrownConrady,
+    };
     if let Some(node) = sensor.doc.get("distortion_coefficients") {
         let d = sensor.numbers(node, "distortion_coefficients")?;
-        if d_model != "radial-tangential" && d.iter().any(|&v| v != 0.0) {
+        if !matches!(d_model, "radial-tangential" | "equidistant") && d.iter().any(|&v| v != 0.0) {
             return Err(Error::line(
                 &sensor.path,
                 sensor.line(node),
-                format!("distortion_model `{d_model}`: only `radial-tangential` is read"),
+                format!("distortion_model `{d_model}`: `radial-tangential` and `equidistant` are read"),
             ));
         }
-        if d.len() > 5 {
-            return Err(Error::line(&sensor.path, sensor.line(node), "more than 5 radial-tangential coefficients"));
+        let most = if lens == LensModel::KannalaBrandt { 4 } else { 5 };
+        if d.len() > most {
+            return Err(Error::line(
+                &sensor.path,
+                sensor.line(node),
+                format!("more than {most} {d_model} coefficients"),
+            ));
         }
         distortion[..d.len()].copy_from_slice(&d);
     }
-    Ok(CameraInfo { width: w as u32, height: h as u32, fx, fy, cx, cy, distortion })
+    Ok(CameraInfo { width: w as u32, height: h as u32, fx, fy, cx, cy, distortion, model: lens })
 }
 
 /// One ground-truth sample: the IMU body's pose and velocity.

@@ -3,22 +3,25 @@
 
 use std::path::Path;
 
-use dynaflow_msg::CameraInfo;
+use dynaflow_msg::{CameraInfo, LensModel};
 use dynaflow_vision::camera::Pinhole;
 
 use crate::Error;
 
-/// A calibrated camera without its image size: the pinhole and OpenCV-order distortion.
+/// A calibrated camera without its image size: the pinhole and the lens's distortion.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Intrinsics {
     /// Focal lengths and principal point.
     pub pinhole: Pinhole,
-    /// `[k1, k2, p1, p2, k3]` (see `dynaflow_vision::camera::distort`).
+    /// `[k1, k2, p1, p2, k3]` (see `dynaflow_vision::camera::distort`), or for a
+    /// Kannala-Brandt lens `[k1, k2, k3, k4, 0]`.
     pub distortion: [f64; 5],
+    /// The lens model of `distortion`.
+    pub model: LensModel,
 }
 
 const fn preset(fx: f64, fy: f64, cx: f64, cy: f64, distortion: [f64; 5]) -> Intrinsics {
-    Intrinsics { pinhole: Pinhole::new(fx, fy, cx, cy), distortion }
+    Intrinsics { pinhole: Pinhole::new(fx, fy, cx, cy), distortion, model: LensModel::BrownConrady }
 }
 
 /// TUM fr1 (ROS default calibration as published with the dataset).
@@ -37,10 +40,20 @@ impl Intrinsics {
     /// The message for images of `width` x `height`.
     pub const fn camera_info(&self, width: u32, height: u32) -> CameraInfo {
         let p = self.pinhole;
-        CameraInfo { width, height, fx: p.fx, fy: p.fy, cx: p.cx, cy: p.cy, distortion: self.distortion }
+        CameraInfo {
+            width,
+            height,
+            fx: p.fx,
+            fy: p.fy,
+            cx: p.cx,
+            cy: p.cy,
+            distortion: self.distortion,
+            model: self.model,
+        }
     }
 
-    /// `fr1`, `fr2`, `fr3`, or `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`.
+    /// `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`, or a Kannala-Brandt fisheye
+    /// `kb:fx,fy,cx,cy,k1,k2,k3,k4`.
     pub fn parse(text: &str) -> Result<Self, Error> {
         Self::parse_msg(text).map_err(Error::Intrinsics)
     }
@@ -52,19 +65,34 @@ impl Intrinsics {
             "fr3" => return Ok(FR3),
             _ => {}
         }
-        let v: Vec<f64> = text
+        let (fisheye, numbers) = match text.trim().strip_prefix("kb:") {
+            Some(rest) => (true, rest),
+            None => (false, text),
+        };
+        let v: Vec<f64> = numbers
             .split([',', ' ', '\t'])
             .filter(|s| !s.is_empty())
             .map(|s| s.parse::<f64>().map_err(|_| format!("`{s}` is not a number")))
             .collect::<Result<_, _>>()?;
         let ok = |v: &[f64]| v.iter().all(|x| x.is_finite());
+        if fisheye {
+            return match v.as_slice() {
+                [fx, fy, cx, cy, k1, k2, k3, k4] if ok(&v) && *fx > 0.0 && *fy > 0.0 => Ok(Intrinsics {
+                    model: LensModel::KannalaBrandt,
+                    ..preset(*fx, *fy, *cx, *cy, [*k1, *k2, *k3, *k4, 0.0])
+                }),
+                _ => Err(format!(
+                    "expected `kb:fx,fy,cx,cy,k1,k2,k3,k4` (a Kannala-Brandt fisheye) with positive focal lengths, got `{text}`"
+                )),
+            };
+        }
         match v.as_slice() {
             [fx, fy, cx, cy] if ok(&v) && *fx > 0.0 && *fy > 0.0 => Ok(preset(*fx, *fy, *cx, *cy, [0.0; 5])),
             [fx, fy, cx, cy, k1, k2, p1, p2, k3] if ok(&v) && *fx > 0.0 && *fy > 0.0 => {
                 Ok(preset(*fx, *fy, *cx, *cy, [*k1, *k2, *p1, *p2, *k3]))
             }
             _ => Err(format!(
-                "expected `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy` or `fx,fy,cx,cy,k1,k2,p1,p2,k3` with positive focal lengths, got `{text}`"
+                "expected `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy`, `fx,fy,cx,cy,k1,k2,p1,p2,k3` or `kb:fx,fy,cx,cy,k1,k2,k3,k4` with positive focal lengths, got `{text}`"
             )),
         }
     }
@@ -103,4 +131,24 @@ pub fn read_calibration(dir: &Path) -> Option<Result<Intrinsics, Error>> {
         .find(|(_, l)| !l.is_empty() && !l.starts_with('#'))
         .unwrap_or((0, ""));
     Some(Intrinsics::parse(line).map_err(|e| Error::line(&calib, n, e)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_fisheye_is_written_kb_and_its_coefficients_kept() {
+        let k = Intrinsics::parse("kb:190.97,190.97,254.93,256.90,0.0035,0.0007,-0.0021,0.0002").unwrap();
+        assert_eq!(k.model, LensModel::KannalaBrandt);
+        assert_eq!(k.distortion, [0.0035, 0.0007, -0.0021, 0.0002, 0.0]);
+        assert_eq!(k.camera_info(512, 512).model, LensModel::KannalaBrandt);
+        assert_eq!(Intrinsics::parse("fr1").unwrap().model, LensModel::BrownConrady);
+        for bad in ["kb:190,190,250,250,0.1,0.2,0.3", "kb:0,190,250,250,0,0,0,0"] {
+            let e = Intrinsics::parse(bad).unwrap_err().to_string();
+            assert!(e.contains("kb:fx,fy,cx,cy,k1,k2,k3,k4"), "{bad}: {e}");
+        }
+        let e = Intrinsics::parse("kb:1,2,3,4,5,6,7,x").unwrap_err().to_string();
+        assert!(e.contains("`x` is not a number"), "{e}");
+    }
 }

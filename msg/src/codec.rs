@@ -23,7 +23,7 @@ use crate::{
     PointCloud, PointLabel, PointLabels, PortType, Pose, Scalars, SegmentationMask, SparseMap, StampedPose, StereoRig,
     Track, Tracks, Trajectory,
 };
-use crate::{ImuBatch, ImuCalibration, ImuSample};
+use crate::{ImuBatch, ImuCalibration, ImuSample, LensModel};
 
 /// The encoding's version byte; a reader refuses any other.
 pub const VERSION: u8 = 2;
@@ -175,6 +175,10 @@ fn body(w: &mut W, b: &Body) {
             for v in [c.fx, c.fy, c.cx, c.cy].iter().chain(&c.distortion) {
                 w.f64(*v);
             }
+            w.u8(match c.model {
+                LensModel::BrownConrady => 0,
+                LensModel::KannalaBrandt => 1,
+            });
         }
         Body::Keypoints(k) => {
             w.len(k.points.len());
@@ -483,7 +487,12 @@ fn read_body(r: &mut R<'_>, tag: u8) -> Result<Body, CodecError> {
             r.need(72)?;
             let [fx, fy, cx, cy] = [0; 4].map(|_| r.f64().unwrap_or(f64::NAN));
             let distortion = [0; 5].map(|_| r.f64().unwrap_or(f64::NAN));
-            Body::CameraInfo(CameraInfo { width, height, fx, fy, cx, cy, distortion })
+            let model = match r.u8()? {
+                0 => LensModel::BrownConrady,
+                1 => LensModel::KannalaBrandt,
+                v => return Err(CodecError(format!("lens model {v}"))),
+            };
+            Body::CameraInfo(CameraInfo { width, height, fx, fy, cx, cy, distortion, model })
         }
         PortType::Keypoints => {
             let n = r.len(21)?;
@@ -692,6 +701,17 @@ mod tests {
                 cx: 320.1,
                 cy: 247.6,
                 distortion: [0.1, -0.2, 0.0, 1e-9, f64::MIN_POSITIVE],
+                model: LensModel::BrownConrady,
+            }),
+            Body::CameraInfo(CameraInfo {
+                width: 512,
+                height: 512,
+                fx: 190.97,
+                fy: 190.97,
+                cx: 254.93,
+                cy: 256.90,
+                distortion: [0.0035, 0.0007, -0.0021, 0.0002, 0.0],
+                model: LensModel::KannalaBrandt,
             }),
             Body::Keypoints(Keypoints {
                 points: vec![Keypoint { x: 1.5, y: 2.25, size: 31.0, angle: -1.0, response: 1e-3, octave: 3 }],

@@ -84,7 +84,22 @@ impl DepthImage {
     }
 }
 
-/// Pinhole intrinsics with Brown–Conrady distortion `[k1, k2, p1, p2, k3]` (OpenCV order).
+/// How a camera's lens bends rays beyond the pinhole, as ROS's `CameraInfo.distortion_model`
+/// names it; the coefficients are [`CameraInfo::distortion`].
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LensModel {
+    /// Brown-Conrady `[k1, k2, p1, p2, k3]` (OpenCV's, ROS's `plumb_bob`); all zero: an ideal
+    /// pinhole.
+    #[default]
+    BrownConrady,
+    /// Kannala-Brandt fisheye `[k1, k2, k3, k4, 0]` (OpenCV's `fisheye`, ROS's `equidistant`,
+    /// EuRoC/Kalibr's `equidistant`).
+    KannalaBrandt,
+}
+
+/// Pinhole intrinsics with the lens's distortion: Brown–Conrady `[k1, k2, p1, p2, k3]` (OpenCV
+/// order) or Kannala-Brandt `[k1, k2, k3, k4, 0]` ([`LensModel`]).
 #[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct CameraInfo {
     /// Image width.
@@ -99,8 +114,10 @@ pub struct CameraInfo {
     pub cx: f64,
     /// Principal point y.
     pub cy: f64,
-    /// Distortion coefficients, OpenCV order.
+    /// Distortion coefficients, OpenCV order, of `model`.
     pub distortion: [f64; 5],
+    /// The lens model the coefficients belong to.
+    pub model: LensModel,
 }
 
 impl CameraInfo {
@@ -109,6 +126,10 @@ impl CameraInfo {
         d.u64(u64::from(self.height));
         for v in [self.fx, self.fy, self.cx, self.cy].iter().chain(&self.distortion) {
             d.f64(*v);
+        }
+        // Brown-Conrady adds nothing, so digests from before the lens model stay valid.
+        if self.model == LensModel::KannalaBrandt {
+            d.u64(1);
         }
     }
 }

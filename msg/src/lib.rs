@@ -31,7 +31,7 @@ pub use geometry::{
     Isometry3, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, OctreeUpdate, Point3, PointCloud, Pose,
     SparseMap, StampedPose, Trajectory,
 };
-pub use image::{CameraInfo, DepthImage, Image, PixelFormat, StereoRig};
+pub use image::{CameraInfo, DepthImage, Image, LensModel, PixelFormat, StereoRig};
 pub use inertial::{ImuBatch, ImuCalibration, ImuSample, STANDARD_GRAVITY};
 pub use scalar::Scalars;
 pub use semantic::{Detection, Detections, SegmentationMask, class_rgb};

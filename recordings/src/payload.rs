@@ -154,7 +154,15 @@ fn data(body: &Body) -> Value {
             json!({"occupied": o.occupied.len(), "freed": o.freed.len(), "resolution": o.resolution})
         }
         Body::CameraInfo(c) => {
-            json!({"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "width": c.width, "height": c.height})
+            let mut v = json!({"fx": c.fx, "fy": c.fy, "cx": c.cx, "cy": c.cy, "width": c.width, "height": c.height});
+            // The lens, where there is one (`mcap_replay` reads both back).
+            if c.distortion != [0.0; 5] {
+                v["distortion"] = json!(c.distortion);
+            }
+            if c.model != dynaflow_engine::msg::LensModel::BrownConrady {
+                v["model"] = json!(c.model);
+            }
+            v
         }
         Body::Image(i) => json!({"width": i.width, "height": i.height}),
         Body::Depth(d) => json!({"width": d.width, "height": d.height}),

@@ -16,8 +16,8 @@ use std::sync::Arc;
 use base64::Engine as _;
 use dynaflow_engine::msg::{
     Body, CameraInfo, DepthImage, Descriptors, Detection, Detections, Header, Image, ImuBatch, ImuCalibration,
-    ImuSample, Isometry3, Keypoint, Keypoints, LabelReason, Message, PixelFormat, PointLabel, PointLabels, PortType,
-    Pose, Scalars, SegmentationMask, StampedPose, StereoRig, Track, Tracks, Trajectory,
+    ImuSample, Isometry3, Keypoint, Keypoints, LabelReason, LensModel, Message, PixelFormat, PointLabel, PointLabels,
+    PortType, Pose, Scalars, SegmentationMask, StampedPose, StereoRig, Track, Tracks, Trajectory,
 };
 use dynaflow_engine::op::{
     Context, Instance, OpError, OpSpec, Outputs, Param, ParamMap, ParamType, Params, PortSpec, Source,
@@ -384,6 +384,11 @@ fn decode_json(ty: PortType, v: &Value) -> Result<Body, String> {
                 cx: g("cx"),
                 cy: g("cy"),
                 distortion,
+                // Recordings made before the lens model have none: Brown-Conrady.
+                model: match d["model"].as_str() {
+                    Some("kannala_brandt") => LensModel::KannalaBrandt,
+                    _ => LensModel::BrownConrady,
+                },
             })
         }
         PortType::Keypoints => {

@@ -5,7 +5,7 @@
 //! back by this crate's own reader in the tests, and by the `rosbags` package in the
 //! integration tests.
 
-use dynaflow_msg::{CameraInfo, DepthImage, Image, PixelFormat};
+use dynaflow_msg::{CameraInfo, DepthImage, Image, LensModel, PixelFormat};
 use nalgebra::Isometry3;
 
 /// A CDR message being written.
@@ -174,17 +174,25 @@ pub fn compressed_image(stamp: f64, frame: &str, format: &str, data: &[u8]) -> V
     w.finish()
 }
 
-/// `sensor_msgs/msg/CameraInfo`: `plumb_bob` with dynaflow's five coefficients, `R` the
-/// identity and `P` the intrinsics with no baseline (a monocular or left camera).
+/// `sensor_msgs/msg/CameraInfo`: `plumb_bob` with dynaflow's five coefficients (or
+/// `equidistant` with a Kannala-Brandt lens's four), `R` the identity and `P` the intrinsics
+/// with no baseline (a monocular or left camera).
 pub fn camera_info(stamp: f64, frame: &str, c: &CameraInfo) -> Vec<u8> {
     let mut w = Cdr::new();
     header(&mut w, stamp, frame);
     w.u32(c.height);
     w.u32(c.width);
-    w.string("plumb_bob");
-    w.seq_len(5);
-    for v in c.distortion {
-        w.f64(v);
+    let d = match c.model {
+        LensModel::BrownConrady => &c.distortion[..],
+        LensModel::KannalaBrandt => &c.distortion[..4],
+    };
+    w.string(match c.model {
+        LensModel::BrownConrady => "plumb_bob",
+        LensModel::KannalaBrandt => "equidistant",
+    });
+    w.seq_len(d.len());
+    for v in d {
+        w.f64(*v);
     }
     for v in [c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0] {
         w.f64(v);

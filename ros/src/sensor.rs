@@ -4,7 +4,7 @@
 //! `PoseStamped`, `Odometry` and `TransformStamped`. Both ROS 1 and ROS 2 layouts (their headers
 //! and stamps differ) are read. Errors say which field or encoding is wrong.
 
-use dynaflow_msg::{CameraInfo, DepthImage, Image, ImuSample, PixelFormat};
+use dynaflow_msg::{CameraInfo, DepthImage, Image, ImuSample, LensModel, PixelFormat};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
 use crate::decode::{Message, Value};
@@ -271,6 +271,7 @@ pub fn camera_info(m: &Message) -> Result<CameraInfo, String> {
         return Err(format!("`k` has {} values, not 9", k.len()));
     }
     let mut distortion = [0.0; 5];
+    let mut lens = LensModel::BrownConrady;
     match model {
         "" if d.iter().all(|v| *v == 0.0) => {}
         "plumb_bob" | "rational_polynomial" => {
@@ -284,8 +285,18 @@ pub fn camera_info(m: &Message) -> Result<CameraInfo, String> {
                 *o = *v;
             }
         }
-        "equidistant" | "fisheye" | "kannala_brandt" if d.iter().all(|v| *v == 0.0) => {}
-        other => return Err(format!("distortion model `{other}` (read: plumb_bob, rational_polynomial)")),
+        "equidistant" | "fisheye" | "kannala_brandt" => {
+            if d.iter().skip(4).any(|v| *v != 0.0) {
+                return Err(format!("distortion `{model}` with {} coefficients: Kannala-Brandt has four", d.len()));
+            }
+            lens = LensModel::KannalaBrandt;
+            for (o, v) in distortion.iter_mut().zip(&d) {
+                *o = *v;
+            }
+        }
+        other => {
+            return Err(format!("distortion model `{other}` (read: plumb_bob, rational_polynomial, equidistant)"));
+        }
     }
     let info = CameraInfo {
         width: uint(m, "width")? as u32,
@@ -295,6 +306,7 @@ pub fn camera_info(m: &Message) -> Result<CameraInfo, String> {
         cx: k[2],
         cy: k[5],
         distortion,
+        model: lens,
     };
     if !(info.fx > 0.0 && info.fy > 0.0 && info.cx.is_finite() && info.cy.is_finite()) {
         return Err(format!("`k` has no positive focal lengths: {k:?} (an uncalibrated camera?)"));

@@ -185,6 +185,7 @@ impl BagSequence {
                 let k = Intrinsics {
                     pinhole: Pinhole::new(info.fx, info.fy, info.cx, info.cy),
                     distortion: info.distortion,
+                    model: info.model,
                 };
                 let size = (info.width > 0 && info.height > 0).then_some((info.width, info.height));
                 (k, size, Some(topic))

@@ -182,3 +182,24 @@ fn an_unrectified_pair_is_refused_for_stereo_with_what_differs() {
     assert!(e.contains("cam1/sensor.yaml") && e.contains("no rectified partner") && e.contains("1.146°"), "{e}");
     let _ = fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn an_equidistant_camera_is_read_as_kannala_brandt() {
+    let dir = written("equidistant", 2, None, false);
+    // TUM-VI's cam0 calibration as Kalibr writes it.
+    edit(&dir, "cam0/sensor.yaml", "distortion_model: radial-tangential", "distortion_model: equidistant");
+    edit(
+        &dir,
+        "cam0/sensor.yaml",
+        "distortion_coefficients: [0.0, 0.0, 0.0, 0.0]",
+        "distortion_coefficients: [0.003482389, 0.000715034, -0.002053236, 0.000202936]",
+    );
+    let seq = EurocSequence::open(&dir, 0).unwrap();
+    assert_eq!(seq.camera().model, dynaflow_msg::LensModel::KannalaBrandt);
+    assert_eq!(seq.camera().distortion, [0.003482389, 0.000715034, -0.002053236, 0.000202936, 0.0]);
+    // Five coefficients are no Kannala-Brandt lens.
+    edit(&dir, "cam0/sensor.yaml", "0.000202936]", "0.000202936, 0.1]");
+    let e = open_error(&dir);
+    assert!(e.contains("cam0/sensor.yaml:") && e.contains("more than 4 equidistant"), "{e}");
+    let _ = fs::remove_dir_all(&dir);
+}

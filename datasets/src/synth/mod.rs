@@ -100,6 +100,7 @@ pub fn scaled_fr3(width: u32, height: u32) -> Intrinsics {
         cx: (FR3.cx + 0.5) * sx - 0.5,
         cy: (FR3.cy + 0.5) * sy - 0.5,
         distortion: [0.0; 5],
+        model: dynaflow_msg::LensModel::BrownConrady,
     }
 }
 

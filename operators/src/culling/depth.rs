@@ -34,7 +34,13 @@ impl Operator for DepthOp {
         let (msg, t) = TRACKS.require(inputs)?;
         let depth = DEPTH.get(inputs)?;
         let pose = POSE.get(inputs)?.map(|p| p.world_from_cam);
-        let camera = CAMERA_INFO.get(inputs)?.map(|k| rules::Pinhole::new(k.fx, k.fy, k.cx, k.cy));
+        let camera = match CAMERA_INFO.get(inputs)? {
+            Some(k) => {
+                crate::frontend::pinhole_only(k, "the depth rule")?;
+                Some(rules::Pinhole::new(k.fx, k.fy, k.cx, k.cy))
+            }
+            None => None,
+        };
         let threshold = self.config.depth_threshold as f32;
         let decisions = match (depth, pose, camera) {
             (Some(cur_depth), Some(world_from_cur), Some(camera)) => {

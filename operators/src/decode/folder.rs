@@ -24,7 +24,7 @@ params! {
         pattern: String = "*.png".into(),
         /// frame rate that sets the stamps
         rate_hz: f64 [0.001, 10_000.0] = 30.0,
-        /// `fr1`/`fr2`/`fr3`, `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`, or `auto` (the folder's calibration.txt)
+        /// `fr1`/`fr2`/`fr3`, `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`, `kb:fx,fy,cx,cy,k1,k2,k3,k4`, or `auto` (the folder's calibration.txt)
         intrinsics: CameraParam = CameraParam::Auto,
         /// an unreadable image: fail the run, or skip the frame (counted, logged)
         on_error: OnError = OnError::Fail,

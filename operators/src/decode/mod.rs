@@ -50,10 +50,14 @@ impl Param for CameraParam {
             CameraParam::Given(k) => {
                 let p = k.pinhole;
                 let mut v = vec![p.fx, p.fy, p.cx, p.cy];
-                if k.distortion != [0.0; 5] {
+                let fisheye = k.model == dynaflow_engine::msg::LensModel::KannalaBrandt;
+                if fisheye {
+                    v.extend(&k.distortion[..4]);
+                } else if k.distortion != [0.0; 5] {
                     v.extend(k.distortion);
                 }
-                v.iter().map(f64::to_string).collect::<Vec<_>>().join(",").into()
+                let text = v.iter().map(f64::to_string).collect::<Vec<_>>().join(",");
+                if fisheye { format!("kb:{text}").into() } else { text.into() }
             }
         }
     }

@@ -61,7 +61,7 @@ params! {
         max_difference: f64 [0.0, 1.0] = 0.02,
         /// 16-bit depth value per metre (REP 118: millimetres)
         depth_factor: f64 [1e-6, 1e9] = 1000.0,
-        /// `auto` (the bag's CameraInfo), `fr1`/`fr2`/`fr3` or `fx,fy,cx,cy[,k1,k2,p1,p2,k3]`
+        /// `auto` (the bag's CameraInfo), `fr1`/`fr2`/`fr3`, `fx,fy,cx,cy[,k1,k2,p1,p2,k3]` or `kb:fx,fy,cx,cy,k1,k2,k3,k4`
         intrinsics: CameraParam = CameraParam::Auto,
         /// an unreadable frame: fail the run, or skip the frame (counted, logged)
         on_error: OnError = OnError::Fail,

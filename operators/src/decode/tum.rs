@@ -15,7 +15,7 @@ params! {
     struct Config {
         /// sequence folder
         path: PathBuf,
-        /// `auto` (from the folder name `rgbd_dataset_freiburgN_*`, else `calibration.txt`), `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy` or `fx,fy,cx,cy,k1,k2,p1,p2,k3`
+        /// `auto` (from the folder name `rgbd_dataset_freiburgN_*`, else `calibration.txt`), `fr1`, `fr2`, `fr3`, `fx,fy,cx,cy`, `fx,fy,cx,cy,k1,k2,p1,p2,k3` or `kb:fx,fy,cx,cy,k1,k2,k3,k4`
         intrinsics: CameraParam = CameraParam::Auto,
         /// largest colour/depth time difference to associate, seconds
         max_difference: f64 [0.0, 1.0] = 0.02,

@@ -40,6 +40,18 @@ pub(crate) fn orb_descriptors(keypoints: &Keypoints) -> Result<&[u8], OpError> {
     }
 }
 
+/// Refuses a Kannala-Brandt (fisheye) camera where `what` needs pinhole geometry: the model
+/// is read and recorded, and ORB and LK run on fisheye images, but tracking, stereo matching
+/// and the depth-based operators project through a pinhole.
+pub(crate) fn pinhole_only(k: &dynaflow_engine::msg::CameraInfo, what: &str) -> Result<(), OpError> {
+    if k.model == dynaflow_engine::msg::LensModel::KannalaBrandt {
+        return Err(OpError::Input(format!(
+            "`camera_info` is a Kannala-Brandt (fisheye) camera: {what} projects through a pinhole and would be wrong on it; fisheye geometry there is not built yet (ORB and LK run on fisheye images)"
+        )));
+    }
+    Ok(())
+}
+
 /// A stereo rig's baseline, metres: positive and finite, or an error saying what is wrong.
 pub(crate) fn stereo_baseline(rig: &StereoRig) -> Result<f64, OpError> {
     let b = rig.baseline;

@@ -56,6 +56,7 @@ impl Operator for StereoOp {
         let (msg, kp) = KEYPOINTS.require(inputs)?;
         let (_, left) = LEFT.require(inputs)?;
         let (_, k) = CAMERA_INFO.require(inputs)?;
+        super::pinhole_only(k, "stereo matching")?;
         let (Some(right), Some(rig)) = (RIGHT.get(inputs)?, STEREO.get(inputs)?) else {
             return Err(OpError::Input(format!(
                 "frame {} has no right image or no `stereo` rig: the source gives none (`synth`: set `stereo_baseline` > 0; a zero baseline has no disparity)",

@@ -121,6 +121,7 @@ impl Operator for Octomap {
     fn process(&mut self, _ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (msg, depth) = DEPTH.require(inputs)?;
         let (_, k) = CAMERA_INFO.require(inputs)?;
+        crate::frontend::pinhole_only(k, "the occupancy map's ray casting")?;
         let (_, pose) = POSE.require(inputs)?;
         // An image or mask of another size would be read at the wrong pixels: an error.
         let same_size = |what: &str, (w, h): (u32, u32)| {

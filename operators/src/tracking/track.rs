@@ -354,6 +354,7 @@ impl Operator for Track {
     fn process(&mut self, ctx: &mut Context, inputs: &Inputs) -> Result<Outputs, OpError> {
         let (msg, kp) = KEYPOINTS.require(inputs)?;
         let (_, k) = CAMERA_INFO.require(inputs)?;
+        crate::frontend::pinhole_only(k, "tracking")?;
         let (depth, rig) = match self.setup {
             Setup::Mono => (None, None),
             Setup::Rgbd(_) => (Some(DEPTH_CAMERA.require(inputs)?.1), None),

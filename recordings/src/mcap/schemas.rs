@@ -8,7 +8,7 @@
 //! ignores and `dynaflow diff` reads. The schemas below list the fields we write.
 
 use base64::Engine as _;
-use dynaflow_engine::msg::{Body, Message, PointCloud, PortType, SparseMap};
+use dynaflow_engine::msg::{Body, LensModel, Message, PointCloud, PortType, SparseMap};
 use serde::Serialize;
 use serde_json::{Value, json};
 
@@ -143,7 +143,9 @@ pub fn to_json(msg: &Message) -> Result<Vec<u8>, String> {
     let mut v = match &msg.body {
         Body::CameraInfo(c) => json!({
             "timestamp": ts, "frame_id": frame_id, "width": c.width, "height": c.height,
-            "distortion_model": "plumb_bob", "D": c.distortion,
+            // Foxglove's names; a Kannala-Brandt lens has four coefficients.
+            "distortion_model": if c.model == LensModel::KannalaBrandt { "kannala_brandt" } else { "plumb_bob" },
+            "D": if c.model == LensModel::KannalaBrandt { &c.distortion[..4] } else { &c.distortion[..] },
             "K": [c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0],
             "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
             "P": [c.fx, 0.0, c.cx, 0.0, 0.0, c.fy, c.cy, 0.0, 0.0, 0.0, 1.0, 0.0],

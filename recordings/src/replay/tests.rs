@@ -50,3 +50,31 @@ fn an_imu_batch_replays_from_its_payload_with_the_recorded_digest() {
     assert_eq!(back, msg);
     assert!(super::same_as_recorded(&back, &stored["dynaflow"]));
 }
+
+#[test]
+fn a_camera_replays_with_its_lens() {
+    use dynaflow_engine::msg::{Body, CameraInfo, Header, LensModel, Message};
+    let header = Header { seq: 0, stamp: 1.0, frame_id: "camera".into() };
+    let fisheye = CameraInfo {
+        width: 512,
+        height: 512,
+        fx: 190.97,
+        fy: 190.97,
+        cx: 254.93,
+        cy: 256.9,
+        distortion: [0.0035, 0.0007, -0.0021, 0.0002, 0.0],
+        model: LensModel::KannalaBrandt,
+    };
+    let kinect = CameraInfo {
+        distortion: [0.2624, -0.9531, -0.0054, 0.0026, 1.1633],
+        model: LensModel::BrownConrady,
+        ..fisheye.clone()
+    };
+    for info in [fisheye, kinect] {
+        let msg = Message::new(header.clone(), Body::CameraInfo(info));
+        let stored = serde_json::json!({ "dynaflow": serde_json::to_value(crate::payload::payload(&msg)).unwrap() });
+        let back = Message::new(header.clone(), super::decode_json(PortType::CameraInfo, &stored).unwrap());
+        assert_eq!(back, msg);
+        assert!(super::same_as_recorded(&back, &stored["dynaflow"]));
+    }
+}

@@ -68,8 +68,18 @@ fn images_camera_info_poses_and_imu_read_back() {
         cx: 318.6,
         cy: 255.3,
         distortion: [0.26, -0.95, -0.005, 0.002, 1.16],
+        model: LensModel::BrownConrady,
     };
     assert_eq!(sensor::camera_info(&read("sensor_msgs/CameraInfo", &camera_info(2.0, "camera", &info))).unwrap(), info);
+    // A fisheye is written `equidistant` with its four coefficients, and read back as one.
+    let fisheye = CameraInfo {
+        distortion: [0.0035, 0.0007, -0.0021, 0.0002, 0.0],
+        model: LensModel::KannalaBrandt,
+        ..info.clone()
+    };
+    let m = read("sensor_msgs/CameraInfo", &camera_info(2.0, "camera", &fisheye));
+    assert_eq!(m.get("distortion_model"), Some(&Value::String("equidistant".into())));
+    assert_eq!(sensor::camera_info(&m).unwrap(), fisheye);
 
     let (h, _, p) =
         sensor::stamped_pose(&read("geometry_msgs/PoseStamped", &pose_stamped(3.25, "map", &iso()))).unwrap();
