@@ -69,11 +69,7 @@ impl Intrinsics {
             Some(rest) => (true, rest),
             None => (false, text),
         };
-        let v: Vec<f64> = numbers
-            .split([',', ' ', '\t'])
-            .filter(|s| !s.is_empty())
-            .map(|s| s.parse::<f64>().map_err(|_| format!("`{s}` is not a number")))
-            .collect::<Result<_, _>>()?;
+        let v = numbers_of(numbers)?;
         let ok = |v: &[f64]| v.iter().all(|x| x.is_finite());
         if fisheye {
             return match v.as_slice() {
@@ -96,6 +92,15 @@ impl Intrinsics {
             )),
         }
     }
+}
+
+/// The numbers of a calibration written as text (`fx,fy,cx,cy`, `1 2 3`): separated by commas,
+/// spaces or tabs; the first that is not a number is named.
+pub fn numbers_of(text: &str) -> Result<Vec<f64>, String> {
+    text.split([',', ' ', '\t'])
+        .filter(|s| !s.is_empty())
+        .map(|s| s.parse::<f64>().map_err(|_| format!("`{s}` is not a number")))
+        .collect()
 }
 
 /// The preset a TUM folder name implies (`rgbd_dataset_freiburgN_*`), if any.

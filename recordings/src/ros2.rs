@@ -35,7 +35,7 @@ use dynaflow_ros::encode::{self as ros, MarkerKind, Transform};
 use nalgebra::Isometry3;
 
 use crate::encode::{self, EncodeCache, ImageCodec};
-use crate::mcap::{DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_INTERVAL, schemas};
+use crate::mcap::{DEFAULT_CHUNK_SIZE, DEFAULT_FLUSH_INTERVAL, open_writer, schemas, writer_error};
 
 /// The fixed frame of estimated poses and the map (REP 105's `map`).
 pub const MAP_FRAME: &str = "map";
@@ -125,7 +125,7 @@ impl Ros2Sink {
     /// Writes one message on `topic` (its channel and schema added on first use).
     fn write(&mut self, topic: &str, ty: &'static str, stamp_ns: u64, seq: u32, data: &[u8]) -> Result<(), SinkError> {
         let path = self.mcap_path();
-        let err = |e: mcap::McapError| SinkError::new("ros2", format!("{}: {e}", path.display()));
+        let err = |e: mcap::McapError| writer_error("ros2", &path, &e);
         let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("ros2", "not open"))?;
         let channel = match self.topics.get_mut(topic) {
             Some(t) => {
@@ -309,16 +309,7 @@ impl Sink for Ros2Sink {
             return Err(self.err("already exists; a bag folder is never overwritten"));
         }
         std::fs::create_dir_all(&self.dir).map_err(|e| self.err(e))?;
-        let file = dynaflow_engine::files::create_new(&self.mcap_path()).map_err(|e| self.err(e))?;
-        let options = mcap::WriteOptions::new()
-            .compression(Some(mcap::Compression::Zstd))
-            .compression_level(1)
-            .chunk_size(Some(DEFAULT_CHUNK_SIZE))
-            .profile("ros2")
-            .library(format!("dynaflow {}", info.version));
-        let mut writer = options.create(BufWriter::new(file)).map_err(|e| self.err(e))?;
-        let metadata = mcap::records::Metadata { name: "dynaflow".into(), metadata: info.to_strings() };
-        writer.write_metadata(&metadata).map_err(|e| self.err(e))?;
+        let writer = open_writer("ros2", &self.mcap_path(), "ros2", DEFAULT_CHUNK_SIZE, info)?;
         self.writer = Some(writer);
         self.ground_truth.clone_from(&info.ground_truth_ports);
         self.camera_pose = info.estimates.first().cloned();
@@ -336,8 +327,9 @@ impl Sink for Ros2Sink {
             self.write(&topic, ty, ns, msg.header.seq as u32, &data)?;
         }
         if self.last_flush.elapsed() >= DEFAULT_FLUSH_INTERVAL {
+            let path = self.mcap_path();
             let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("ros2", "not open"))?;
-            writer.flush().map_err(|e| SinkError::new("ros2", e.to_string()))?;
+            writer.flush().map_err(|e| writer_error("ros2", &path, &e))?;
             self.last_flush = Instant::now();
         }
         Ok(())
@@ -354,7 +346,7 @@ impl Sink for Ros2Sink {
             self.write(&format!("/{key}/path"), "nav_msgs/msg/Path", stamp_ns(last), 0, &data)?;
         }
         let Some(mut writer) = self.writer.take() else { return Ok(()) };
-        writer.finish().map_err(|e| self.err(e))?;
+        writer.finish().map_err(|e| writer_error("ros2", &self.mcap_path(), &e))?;
         let mut inner = writer.into_inner();
         inner.flush().map_err(|e| self.err(e))?;
         inner.get_ref().sync_all().map_err(|e| self.err(e))?;

@@ -54,9 +54,6 @@ pub fn inspect(bag: &Bag) -> Result<Inventory, Error> {
     scan(bag, |_, _, _| {})
 }
 
-/// [`inspect`], handing each message to `each` as it goes: the message, its decoding, and its
-/// header stamp (record time without a header), nanoseconds. A run's source reads what it needs
-/// (image stamps, calibration, poses) in the same pass.
 /// The `CameraInfo` topics of `infos` beside image topic `image`: in its namespace, where
 /// image_transport puts them (`/cam/color/camera_info` beside `/cam/color/image_raw` and its
 /// `/cam/color/image_raw/compressed`).
@@ -69,6 +66,9 @@ pub(crate) fn beside(image: &str, infos: &[String]) -> Vec<String> {
     infos.iter().filter(|i| i.rsplit_once('/').is_some_and(|(n, _)| n == ns)).cloned().collect()
 }
 
+/// [`inspect`], handing each message to `each` as it goes: the message, its decoding, and its
+/// header stamp (record time without a header), nanoseconds. A run's source reads what it needs
+/// (image stamps, calibration, poses) in the same pass.
 pub(crate) fn scan(
     bag: &Bag,
     mut each: impl FnMut(&crate::RawMessage, &Result<crate::decode::Message, String>, i64),

@@ -102,7 +102,7 @@ impl McapSink {
         let ty = msg.body.port_type();
         let name = schemas::schema_name(ty, self.codec);
         let protobuf = schemas::is_protobuf(ty);
-        let err = |e: mcap::McapError| writer_error(&self.path, &e);
+        let err = |e: mcap::McapError| writer_error("mcap", &self.path, &e);
         let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
         let schema = match self.schemas.get(name) {
             Some(id) => *id,
@@ -128,11 +128,37 @@ impl McapSink {
     }
 }
 
+/// A new MCAP file at `path` for recorder `sink` (never over an existing file), in `profile`
+/// (`""`, or `ros2` for a rosbag2 bag): zstd chunks of `chunk_size`, the run's provenance as a
+/// metadata record.
+pub(crate) fn open_writer(
+    sink: &str,
+    path: &std::path::Path,
+    profile: &str,
+    chunk_size: u64,
+    info: &RunInfo,
+) -> Result<mcap::Writer<BufWriter<File>>, SinkError> {
+    let file = dynaflow_engine::files::create_new(path)
+        .map_err(|e| SinkError::new(sink, format!("{}: {e}", path.display())))?;
+    let options = mcap::WriteOptions::new()
+        .compression(Some(mcap::Compression::Zstd))
+        // Level 1: 0.68x the CPU of the default 3 for 1.13x the bytes on the default
+        // graph's frames (docs/benchmarks.md); recording has to keep up with the graph.
+        .compression_level(1)
+        .chunk_size(Some(chunk_size))
+        .profile(profile)
+        .library(format!("dynaflow {}", info.version));
+    let mut writer = options.create(BufWriter::new(file)).map_err(|e| writer_error(sink, path, &e))?;
+    let metadata = mcap::records::Metadata { name: "dynaflow".into(), metadata: info.to_strings() };
+    writer.write_metadata(&metadata).map_err(|e| writer_error(sink, path, &e))?;
+    Ok(writer)
+}
+
 /// The MCAP writer's error for the file at `path`, with what caused it: the writer's own
 /// message for an I/O failure names no cause ("I/O error from writing ..."), the
 /// `std::io::Error` under it does ("No space left on device").
-fn writer_error(path: &std::path::Path, e: &mcap::McapError) -> SinkError {
-    SinkError::new("mcap", format!("{}: {}", path.display(), with_causes(e)))
+pub(crate) fn writer_error(sink: &str, path: &std::path::Path, e: &mcap::McapError) -> SinkError {
+    SinkError::new(sink, format!("{}: {}", path.display(), with_causes(e)))
 }
 
 /// An error's message followed by those of its sources not already in it.
@@ -155,19 +181,8 @@ impl Sink for McapSink {
     }
 
     fn open(&mut self, info: &RunInfo) -> Result<(), SinkError> {
-        let file = dynaflow_engine::files::create_new(&self.path).map_err(|e| self.err(e))?;
-        let options = mcap::WriteOptions::new()
-            .compression(Some(mcap::Compression::Zstd))
-            // Level 1: 0.68x the CPU of the default 3 for 1.13x the bytes on the default
-            // graph's frames (docs/benchmarks.md); recording has to keep up with the graph.
-            .compression_level(1)
-            .chunk_size(Some(self.chunk_size))
-            .profile("")
-            .library(format!("dynaflow {}", info.version));
-        let mut writer = options.create(BufWriter::new(file)).map_err(|e| writer_error(&self.path, &e))?;
+        let writer = open_writer("mcap", &self.path, "", self.chunk_size, info)?;
         self.ground_truth.clone_from(&info.ground_truth_ports);
-        let metadata = mcap::records::Metadata { name: "dynaflow".into(), metadata: info.to_strings() };
-        writer.write_metadata(&metadata).map_err(|e| writer_error(&self.path, &e))?;
         self.writer = Some(writer);
         self.last_flush = Instant::now();
         Ok(())
@@ -192,7 +207,7 @@ impl Sink for McapSink {
             publish_time: ns,
         };
         let flush_due = self.last_flush.elapsed() >= self.flush_interval;
-        let err = |e: mcap::McapError| writer_error(&self.path, &e);
+        let err = |e: mcap::McapError| writer_error("mcap", &self.path, &e);
         let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
         writer.write_to_known_channel(&header, &data).map_err(err)?;
         if flush_due {
@@ -204,7 +219,7 @@ impl Sink for McapSink {
 
     fn close(&mut self) -> Result<(), SinkError> {
         let Some(mut writer) = self.writer.take() else { return Ok(()) };
-        writer.finish().map_err(|e| writer_error(&self.path, &e))?;
+        writer.finish().map_err(|e| writer_error("mcap", &self.path, &e))?;
         let mut inner = writer.into_inner();
         inner.flush().map_err(|e| self.err(e))?;
         inner.get_ref().sync_all().map_err(|e| self.err(e))

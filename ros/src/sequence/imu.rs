@@ -9,6 +9,7 @@
 use std::collections::HashMap;
 use std::path::Path;
 
+use dynaflow_datasets::intrinsics::numbers_of;
 use dynaflow_msg::{ImuCalibration, ImuSample, STANDARD_GRAVITY};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion};
 
@@ -28,7 +29,7 @@ pub struct ImuOptions {
 impl ImuOptions {
     /// `GYRO_ND,ACCEL_ND,GYRO_RW,ACCEL_RW` (empty: none).
     pub fn parse_noise(text: &str) -> Result<Option<[f64; 4]>, String> {
-        let v = numbers(text)?;
+        let v = numbers_of(text)?;
         match v[..] {
             [] => Ok(None),
             [a, b, c, d] if v.iter().all(|x| *x > 0.0 && x.is_finite()) => Ok(Some([a, b, c, d])),
@@ -40,7 +41,7 @@ impl ImuOptions {
 
     /// `TX,TY,TZ,QX,QY,QZ,QW`: the camera's pose in the IMU frame (empty: from tf).
     pub fn parse_extrinsic(text: &str) -> Result<Option<Isometry3<f64>>, String> {
-        let v = numbers(text)?;
+        let v = numbers_of(text)?;
         match v[..] {
             [] => Ok(None),
             [tx, ty, tz, qx, qy, qz, qw] => {
@@ -53,13 +54,6 @@ impl ImuOptions {
             _ => Err(format!("`{text}`: expected TX,TY,TZ,QX,QY,QZ,QW (the camera's pose in the IMU frame)")),
         }
     }
-}
-
-fn numbers(text: &str) -> Result<Vec<f64>, String> {
-    text.split([',', ' '])
-        .filter(|s| !s.is_empty())
-        .map(|s| s.parse::<f64>().map_err(|_| format!("`{s}` is not a number")))
-        .collect()
 }
 
 /// The first pass's samples of every IMU topic, in record order, with the first frame id.
