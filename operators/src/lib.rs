@@ -37,6 +37,7 @@ pub fn registry() -> Registry {
     r.register(frontend::MATCH_DESCRIPTORS);
     r.register(frontend::LK_FLOW);
     r.register(frontend::STEREO_MATCH);
+    r.register(frontend::UNDISTORT);
     r.register(culling::FUNDAMENTAL_RANSAC);
     r.register(culling::HOMOGRAPHY_PROSAC);
     r.register(culling::CULL_EPIPOLAR);

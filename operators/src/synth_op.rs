@@ -9,7 +9,9 @@ use dynaflow_engine::op::Seeded;
 use dynaflow_engine::op::{Instance, OpError, OpSpec, Out, Outputs, Param, ParamType, Params};
 use dynaflow_engine::params;
 
-use dynaflow_datasets::synth::{Frame, Generator, Motion, PeopleMode, SynthConfig, rig_calibration, scaled_fr3};
+use dynaflow_datasets::synth::{
+    Frame, Generator, Motion, PeopleMode, SynthConfig, fisheye, rig_calibration, scaled_fr3,
+};
 
 use crate::decode::{OnError, SequenceSource, ground_truth_pose};
 use dynaflow_datasets::Sequence;
@@ -42,6 +44,8 @@ params! {
         width: u32 [16, 4096] = 640,
         /// image height
         height: u32 [16, 4096] = 480,
+        /// a Kannala-Brandt fisheye (TUM-VI's lens, 123 degrees across at 640x480) instead of the fr3 pinhole; `undistort` turns it into a pinhole for the operators that need one
+        fisheye: bool = false,
         /// frame rate
         rate_hz: f64 [0.1, 1000.0] = 30.0,
         /// scene and noise seed; unset, it derives from the graph seed (`--seed`) and the node id
@@ -65,7 +69,10 @@ params! {
 
 const RGB: Out<Image> = Out::new("rgb", "RGB8 camera image");
 const DEPTH: Out<DepthImage> = Out::new("depth", "depth in metres (0 = no measurement)");
-const CAMERA_INFO: Out<CameraInfo> = Out::new("camera_info", "pinhole intrinsics (TUM fr3, scaled to the resolution)");
+const CAMERA_INFO: Out<CameraInfo> = Out::new(
+    "camera_info",
+    "intrinsics: TUM fr3's pinhole scaled to the resolution, or with `fisheye` the Kannala-Brandt lens",
+);
 const GT_POSE: Out<Pose> = Out::ground_truth("gt_pose", "ground-truth world_from_cam");
 const RIGHT: Out<Image> =
     Out::new("right", "RGB8 image of the rectified right camera (with `stereo_baseline` > 0; its own sensor noise)");
@@ -101,7 +108,7 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         // Replaced in `start` by the node's seed when the graph sets none.
         seed: c.seed.or(0),
         rate_hz: c.rate_hz,
-        intrinsics: scaled_fr3(c.width, c.height),
+        intrinsics: if c.fisheye { fisheye(c.width, c.height) } else { scaled_fr3(c.width, c.height) },
         depth_noise: c.depth_noise,
         image_noise: c.image_noise as f32,
         blur: c.blur,

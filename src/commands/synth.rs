@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use dynaflow_datasets::synth::{
-    EurocWriteOptions, Generator, KittiWriteOptions, Motion, PeopleMode, SynthConfig, WriteOptions, rig_calibration,
-    scaled_fr3, write_euroc, write_kitti, write_tum,
+    EurocWriteOptions, Generator, KittiWriteOptions, Motion, PeopleMode, SynthConfig, WriteOptions, fisheye,
+    rig_calibration, scaled_fr3, write_euroc, write_kitti, write_tum,
 };
 
 use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
@@ -35,6 +35,10 @@ pub struct SynthArgs {
     /// Image height.
     #[arg(long, default_value_t = 480, value_parser = clap::value_parser!(u32).range(16..=4096))]
     pub height: u32,
+    /// A Kannala-Brandt fisheye (TUM-VI's lens, 123 degrees across at 640x480) instead of the
+    /// fr3 pinhole; written as `kb:...` in calibration.txt, Kalibr's `equidistant` in EuRoC.
+    #[arg(long)]
+    pub fisheye: bool,
     /// Also write ground-truth optical flow (`flow/*.flo`).
     #[arg(long)]
     pub flow: bool,
@@ -75,7 +79,7 @@ pub fn synth(args: &SynthArgs) -> u8 {
         people: args.people as usize,
         mode: if args.sitting { PeopleMode::Sitting } else { PeopleMode::Walking },
         seed: args.seed,
-        intrinsics: scaled_fr3(args.width, args.height),
+        intrinsics: if args.fisheye { fisheye(args.width, args.height) } else { scaled_fr3(args.width, args.height) },
         depth_noise: !args.clean,
         image_noise: if args.clean { 0.0 } else { 2.0 },
         blur: !args.clean,

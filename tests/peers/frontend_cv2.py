@@ -143,4 +143,23 @@ if "fisheye" in job:
         und = cv2.fisheye.undistortPoints(np.float64(case["pixels"]).reshape(-1, 1, 2), K, D)
         res[case["name"]] = {"projected": px.reshape(-1, 2).tolist(), "undistorted": und.reshape(-1, 2).tolist()}
     out["fisheye"] = res
+if "remap" in job:
+    res = {}
+    for case in job["remap"]:
+        K = np.float64(case["K"]).reshape(3, 3)
+        P = np.float64(case["P"]).reshape(3, 3)
+        img = gray(case["image"])
+        size = (img.shape[1], img.shape[0])
+        if case["model"] == "fisheye":
+            D = np.float64(case["D"]).reshape(4, 1)
+            mx, my = cv2.fisheye.initUndistortRectifyMap(K, D, np.eye(3), P, size, cv2.CV_32FC1)
+        else:
+            D = np.float64(case["D"]).reshape(5, 1)
+            mx, my = cv2.initUndistortRectifyMap(K, D, None, P, size, cv2.CV_32FC1)
+        linear = cv2.remap(img, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        nearest = cv2.remap(img, mx, my, cv2.INTER_NEAREST, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+        cv2.imwrite(case["linear"], linear)
+        cv2.imwrite(case["nearest"], nearest)
+        res[case["name"]] = {"map_x": mx.ravel().tolist(), "map_y": my.ravel().tolist()}
+    out["remap"] = res
 print(json.dumps(out))

@@ -10,6 +10,8 @@
 //! - [`flow`]: pyramidal LK (Scharr gradients, minimum-eigenvalue rejection,
 //!   forward-backward check) and a corner detector for re-seeding tracks.
 //! - [`stereo`]: ORB-SLAM2's sparse stereo matching of ORB keypoints on a rectified pair.
+//! - [`undistort`]: whole-image undistortion and rectification (OpenCV's
+//!   `initUndistortRectifyMap` and `remap`), pinhole or fisheye lens to an ideal pinhole.
 //! - [`geometry`]: the fundamental matrix (7- and 8-point solvers, LO-RANSAC) and epipolar
 //!   distances, for culling points that move.
 //!
@@ -25,5 +27,6 @@ pub mod image;
 pub mod matching;
 pub mod orb;
 pub mod stereo;
+pub mod undistort;
 
 pub use image::GrayImage;

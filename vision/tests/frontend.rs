@@ -500,3 +500,76 @@ fn kannala_brandt_projection_and_unprojection_agree_with_opencv_fisheye() {
         }
     }
 }
+
+#[test]
+fn undistortion_tables_and_resampling_agree_with_opencv_remap() {
+    use dynaflow_datasets::synth::{Generator, SynthConfig, fisheye};
+    use dynaflow_vision::camera::{KannalaBrandt, Pinhole};
+    use dynaflow_vision::undistort::{Lens, RemapTable};
+    let Some(python) = frontend::cv2_python("undistort: tables and remap vs OpenCV") else {
+        return;
+    };
+    let dir = common::TempDir::new("remap-cv2");
+    // A synthetic fisheye frame (TUM-VI's lens), and the same frame seen through a Kinect-like
+    // Brown-Conrady lens (TUM fr1's published coefficients) by relabelling its camera.
+    let k = fisheye(320, 240);
+    let g = Generator::new(SynthConfig { intrinsics: k.clone(), seed: 3, ..SynthConfig::default() });
+    let f = g.frame(10, false);
+    let img = GrayImage::from_rgb8(320, 240, &f.rgb).unwrap();
+    let path = dir.path().join("fisheye.png");
+    frontend::save_gray(&img, &path);
+    let pinhole = Pinhole::from(&k);
+    let kb = KannalaBrandt::new(pinhole, [k.distortion[0], k.distortion[1], k.distortion[2], k.distortion[3]]);
+    let fr1 = [0.262383, -0.953104, -0.005358, 0.002628, 1.163314];
+    // The pinhole keeps the principal point; a focal length of 0.8 x the lens's for the
+    // fisheye (more of the periphery, some of it outside the image: the black border).
+    let cases = [
+        (
+            "fisheye",
+            Lens::KannalaBrandt(kb),
+            Pinhole { fx: pinhole.fx * 0.8, fy: pinhole.fy * 0.8, ..pinhole },
+            "fisheye",
+        ),
+        ("kinect", Lens::BrownConrady { pinhole, k: fr1 }, pinhole, "brown_conrady"),
+    ];
+    let kmat = |p: &Pinhole| vec![p.fx, 0.0, p.cx, 0.0, p.fy, p.cy, 0.0, 0.0, 1.0];
+    let job = json!({
+        "remap": cases.iter().map(|(name, lens, new, model)| json!({
+            "name": name,
+            "model": model,
+            "image": path,
+            "K": kmat(&pinhole),
+            "D": match lens { Lens::KannalaBrandt(kb) => kb.k.to_vec(), Lens::BrownConrady { k, .. } => k.to_vec() },
+            "P": kmat(new),
+            "linear": dir.path().join(format!("{name}-linear.png")),
+            "nearest": dir.path().join(format!("{name}-nearest.png")),
+        })).collect::<Vec<_>>(),
+    });
+    let cv = frontend::run_cv2(&python, dir.path(), &job);
+    for (name, lens, new, _) in &cases {
+        let table = RemapTable::undistort_rectify(lens, &nalgebra::Matrix3::identity(), new, 320, 240);
+        let theirs = &cv["remap"][name];
+        let (mx, my) = (theirs["map_x"].as_array().unwrap(), theirs["map_y"].as_array().unwrap());
+        let mut worst = 0.0f64;
+        for (i, [x, y]) in table.map.iter().enumerate() {
+            let (ox, oy) = (mx[i].as_f64().unwrap(), my[i].as_f64().unwrap());
+            worst = worst.max((f64::from(*x) - ox).abs()).max((f64::from(*y) - oy).abs());
+        }
+        // Both in single precision from double arithmetic: a few ulps of a few hundred pixels.
+        assert!(worst < 1e-3, "{name}: table differs from OpenCV's by {worst} px");
+        // Resampled: bit for bit (the pinned OpenCV interpolates in single precision, as this does).
+        let mut ours = Vec::new();
+        table.remap_u8(&img.data, 320, 240, 1, &mut ours);
+        let linear = frontend::load_gray(&dir.path().join(format!("{name}-linear.png")));
+        let differ = ours.iter().zip(&linear.data).filter(|(a, b)| a != b).count();
+        let max = ours.iter().zip(&linear.data).map(|(a, b)| a.abs_diff(*b)).max().unwrap_or(0);
+        assert!(differ == 0 && max == 0, "{name}: {differ} pixels differ from OpenCV's remap, by up to {max}");
+        // Nearest, as the depth is resampled.
+        let src: Vec<f32> = img.data.iter().map(|&v| f32::from(v)).collect();
+        let mut near = Vec::new();
+        table.remap_nearest(&src, 320, 240, &mut near);
+        let nearest = frontend::load_gray(&dir.path().join(format!("{name}-nearest.png")));
+        let differ = near.iter().zip(&nearest.data).filter(|(a, b)| **a != f32::from(**b)).count();
+        assert!(differ == 0, "{name}: {differ} pixels differ from OpenCV's nearest remap");
+    }
+}

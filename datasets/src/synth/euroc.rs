@@ -70,9 +70,16 @@ pub fn write_euroc(generator: &Generator, root: &Path, opts: &EurocWriteOptions)
     if let Some(b) = opts.baseline {
         cams.push(("cam1", cal.body_from_cam * nalgebra::Translation3::new(b, 0.0, 0.0)));
     }
+    // Kalibr's names: a fisheye is `equidistant` with four coefficients.
+    let distortion = if k.model == dynaflow_msg::LensModel::KannalaBrandt {
+        let [k1, k2, k3, k4, _] = k.distortion;
+        format!("distortion_model: equidistant\ndistortion_coefficients: [{k1:e}, {k2:e}, {k3:e}, {k4:e}]")
+    } else {
+        "distortion_model: radial-tangential\ndistortion_coefficients: [0.0, 0.0, 0.0, 0.0]".to_owned()
+    };
     let camera_yaml = |name: &str, body_from_cam: &Isometry3<f64>| {
         format!(
-            "# General sensor definitions.\nsensor_type: camera\ncomment: dynaflow synth {name} (seed {})\n\n# Sensor extrinsics wrt. the body-frame.\n{}\n# Camera specific definitions.\nrate_hz: {}\nresolution: [{}, {}]\ncamera_model: pinhole\nintrinsics: [{:e}, {:e}, {:e}, {:e}] #fu, fv, cu, cv\ndistortion_model: radial-tangential\ndistortion_coefficients: [0.0, 0.0, 0.0, 0.0]\n",
+            "# General sensor definitions.\nsensor_type: camera\ncomment: dynaflow synth {name} (seed {})\n\n# Sensor extrinsics wrt. the body-frame.\n{}\n# Camera specific definitions.\nrate_hz: {}\nresolution: [{}, {}]\ncamera_model: pinhole\nintrinsics: [{:e}, {:e}, {:e}, {:e}] #fu, fv, cu, cv\n{distortion}\n",
             c.seed,
             t_bs(body_from_cam),
             c.rate_hz,

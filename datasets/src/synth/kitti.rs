@@ -33,6 +33,12 @@ pub fn write_kitti(generator: &Generator, root: &Path, opts: &KittiWriteOptions)
     }
     let c = generator.config();
     let k = &c.intrinsics;
+    if k.model == dynaflow_msg::LensModel::KannalaBrandt {
+        return Err(Error::file(
+            root,
+            "the KITTI layout holds rectified pinhole images; a fisheye sequence is written as `tum` or `euroc`",
+        ));
+    }
     let seq = root.join("sequences").join("00");
     for sub in ["image_2", "image_3"] {
         fs::create_dir_all(seq.join(sub)).map_err(|e| Error::file(&seq.join(sub), e))?;

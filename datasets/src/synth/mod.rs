@@ -66,6 +66,34 @@ pub struct SynthConfig {
     pub blackout: Option<u64>,
 }
 
+/// TUM-VI cam0's Kannala-Brandt coefficients `[k1, k2, k3, k4]` (the published equidistant
+/// calibration of its 512x512 cameras, Schubert et al., IROS 2018): the generated fisheye's lens.
+pub const TUMVI_KB: [f64; 4] =
+    [0.003_482_389_402_249_343, 0.000_715_034_845_216_225_7, -0.002_053_236_141_870_62, 0.000_202_936_735_918_111_8];
+
+/// Focal length of the generated fisheye at 640x480, pixels: the image's corners 1.34 rad
+/// (77 degrees) off the axis, as far as TUM-VI's 512x512 image reaches at its edges' midpoints
+/// (256 / 190.98 px), and inside the 90 degrees a z-depth renderer can trace. A horizontal
+/// field of view of 123 degrees against the pinhole's 62. Chosen for the synthetic scene.
+pub const FISHEYE_FOCAL: f64 = 298.5;
+
+/// The generated fisheye at `width` x `height`: [`FISHEYE_FOCAL`] scaled from 640x480 (the
+/// principal point at the centre), TUM-VI's lens ([`TUMVI_KB`]).
+pub fn fisheye(width: u32, height: u32) -> Intrinsics {
+    let (sx, sy) = (f64::from(width) / 640.0, f64::from(height) / 480.0);
+    let [k1, k2, k3, k4] = TUMVI_KB;
+    Intrinsics {
+        width,
+        height,
+        fx: FISHEYE_FOCAL * sx,
+        fy: FISHEYE_FOCAL * sy,
+        cx: f64::from(width) / 2.0 - 0.5,
+        cy: f64::from(height) / 2.0 - 0.5,
+        distortion: [k1, k2, k3, k4, 0.0],
+        model: dynaflow_msg::LensModel::KannalaBrandt,
+    }
+}
+
 /// Frames a kidnapped camera sees nothing (one second at 30 Hz).
 pub const KIDNAP_BLACKOUT: u64 = 30;
 /// How far back in its motion a kidnapped camera is set down, seconds.
@@ -200,7 +228,8 @@ impl Generator {
     }
 
     /// The exact disparity `fx * baseline / z` of every pixel of `left` for a right camera
-    /// `baseline` metres to its right (0 where no surface was hit).
+    /// `baseline` metres to its right (0 where no surface was hit); a pinhole's (a fisheye's
+    /// pair is not rectified: its disparity is not along rows).
     pub fn disparity(&self, left: &Frame, baseline: f64) -> Vec<f32> {
         let bf = self.config.intrinsics.fx * baseline;
         left.depth_true.iter().map(|&z| if z > 0.0 { (bf / f64::from(z)) as f32 } else { 0.0 }).collect()
@@ -228,6 +257,7 @@ impl Generator {
             let next_parts = self.scene.people_parts(t1);
             let cam1_from_world = self.pose(k + 1).inverse();
             let k_ = &c.intrinsics;
+            let lens = render::fisheye(k_);
             r.hits
                 .iter()
                 .enumerate()
@@ -242,7 +272,11 @@ impl Generator {
                     if q.z <= 1e-6 {
                         return [f32::NAN, f32::NAN];
                     }
-                    [(k_.fx * q.x / q.z + k_.cx - u) as f32, (k_.fy * q.y / q.z + k_.cy - v) as f32]
+                    let [pu, pv] = match &lens {
+                        Some(kb) => kb.project(&q).unwrap_or([f64::NAN; 2]),
+                        None => [k_.fx * q.x / q.z + k_.cx, k_.fy * q.y / q.z + k_.cy],
+                    };
+                    [(pu - u) as f32, (pv - v) as f32]
                 })
                 .collect()
         });

@@ -1,16 +1,39 @@
 //! A ray caster for the scene: per pixel the nearest of the room's inner faces, the furniture
-//! boxes and the people's boxes. Rays are `((u - cx)/fx, (v - cy)/fy, 1)` in the camera frame,
-//! so the ray parameter is the z-depth directly. Objects are culled per pixel by their
-//! projected screen rectangle (of the part in front of the camera: a box behind it is never
-//! tested); rows are split across threads.
+//! boxes and the people's boxes. Rays are `((u - cx)/fx, (v - cy)/fy, 1)` in the camera frame
+//! (through a Kannala-Brandt fisheye: the pixel's ray unprojected, scaled to `z = 1`), so the
+//! ray parameter is the z-depth directly. Objects are culled per pixel by their projected
+//! screen rectangle (of the part in front of the camera: a box behind it is never tested; a
+//! fisheye bends straight edges, so there each ray is tested against the box's rectangle on
+//! the `z = 1` plane instead); rows are split across threads.
 
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 
 use super::scene::{Kind, Part, ROOM_HALF_DEPTH, ROOM_HALF_WIDTH, ROOM_HEIGHT, Scene};
 use super::texture::Texture;
 
-/// The rendered camera: a pinhole without distortion.
+/// The rendered camera: a pinhole without distortion, or a Kannala-Brandt fisheye (whose
+/// image must stay within 90 degrees of the axis: a z-depth has no meaning beyond).
 pub type Intrinsics = dynaflow_msg::CameraInfo;
+
+/// The fisheye of `k`, if it is one.
+pub(super) fn fisheye(k: &Intrinsics) -> Option<dynaflow_vision::camera::KannalaBrandt> {
+    use dynaflow_vision::camera::{KannalaBrandt, Pinhole};
+    (k.model == dynaflow_msg::LensModel::KannalaBrandt).then(|| {
+        let [k1, k2, k3, k4, _] = k.distortion;
+        KannalaBrandt::new(Pinhole::from(k), [k1, k2, k3, k4])
+    })
+}
+
+/// The ray through image point `(u, v)`, scaled to `z = 1`.
+fn ray(k: &Intrinsics, lens: Option<&dynaflow_vision::camera::KannalaBrandt>, u: f64, v: f64) -> Vector3<f64> {
+    match lens {
+        Some(kb) => {
+            let [x, y] = kb.unproject_normalised([u, v]);
+            Vector3::new(x, y, 1.0)
+        }
+        None => Vector3::new((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0),
+    }
+}
 
 /// What a pixel's ray hit, for ground-truth flow.
 #[derive(Clone, Copy, Debug, Default)]
@@ -45,6 +68,9 @@ struct Prepared<'a> {
     origin_in_part: Vector3<f64>,
     /// Screen rectangle `[u0, v0, u1, v1]` (inclusive) where the box may appear.
     rect: [i64; 4],
+    /// The same on the `z = 1` plane `[x0, y0, x1, y1]`: a ray `(x, y, 1)` outside it misses
+    /// the box (what a fisheye's rays are tested against).
+    plane_rect: [f64; 4],
     dynamic_index: u32,
 }
 
@@ -83,6 +109,18 @@ fn prepare<'a>(
         }
     }
     let mut rect = [i64::MAX, i64::MAX, i64::MIN, i64::MIN];
+    // Widened by a relative 1e-9 against the rounding of the two divisions.
+    let mut plane_rect = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+    for p in &front {
+        let (x, y) = (p.x / p.z, p.y / p.z);
+        let slack = 1e-9 * (1.0 + x.abs() + y.abs());
+        plane_rect = [
+            plane_rect[0].min(x - slack),
+            plane_rect[1].min(y - slack),
+            plane_rect[2].max(x + slack),
+            plane_rect[3].max(y + slack),
+        ];
+    }
     for p in &front {
         let (u, v) = (k.fx * p.x / p.z + k.cx, k.fy * p.y / p.z + k.cy);
         // Clamped a little beyond the image (the tests allow a pixel of margin).
@@ -100,11 +138,12 @@ fn prepare<'a>(
     }
     if !cull {
         rect = [-4, -4, w + 4, h + 4];
+        plane_rect = [f64::NEG_INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::INFINITY];
     }
     let cam_from_part_rot = cam_from_part.rotation.to_rotation_matrix().into_inner();
     let part_from_cam_rot = cam_from_part_rot.transpose();
     let origin_in_part = -(part_from_cam_rot * cam_from_part.translation.vector);
-    Prepared { part, cam_from_part_rot, part_from_cam_rot, origin_in_part, rect, dynamic_index }
+    Prepared { part, cam_from_part_rot, part_from_cam_rot, origin_in_part, rect, plane_rect, dynamic_index }
 }
 
 /// Slab test of a camera-frame ray (origin 0) against an oriented box: `(t, face axis, local point)`.
@@ -225,13 +264,18 @@ struct Rays<'a> {
     scene: &'a Scene,
     objects: &'a [Prepared<'a>],
     k: &'a Intrinsics,
+    lens: Option<dynaflow_vision::camera::KannalaBrandt>,
     world_from_cam_rot: &'a Matrix3<f64>,
     origin: &'a Vector3<f64>,
 }
 
 impl Rays<'_> {
-    /// Objects whose rectangle meets row `v` (a pixel's sub-samples reach half a pixel beyond).
+    /// Objects whose rectangle meets row `v` (a pixel's sub-samples reach half a pixel beyond);
+    /// through a fisheye, whose rows are curves on the `z = 1` plane, every object.
     fn candidates(&self, v: usize) -> Vec<&Prepared<'_>> {
+        if self.lens.is_some() {
+            return self.objects.iter().collect();
+        }
         let vi = v as i64;
         self.objects.iter().filter(|o| o.rect[1] - 1 <= vi && vi <= o.rect[3] + 1).collect()
     }
@@ -241,9 +285,14 @@ impl Rays<'_> {
         let (scene, k, world_from_cam_rot, origin) = (self.scene, self.k, self.world_from_cam_rot, self.origin);
         let bounds_min = Vector3::new(-ROOM_HALF_WIDTH, -ROOM_HALF_DEPTH, 0.0);
         let bounds_max = Vector3::new(ROOM_HALF_WIDTH, ROOM_HALF_DEPTH, ROOM_HEIGHT);
-        let d = Vector3::new((uf - k.cx) / k.fx, (vf - k.cy) / k.fy, 1.0);
+        let d = ray(k, self.lens.as_ref(), uf, vf);
         let (ui, vi) = (uf.round() as i64, vf.round() as i64);
+        let fisheye = self.lens.is_some();
         let inside = |o: &&&Prepared<'_>| {
+            if fisheye {
+                let r = &o.plane_rect;
+                return r[0] <= d.x && d.x <= r[2] && r[1] <= d.y && d.y <= r[3];
+            }
             o.rect[0] - 1 <= ui && ui <= o.rect[2] + 1 && o.rect[1] - 1 <= vi && vi <= o.rect[3] + 1
         };
         let mut best: Option<(f64, &Prepared<'_>, usize, Vector3<f64>)> = None;
@@ -363,7 +412,7 @@ fn render_rows(
 ) {
     let w = k.width as usize;
     let h = k.height as usize;
-    let rays = Rays { scene, objects, k, world_from_cam_rot, origin };
+    let rays = Rays { scene, objects, k, lens: fisheye(k), world_from_cam_rot, origin };
     // Centre rays of a whole row (the ground truth: depth, class, flow anchor) and their
     // lit colours; the rows above and below decide which pixels straddle an edge.
     let centre_row = |v: usize| -> Vec<Seen> {

@@ -239,14 +239,19 @@ fn on_the_loop_people_pass_the_camera_at_a_distance_and_stay_in_view() {
 
 #[test]
 fn culling_by_screen_rectangles_changes_no_pixel() {
+    culling_changes_no_pixel(scaled_fr3(160, 120));
+}
+
+#[test]
+fn culling_a_fisheye_on_the_unit_plane_changes_no_pixel() {
+    culling_changes_no_pixel(super::fisheye(160, 120));
+}
+
+fn culling_changes_no_pixel(intrinsics: super::Intrinsics) {
     // Every case of the rectangles: the loop walks through the middle of the room (furniture
     // and people beside, behind and in front of the camera), and a camera set beside each
     // piece of furniture looking along it, so the box reaches from behind the camera into view.
-    let g = Generator::new(SynthConfig {
-        motion: Motion::Loop,
-        intrinsics: scaled_fr3(160, 120),
-        ..SynthConfig::default()
-    });
+    let g = Generator::new(SynthConfig { motion: Motion::Loop, intrinsics, ..SynthConfig::default() });
     let k = &g.config().intrinsics;
     let mut views: Vec<(u64, nalgebra::Isometry3<f64>)> = (0..900).step_by(15).map(|f| (f, g.pose(f))).collect();
     for part in g.scene.statics() {
@@ -304,4 +309,22 @@ fn the_noisy_imu_has_the_datasheets_white_noise_and_is_seeded() {
     assert_eq!(g.imu(&calibration, 1.0, true), noisy[..201].to_vec(), "the same seed draws the same samples");
     let other = Generator::new(SynthConfig { motion: Motion::Halfsphere, seed: 6, ..SynthConfig::default() });
     assert_ne!(other.imu(&calibration, 1.0, true)[1], noisy[1]);
+}
+
+#[test]
+fn a_fisheye_folder_carries_its_lens_in_calibration_txt() {
+    let dir = std::env::temp_dir().join(format!("dynaflow-fisheye-calib-{}", std::process::id()));
+    let k = super::fisheye(32, 24);
+    let g = Generator::new(SynthConfig { intrinsics: k.clone(), people: 0, ..SynthConfig::default() });
+    super::write_tum(&g, &dir, &super::WriteOptions { frames: 1, flow: false }).unwrap();
+    let read = crate::intrinsics::read_calibration(&dir).unwrap().unwrap().camera_info(32, 24);
+    let _ = std::fs::remove_dir_all(&dir);
+    assert_eq!(read.model, dynaflow_msg::LensModel::KannalaBrandt);
+    for (a, b) in [read.fx, read.fy, read.cx, read.cy]
+        .iter()
+        .chain(&read.distortion)
+        .zip([k.fx, k.fy, k.cx, k.cy].iter().chain(&k.distortion))
+    {
+        assert!((a - b).abs() <= 1e-12 * b.abs().max(1.0), "{read:?} vs {k:?}");
+    }
 }

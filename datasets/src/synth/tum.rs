@@ -111,10 +111,18 @@ pub fn write_tum(generator: &Generator, dir: &Path, opts: &WriteOptions) -> Resu
     for (file, text) in [("rgb.txt", &rgb_txt), ("depth.txt", &depth_txt), ("groundtruth.txt", &gt_txt)] {
         fs::write(dir.join(file), text).map_err(|e| err(&dir.join(file), e))?;
     }
-    let calib = format!(
-        "# fx fy cx cy [k1 k2 p1 p2 k3] (dynaflow synth, pinhole without distortion)\n{} {} {} {}\n",
-        k.fx, k.fy, k.cx, k.cy
-    );
+    let calib = if k.model == dynaflow_msg::LensModel::KannalaBrandt {
+        let [k1, k2, k3, k4, _] = k.distortion;
+        format!(
+            "# kb:fx,fy,cx,cy,k1,k2,k3,k4 (dynaflow synth, a Kannala-Brandt fisheye)\nkb:{},{},{},{},{k1},{k2},{k3},{k4}\n",
+            k.fx, k.fy, k.cx, k.cy
+        )
+    } else {
+        format!(
+            "# fx fy cx cy [k1 k2 p1 p2 k3] (dynaflow synth, pinhole without distortion)\n{} {} {} {}\n",
+            k.fx, k.fy, k.cx, k.cy
+        )
+    };
     fs::write(dir.join("calibration.txt"), calib).map_err(|e| err(&dir.join("calibration.txt"), e))?;
     let info = serde_json::json!({
         "generator": "dynaflow synth",
@@ -126,6 +134,8 @@ pub fn write_tum(generator: &Generator, dir: &Path, opts: &WriteOptions) -> Resu
         "rate_hz": c.rate_hz,
         "frames": opts.frames,
         "width": k.width, "height": k.height, "fx": k.fx, "fy": k.fy, "cx": k.cx, "cy": k.cy,
+        "lens": if k.model == dynaflow_msg::LensModel::KannalaBrandt { "kannala_brandt" } else { "pinhole" },
+        "distortion": k.distortion,
         "depth_factor": DEPTH_FACTOR,
         "depth_noise": c.depth_noise, "image_noise": c.image_noise, "blur": c.blur,
         "mask_classes": ["static", "person"],

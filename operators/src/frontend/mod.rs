@@ -4,16 +4,19 @@
 //! - `matching`: `match_descriptors` (frame-to-frame Hamming matching with stable track ids).
 //! - `flow`: `lk_flow` (pyramidal Lucas-Kanade tracking with re-seeding).
 //! - `stereo`: `stereo_match` (ORB-SLAM2's sparse stereo matching into a right image).
+//! - `undistort`: a distorted or fisheye camera's images resampled to an ideal pinhole.
 
 mod flow;
 mod matching;
 mod orb;
 mod stereo;
+mod undistort;
 
 pub use flow::LK_FLOW;
 pub use matching::MATCH_DESCRIPTORS;
 pub use orb::ORB_EXTRACT;
 pub use stereo::STEREO_MATCH;
+pub use undistort::UNDISTORT;
 
 use dynaflow_engine::msg::{Image, Keypoints, PixelFormat, StereoRig};
 use dynaflow_engine::op::OpError;
@@ -46,7 +49,7 @@ pub(crate) fn orb_descriptors(keypoints: &Keypoints) -> Result<&[u8], OpError> {
 pub(crate) fn pinhole_only(k: &dynaflow_engine::msg::CameraInfo, what: &str) -> Result<(), OpError> {
     if k.model == dynaflow_engine::msg::LensModel::KannalaBrandt {
         return Err(OpError::Input(format!(
-            "`camera_info` is a Kannala-Brandt (fisheye) camera: {what} projects through a pinhole and would be wrong on it; fisheye geometry there is not built yet (ORB and LK run on fisheye images)"
+            "`camera_info` is a Kannala-Brandt (fisheye) camera: {what} projects through a pinhole and would be wrong on it; put an `undistort` node before it (ORB and LK run on fisheye images)"
         )));
     }
     Ok(())
