@@ -15,16 +15,19 @@ export DYNAFLOW_REQUIRE_PEERS=1
 skips="$target/peer-skips"
 rm -rf "$skips" && mkdir -p "$skips"
 export DYNAFLOW_SKIP_LOG="$skips"
-# `--features zenoh`: graphs across machines are built and tested too (the default build has
-# no zenoh crate; tests/dependencies.rs checks that).
+# `--features zenoh,python`: graphs across machines and Python operators are built and tested
+# too (the default build has neither zenoh nor libpython; tests/dependencies.rs checks that).
+# PyO3 builds against Debian's Python (python3-dev, installed by peers.sh), whose libpython the
+# binary finds where it runs.
+if [ -z "${PYO3_PYTHON:-}" ] && [ -x /usr/bin/python3 ]; then export PYO3_PYTHON=/usr/bin/python3; fi
 log="$target/test-output.txt"
 : > "$log"
 # Built first, so the build's time is told apart from the tests'.
-cargo test --workspace --release --features zenoh --no-run "$@" 2>&1 | tee "$target/build-output.txt"
+cargo test --workspace --release --features zenoh,python --no-run "$@" 2>&1 | tee "$target/build-output.txt"
 status=${PIPESTATUS[0]}
 t2=$(date +%s)
 if [ "$status" -eq 0 ]; then
-  cargo test --workspace --release --no-fail-fast --features zenoh "$@" 2>&1 | tee "$log"
+  cargo test --workspace --release --no-fail-fast --features zenoh,python "$@" 2>&1 | tee "$log"
   status=${PIPESTATUS[0]}
 fi
 t3=$(date +%s)

@@ -12,6 +12,7 @@ pub mod summary;
 pub fn registry() -> Registry {
     let mut r = dynaflow_operators::registry();
     dynaflow_recordings::register(&mut r);
+    r.register(dynaflow_python::PYTHON);
     r
 }
 

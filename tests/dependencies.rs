@@ -1,5 +1,5 @@
-//! Dependency hygiene: the default build compiles no zenoh crate; the `zenoh`
-//! feature brings it in (so this check can fail). Reads cargo's own dependency tree.
+//! Dependency hygiene: the default build compiles no zenoh crate and no PyO3; the `zenoh` and
+//! `python` features bring them in (so this check can fail). Reads cargo's own dependency tree.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
 mod common;
@@ -29,6 +29,15 @@ fn the_default_build_has_no_zenoh_crate_and_the_feature_adds_it() {
     assert!(!default.iter().any(|c| c == "dynaflow-net"));
     let with = tree(&["--features", "zenoh"]);
     assert!(with.iter().any(|c| c == "zenoh") && with.iter().any(|c| c == "dynaflow-net"), "{with:?}");
+}
+
+#[test]
+fn the_default_build_links_no_python_and_the_feature_adds_it() {
+    let default = tree(&[]);
+    let pyo3: Vec<&String> = default.iter().filter(|c| c.starts_with("pyo3")).collect();
+    assert!(pyo3.is_empty(), "the default build compiles {pyo3:?}");
+    let with = tree(&["--features", "python"]);
+    assert!(with.iter().any(|c| c == "pyo3"), "{with:?}");
 }
 
 /// Each workspace crate's normal dependencies on other workspace crates, from `cargo metadata`.

@@ -3,7 +3,7 @@
 //!
 //! `scripts/test.sh` (the README's test command) installs every peer and sets
 //! `DYNAFLOW_REQUIRE_PEERS=1`: a missing peer then fails its test. A peer named in
-//! `DYNAFLOW_SKIP_PEERS` (comma-separated: `opencv,evo,onnxruntime,octomap,rerun,mcap,gpu,chromium,rosbags`)
+//! `DYNAFLOW_SKIP_PEERS` (comma-separated: `opencv,evo,onnxruntime,octomap,rerun,mcap,gpu,chromium,rosbags,numpy`)
 //! is skipped on purpose. Every skipped comparison is written to `DYNAFLOW_SKIP_LOG` (a
 //! folder), from which the script's last line names them all.
 #![allow(clippy::panic, dead_code)]
@@ -11,7 +11,8 @@
 use std::io::Write as _;
 
 /// The peers, as `DYNAFLOW_SKIP_PEERS` names them.
-pub const PEERS: &[&str] = &["opencv", "evo", "onnxruntime", "octomap", "rerun", "mcap", "gpu", "chromium", "rosbags"];
+pub const PEERS: &[&str] =
+    &["opencv", "evo", "onnxruntime", "octomap", "rerun", "mcap", "gpu", "chromium", "rosbags", "numpy"];
 
 fn skipped_on_purpose(peer: &str) -> bool {
     std::env::var("DYNAFLOW_SKIP_PEERS")

@@ -18,7 +18,10 @@ pub(crate) use declare::comma_items;
 pub use declare::{In, Out, Param, ParamMap, Seeded, doc_line, ranged};
 pub use params::Params;
 pub use registry::Registry;
-pub use spec::{Default, InputRole, Instance, MapStore, OpKind, OpSpec, ParamSpec, ParamType, PortSpec, concat_params};
+pub use spec::{
+    DeclareFn, DeclareRequest, Default, InputRole, Instance, MapStore, OpKind, OpSpec, ParamSpec, ParamType, PortSpec,
+    concat_params,
+};
 
 use crate::msg::{Body, Header, Message};
 

@@ -170,6 +170,8 @@ pub enum Default {
     FromGraphSeed,
     /// The default value, as JSON (written by `params!` from the typed default).
     Value(fn() -> serde_json::Value),
+    /// The default value as JSON text: a parameter declared at run time (a Python operator's).
+    Json(&'static str),
 }
 
 impl Default {
@@ -178,6 +180,7 @@ impl Default {
         match self {
             Default::Required | Default::FromGraphSeed => None,
             Default::Value(f) => Some(f()),
+            Default::Json(text) => serde_json::from_str(text).ok(),
         }
     }
 }
@@ -245,6 +248,22 @@ impl std::fmt::Debug for Instance {
     }
 }
 
+/// What an operator that declares its ports per node (a Python operator, whose class declares
+/// them) is asked while its node is validated.
+#[derive(Clone, Copy, Debug)]
+pub struct DeclareRequest<'a> {
+    /// The node id.
+    pub node: &'a str,
+    /// The node's `params` as written (before validation).
+    pub params: &'a serde_json::Map<String, serde_json::Value>,
+    /// The graph file's folder (relative paths resolve against it).
+    pub base_dir: Option<&'a std::path::Path>,
+}
+
+/// An operator's per-node declaration: its ports and parameters for the node's `params`
+/// (`Err`: why the node cannot be declared, reported at the node).
+pub type DeclareFn = fn(&OpSpec, &DeclareRequest<'_>) -> Result<OpSpec, String>;
+
 /// Everything the engine knows about an operator before running it.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct OpSpec {
@@ -273,6 +292,10 @@ pub struct OpSpec {
     /// this operator (a tracker that keeps a map), if it has them.
     #[serde(skip)]
     pub map_store: Option<MapStore>,
+    /// Ports and parameters declared per node (from the node's `params`) instead of the
+    /// static tables above, which then describe what every node has (`dynaflow ops`).
+    #[serde(skip)]
+    pub declare: Option<DeclareFn>,
     /// Constructor from validated parameters.
     #[serde(skip)]
     pub build: fn(&Params) -> Result<Instance, OpError>,
@@ -318,6 +341,7 @@ impl OpSpec {
             cpu_heavy: false,
             ground_truth_outputs: None,
             map_store: None,
+            declare: None,
             build,
         }
     }
@@ -355,6 +379,12 @@ impl OpSpec {
     /// With the parameters `dynaflow run --save-map/--load-map/--localise` set.
     pub const fn map_store(mut self, store: MapStore) -> Self {
         self.map_store = Some(store);
+        self
+    }
+
+    /// With ports and parameters declared per node by `declare`.
+    pub const fn declare(mut self, declare: DeclareFn) -> Self {
+        self.declare = Some(declare);
         self
     }
 

@@ -40,7 +40,7 @@ pub fn validate(
     cx: &ResolveContext,
 ) -> (Option<ResolvedGraph>, Vec<Diagnostic>) {
     let mut diags = Vec::new();
-    let ops: Vec<Option<&OpSpec>> = spec.nodes.iter().map(|n| lookup_op(n, registry, &mut diags)).collect();
+    let ops: Vec<Option<&OpSpec>> = spec.nodes.iter().map(|n| lookup_op(n, registry, cx, &mut diags)).collect();
     let index: HashMap<&str, usize> = spec.nodes.iter().enumerate().map(|(i, n)| (n.id.as_str(), i)).collect();
 
     let params: Vec<Params> = spec
@@ -339,11 +339,55 @@ fn check_oracle(
     (oracle, carries)
 }
 
-fn lookup_op<'r>(n: &NodeSpec, registry: &'r Registry, diags: &mut Vec<Diagnostic>) -> Option<&'r OpSpec> {
+/// Per-node declarations made so far, by operator, `params` and folder: each is made (a
+/// Python module imported) and leaked once per process.
+type Declared = std::collections::HashMap<(String, String, Option<PathBuf>), &'static OpSpec>;
+static DECLARED: std::sync::Mutex<Option<Declared>> = std::sync::Mutex::new(None);
+
+/// The node's declaration from an operator that declares per node (`OpSpec::declare`).
+fn declare_node(
+    n: &NodeSpec,
+    op: &OpSpec,
+    declare: crate::op::DeclareFn,
+    cx: &ResolveContext,
+) -> Result<&'static OpSpec, String> {
+    let params: serde_json::Map<String, serde_json::Value> =
+        n.params.iter().map(|(k, v)| (k.text.clone(), v.to_json())).collect();
+    let key = (op.name.to_owned(), serde_json::Value::Object(params.clone()).to_string(), cx.base_dir.clone());
+    let lock = || DECLARED.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    if let Some(d) = lock().get_or_insert_default().get(&key) {
+        return Ok(d);
+    }
+    let req = crate::op::DeclareRequest { node: &n.id, params: &params, base_dir: cx.base_dir.as_deref() };
+    let spec: &'static OpSpec = Box::leak(Box::new(declare(op, &req)?));
+    lock().get_or_insert_default().insert(key, spec);
+    Ok(spec)
+}
+
+fn lookup_op<'r>(
+    n: &NodeSpec,
+    registry: &'r Registry,
+    cx: &ResolveContext,
+    diags: &mut Vec<Diagnostic>,
+) -> Option<&'r OpSpec> {
     if n.op.is_empty() {
         return None; // already reported by the parser
     }
     let op = registry.get(&n.op);
+    if let Some(declare) = op.and_then(|o| o.declare) {
+        let op = op?;
+        return match declare_node(n, op, declare, cx) {
+            Ok(spec) => Some(spec),
+            Err(message) => {
+                diags.push(
+                    Diagnostic::error("op-declaration", n.op_span, format!("node `{}`: {message}", n.id)).with_hint(
+                        format!("`{0}` declares the node's ports from its `params` (`dynaflow ops {0}`)", op.name),
+                    ),
+                );
+                None
+            }
+        };
+    }
     if op.is_none() {
         // A namespaced operator (`testing.fault`) is also found by its name alone.
         let hint = registry
