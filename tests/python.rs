@@ -127,8 +127,13 @@ fn python_failures_name_the_node_the_frame_and_the_line() {
             vec!["`labels`.reason: expected shape ("],
         ),
         (
+            "missing.py",
+            "    def process(self, frame):\n        return {}\n",
+            vec!["Rule.process returned no `labels` at frame"],
+        ),
+        (
             "port.py",
-            "    def process(self, frame):\n        return {'lables': None}\n",
+            "    def process(self, frame):\n        return {'labels': None, 'lables': None}\n",
             vec!["returned port `lables`", "outputs: labels"],
         ),
     ];
@@ -145,4 +150,91 @@ fn python_failures_name_the_node_the_frame_and_the_line() {
         let rec = dynaflow_recordings::diff::read_mcap(&out.join("py.mcap")).unwrap();
         assert!(!rec.topics["/camera/rgb"].frames.is_empty(), "{module}");
     }
+}
+
+#[test]
+fn opencv_lk_in_python_agrees_with_lk_flow() {
+    let comparison = "python: OpenCV's LK as an operator against lk_flow";
+    let Some(mut py) = dynaflow_with_numpy(comparison) else {
+        return;
+    };
+    let venv = common::peers::venv();
+    let cv2 = || {
+        let ok =
+            Command::new(venv.join("bin/python")).args(["-c", "import cv2"]).output().is_ok_and(|o| o.status.success());
+        if ok { Ok(()) } else { Err(format!("{}/bin/python cannot import cv2", venv.display())) }
+    };
+    if !common::peers::peer_runs("opencv", comparison, cv2) {
+        return;
+    }
+    let dir = common::TempDir::new("python-opencv-lk");
+    let graph = common::repo().join("examples/python/opencv_lk.yaml");
+    let o = run(&mut py, &graph, dir.path(), &["--frames", "30", "--record", "mcap"]);
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    let rec = dynaflow_recordings::diff::read_mcap(&dir.path().join("python_opencv_lk.mcap")).unwrap();
+    let points = |v: &serde_json::Value| -> std::collections::BTreeMap<u64, (f64, f64)> {
+        let d = &v["data"];
+        let ids = d["id"].as_array().unwrap().iter().map(|i| i.as_u64().unwrap());
+        let cur = d["cur"].as_array().unwrap().iter().map(|c| (c[0].as_f64().unwrap(), c[1].as_f64().unwrap()));
+        ids.zip(cur).collect()
+    };
+    let (ours, theirs) = (&rec.topics["/flow/tracks"].frames, &rec.topics["/opencv/tracks"].frames);
+    let (mut tracked, mut found, mut dist) = (0usize, 0usize, Vec::new());
+    for (seq, msg) in ours {
+        let a = points(msg);
+        tracked += a.len();
+        let Some(b) = theirs.get(seq).map(points) else { continue };
+        found += b.len();
+        for (id, (x, y)) in b {
+            let (ax, ay) = a[&id];
+            dist.push((x - ax).hypot(y - ay));
+        }
+    }
+    dist.sort_by(f64::total_cmp);
+    let median = dist[dist.len() / 2];
+    // The front-end tests' bounds against OpenCV (vision/tests/frontend.rs).
+    assert!(tracked > 5000, "{tracked} tracks");
+    assert!(found as f64 >= 0.95 * tracked as f64, "OpenCV found {found} of lk_flow's {tracked} tracks");
+    assert!(median < 0.05, "median distance between lk_flow's and OpenCV's tracks: {median} px");
+}
+
+#[cfg(unix)]
+#[test]
+fn ctrl_c_stops_a_run_stuck_in_python_and_the_recording_is_whole() {
+    let Some(mut py) = dynaflow_with_numpy("python: Ctrl-C with an operator stuck in Python") else {
+        return;
+    };
+    let dir = common::TempDir::new("python-stuck");
+    let d = dir.path();
+    let marker = d.join("asleep");
+    let body = format!(
+        "    def process(self, frame):\n        if frame.seq == 2:\n            open({:?}, 'w').close()\n            import time\n            time.sleep(10 ** 6)\n        return None\n",
+        marker.display().to_string()
+    );
+    let g = graph(d, "stuck.py", "Rule", &(GOOD_HEAD.to_owned() + &body));
+    let child = py
+        .args(["run", "--no-progress", "--record", "mcap", "--out"])
+        .arg(d.join("out"))
+        .arg(&g)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let t = std::time::Instant::now();
+    while !marker.exists() {
+        assert!(t.elapsed() < std::time::Duration::from_secs(120), "the operator never reached frame 2");
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
+    let sent = std::time::Instant::now();
+    assert!(Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let out = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    // The engine waits its grace period (10 s) for in-flight frames, then cancels the node:
+    // the sleeping Python call is abandoned, the recorders close their files.
+    assert_eq!(out.status.code(), Some(130), "{err}");
+    assert!(sent.elapsed() < std::time::Duration::from_secs(60), "{err}");
+    assert!(err.contains("cancelling"), "{err}");
+    let rec = dynaflow_recordings::diff::read_mcap(&d.join("out/py.mcap")).unwrap();
+    assert!(!rec.truncated);
+    assert!(rec.topics["/camera/rgb"].frames.len() >= 3);
 }

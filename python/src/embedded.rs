@@ -222,6 +222,16 @@ impl Operator for PythonOp {
                     declared.join(", ")
                 ))
             })?;
+            // Every declared port is answered (`None`: nothing this frame), so a misspelt or
+            // forgotten key is an error, not a silently empty port.
+            if let Some(missing) = self.declared.outputs.iter().find(|p| !ret.contains(p.name).unwrap_or(false)) {
+                return Err(OpError::Failed(format!(
+                    "{}.process returned no `{}` at frame {seq}: return every declared output ({}), `None` for nothing this frame, or `None` for the whole frame",
+                    self.class,
+                    missing.name,
+                    declared.join(", ")
+                )));
+            }
             for (k, v) in ret.iter() {
                 let name: String = k.extract().unwrap_or_default();
                 let Some(port) = self.declared.outputs.iter().find(|p| p.name == name) else {
