@@ -5,6 +5,7 @@
 
 use dynaflow_engine::op::Registry;
 
+pub mod cli;
 pub mod summary;
 
 /// Every operator dynaflow ships: the `dynaflow-operators` families plus the recording-backed
@@ -26,8 +27,8 @@ pub fn registry() -> Registry {
 /// blocks of its arenas otherwise stayed resident and grew with the run). jemalloc hands
 /// back unused pages itself, from a background thread, and reuses size classes without that
 /// cost; measured when chosen (docs/recordings.md, "Long runs in bounded memory"). Not on MSVC, which jemalloc does
-/// not build for.
-#[cfg(not(target_env = "msvc"))]
+/// not build for, and not in the Python package (feature `jemalloc` off: the host's allocator).
+#[cfg(all(feature = "jemalloc", not(target_env = "msvc")))]
 #[global_allocator]
 static GLOBAL: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 
@@ -37,7 +38,7 @@ static GLOBAL: tikv_jemallocator::Jemalloc = tikv_jemallocator::Jemalloc;
 /// pages freed over 10 s of a run (10 s of image buffers) stay resident: 280 MB peak at 1 000
 /// recorded frames, against 235 MB with 100 ms; purging at once (0 ms) on the freeing threads
 /// made the run 35 % slower.
-#[cfg(not(target_env = "msvc"))]
+#[cfg(all(feature = "jemalloc", not(target_env = "msvc")))]
 #[allow(unsafe_code)]
 // SAFETY: jemalloc reads this symbol as a `const char *` to a NUL-terminated string, which
 // `Option<&c_char>` has the layout of; the string is static.

@@ -238,3 +238,57 @@ fn ctrl_c_stops_a_run_stuck_in_python_and_the_recording_is_whole() {
     assert!(!rec.truncated);
     assert!(rec.topics["/camera/rgb"].frames.len() >= 3);
 }
+
+#[test]
+fn the_python_package_runs_a_graph_and_its_recording_gives_back_the_ate() {
+    // `scripts/test.sh` installs the package (`pip install .`) into a fresh virtual
+    // environment and names it in DYNAFLOW_PY_PACKAGE.
+    let comparison = "python: the dynaflow package installed by pip";
+    let venv = std::env::var_os("DYNAFLOW_PY_PACKAGE").map(std::path::PathBuf::from);
+    let probe = || match &venv {
+        Some(v) if v.join("bin/python").exists() => Ok(()),
+        _ => Err("DYNAFLOW_PY_PACKAGE names no environment with the package (scripts/test.sh makes it)".to_owned()),
+    };
+    if !common::peers::peer_runs("numpy", comparison, probe) {
+        return;
+    }
+    let venv = venv.unwrap();
+    let dir = common::TempDir::new("python-package");
+    let script = r#"
+import json, sys
+import dynaflow
+graph, out = sys.argv[1], sys.argv[2]
+s = dynaflow.run(graph, out=out, frames=60, record="mcap")
+rec = dynaflow.Recording(s.path.with_name(s.path.name.replace(".summary.json", ".mcap")))
+est, gt = rec.poses("/track/pose"), rec.poses("/camera/gt_pose")
+report = dynaflow.eval(gt, est, align=s.ate["align"])
+try:
+    dynaflow.run(graph, out=out, set={"camera.nonsense": 1})
+    bad = None
+except dynaflow.RunError as e:
+    bad = e.status
+# A graph with a Python operator, run from Python: the operator runs in this interpreter.
+py_op = dynaflow.run(sys.argv[3], out=out, frames=10)
+print(json.dumps({"py_op_frames": py_op.frames, "py_op_status": py_op.status, "summary": s.ate["rmse"], "eval": report["ate"]["rmse"], "pairs": s.ate["pairs"],
+                  "matched": report["matched"], "rows": len(est), "graph": rec.provenance.get("graph"),
+                  "bad": bad, "version": dynaflow.version()}))
+"#;
+    let o = Command::new(venv.join("bin/python"))
+        .args(["-c", script])
+        .arg(common::repo().join("graphs/orb_baseline.yaml"))
+        .arg(dir.path())
+        .arg(common::repo().join("examples/python/cull_flow.yaml"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let r: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    let (summary, eval) = (r["summary"].as_f64().unwrap(), r["eval"].as_f64().unwrap());
+    // The trajectory read back from the recording, evaluated from Python, is the run's own ATE.
+    assert_eq!(r["rows"], 60, "{r}");
+    assert_eq!(r["matched"], r["pairs"], "{r}");
+    assert!((summary - eval).abs() <= 1e-9 * summary.max(1e-3), "summary ATE {summary} vs dynaflow.eval {eval}");
+    assert_eq!(r["bad"], 2, "an unknown parameter is bad input: {r}");
+    assert_eq!(r["version"], env!("CARGO_PKG_VERSION"));
+    assert_eq!((r["py_op_frames"].as_u64(), r["py_op_status"].as_str()), (Some(10), Some("completed")), "{r}");
+}

@@ -24,7 +24,7 @@ use dynaflow_engine::{LoadRequest, Loaded};
 /// Load a graph with the shipped operators; print diagnostics (rich on a terminal, plain
 /// `file:line:col: …` otherwise). `None` when it cannot run.
 pub fn load_and_report(path: &Path, req: &LoadRequest) -> Option<Loaded> {
-    let registry = dynaflow::registry();
+    let registry = crate::registry();
     let loaded = match dynaflow_engine::load(path, &registry, req) {
         Ok(l) => l,
         Err(e) => {

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use dynaflow_octomap::{OcTree, read};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
 /// `dynaflow octree` arguments.
 #[derive(Debug, clap::Args)]
@@ -66,7 +66,7 @@ pub fn octree(args: &OctreeArgs) -> u8 {
         }
         let img = plot(&tree, &occupied, lo, hi, args.scale);
         let (w, h) = img.dimensions();
-        if let Err(e) = crate::plot::save_png(w, h, image::ExtendedColorType::Rgb8, img.as_raw(), out) {
+        if let Err(e) = crate::cli::plot::save_png(w, h, image::ExtendedColorType::Rgb8, img.as_raw(), out) {
             eprintln!("error: {e}");
             return EXIT_FAILED;
         }

@@ -247,7 +247,7 @@ pub(super) fn plots(jobs: &[Job], rows: &[Row], out: &Path) -> Result<(), String
         let oracle = if r.oracle { " (oracle)" } else { "" };
         let title =
             format!("{} {}{oracle} {}: ATE {:.2} cm", j.name, j.variant_name(), j.sequence(), 100.0 * e.ate.rmse);
-        crate::plot::evaluation(&e, &title, &j.dir.join("trajectory.png"))?;
+        crate::cli::plot::evaluation(&e, &title, &j.dir.join("trajectory.png"))?;
     }
     let runs: Vec<(String, &Row)> = jobs
         .iter()
@@ -261,8 +261,8 @@ pub(super) fn plots(jobs: &[Job], rows: &[Row], out: &Path) -> Result<(), String
             ate.entry(label.clone()).or_default().push(100.0 * a[0]);
         }
     }
-    crate::plot::boxes(&ate, "ATE rmse per variant (cm), over sequences", &out.join("ate.png"))?;
+    crate::cli::plot::boxes(&ate, "ATE rmse per variant (cm), over sequences", &out.join("ate.png"))?;
     let stacks: Vec<(String, Vec<(String, f64)>)> =
         runs.iter().filter(|(_, r)| !r.nodes.is_empty()).map(|(label, r)| (label.clone(), r.nodes.clone())).collect();
-    crate::plot::stacked(&stacks, "busy ms per frame, per node", &out.join("time.png"))
+    crate::cli::plot::stacked(&stacks, "busy ms per frame, per node", &out.join("time.png"))
 }

@@ -10,7 +10,7 @@ use dynaflow_slam::bow::Vocabulary;
 use dynaflow_vision::GrayImage;
 use dynaflow_vision::orb::{OrbConfig, OrbExtractor};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
 /// `dynaflow vocab` commands.
 #[derive(Debug, clap::Subcommand)]

@@ -2,7 +2,7 @@
 
 use std::path::Path;
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
 /// The rerun version our recordings are written with; the viewer must match.
 const RERUN_VERSION: &str = "0.36.3";

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use dynaflow_recordings::diff::{self, Tolerance};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
 /// `dynaflow diff` arguments.
 #[derive(Debug, clap::Args)]

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use dynaflow_recordings::merge::{Input, merge_mcap, merge_rrd};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
 /// `dynaflow merge` arguments.
 #[derive(Debug, clap::Args)]

@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use dynaflow_engine::msg::{Image, PixelFormat};
 use dynaflow_operators::inference::{Backend, InputRange, load_segmenter, segment_frame};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
 /// `dynaflow segment` arguments.
 #[derive(Debug, clap::Args)]
@@ -102,7 +102,7 @@ pub fn segment(args: &SegmentArgs) -> u8 {
         return EXIT_BAD_INPUT;
     }
     for (k, path) in args.images.iter().enumerate() {
-        let rgb = match crate::plot::open_image(path) {
+        let rgb = match crate::cli::plot::open_image(path) {
             Ok(i) => i.into_rgb8(),
             Err(e) => {
                 eprintln!("error: {}: {e}", path.display());
@@ -121,7 +121,7 @@ pub fn segment(args: &SegmentArgs) -> u8 {
         let stem = &stems[k];
         let png = args.out.join(format!("{stem}.png"));
         let bytes: Vec<u8> = classes.iter().map(|&c| c as u8).collect();
-        let written = crate::plot::png_bytes(w, h, image::ExtendedColorType::L8, &bytes)
+        let written = crate::cli::plot::png_bytes(w, h, image::ExtendedColorType::L8, &bytes)
             .and_then(|b| dynaflow_engine::files::write_atomic(&png, &b).map_err(|e| e.to_string()));
         if let Err(e) = written {
             eprintln!("error: cannot write {}: {e}", png.display());

@@ -7,7 +7,7 @@ use dynaflow_infer::detect::Detector;
 use dynaflow_infer::onnx;
 use dynaflow_operators::inference::{Backend, COCO_NAMES, DecoderName, Runner, YOLOX_NANO};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
 /// `dynaflow infer` arguments.
 #[derive(Debug, clap::Args)]
@@ -78,7 +78,7 @@ pub fn infer(args: &InferArgs) -> u8 {
     let names: Vec<&str> = COCO_NAMES.lines().collect();
     let mut out = std::io::stdout().lock();
     for path in &args.images {
-        let img = match crate::plot::open_image(path) {
+        let img = match crate::cli::plot::open_image(path) {
             Ok(i) => i.into_rgb8(),
             Err(e) => {
                 eprintln!("error: {}: {e}", path.display());

@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use dynaflow_ros::Bag;
 use dynaflow_ros::inspect::{ROLES, inspect as inventory};
 
-use crate::{EXIT_BAD_INPUT, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_OK};
 
 /// `dynaflow inspect` arguments.
 #[derive(Debug, clap::Args)]

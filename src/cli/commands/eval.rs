@@ -6,7 +6,7 @@ use std::path::PathBuf;
 use dynaflow_datasets::tum::read_trajectory;
 use dynaflow_slam::eval::{Align, RpeDelta, Stats, evaluate_with};
 
-use crate::{EXIT_BAD_INPUT, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_OK};
 
 /// `dynaflow eval` arguments.
 #[derive(Debug, clap::Args)]
@@ -50,7 +50,7 @@ fn row(name: &str, unit: &str, s: &Stats) -> String {
 /// Whether `path` is a EuRoC ground-truth CSV: its first data line (not blank, not a `#`
 /// comment, which may hold commas in either format) has commas (a TUM file separates with
 /// spaces).
-fn is_euroc_csv(path: &std::path::Path) -> bool {
+pub fn is_euroc_csv(path: &std::path::Path) -> bool {
     use std::io::BufRead;
     std::fs::File::open(path)
         .ok()
@@ -125,7 +125,7 @@ pub fn eval(args: &EvalArgs) -> u8 {
             return EXIT_BAD_INPUT;
         }
         let title = format!("{} vs {}", args.est.display(), args.gt.display());
-        if let Err(e) = crate::plot::evaluation(&result, &title, path) {
+        if let Err(e) = crate::cli::plot::evaluation(&result, &title, path) {
             // The path is the user's input: a folder that does not exist, one not writable.
             eprintln!("error: {e}");
             return EXIT_BAD_INPUT;

@@ -4,11 +4,11 @@ use std::path::PathBuf;
 
 use dynaflow_engine::LoadRequest;
 
-use crate::{EXIT_BAD_INPUT, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_OK};
 
 pub fn validate(graphs: &[PathBuf], json: bool) -> u8 {
     let req = LoadRequest { all_variants: true, ..LoadRequest::default() };
-    let registry = dynaflow::registry();
+    let registry = crate::registry();
     let mut bad = false;
     let mut all = Vec::new();
     for path in graphs {

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use dynaflow_recordings::diff::compare::{read_run, write_compare};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
 /// `dynaflow compare` arguments.
 #[derive(Debug, clap::Args)]

@@ -3,7 +3,7 @@
 
 use dynaflow_engine::op::{InputRole, OpKind, OpSpec, ParamSpec, PortSpec};
 
-use crate::EXIT_OK;
+use crate::cli::EXIT_OK;
 
 pub enum Format {
     Text,
@@ -12,7 +12,7 @@ pub enum Format {
 }
 
 pub fn ops(format: &Format) -> u8 {
-    let registry = dynaflow::registry();
+    let registry = crate::registry();
     let ops: Vec<&OpSpec> = registry.iter().collect();
     match format {
         Format::Json => say!("{}", serde_json::to_string_pretty(&ops).unwrap_or_default()),

@@ -10,12 +10,12 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::{Arc, Mutex};
 
-use dynaflow::summary::{NodeReport, Summary};
+use crate::summary::{NodeReport, Summary};
 use dynaflow_engine::LoadRequest;
 use dynaflow_engine::files::RunFiles;
 use dynaflow_slam::eval::{Align, evaluate};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK};
 
 mod results;
 
@@ -131,7 +131,7 @@ fn sequence_names(inputs: &[PathBuf]) -> Vec<String> {
 }
 
 fn jobs(args: &BenchArgs) -> Result<Vec<Job>, String> {
-    let registry = dynaflow::registry();
+    let registry = crate::registry();
     let mut out = Vec::new();
     let inputs: Vec<(Option<PathBuf>, String)> = if args.inputs.is_empty() {
         vec![(None, "synthetic".to_owned())]

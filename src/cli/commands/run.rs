@@ -4,7 +4,7 @@ use std::io::IsTerminal;
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use dynaflow::summary::Summary;
+use crate::summary::Summary;
 use dynaflow_engine::files::RunFiles;
 use dynaflow_engine::runtime::{self, RunOptions, RunStatus};
 use dynaflow_engine::sink::{DigestSink, Sink};
@@ -13,7 +13,7 @@ use dynaflow_engine::{LoadRequest, SourceOverride};
 use dynaflow_recordings::mcap::DEFAULT_FLUSH_INTERVAL;
 use dynaflow_recordings::{EncodeCache, ImageCodec, LiveSink, McapSink, MessageLog, Ros2Sink, RrdSink};
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, RunArgs};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK, RunArgs};
 
 /// A run that could not start, as a located diagnostic where an operator refused one of its
 /// parameters: at the parameter in the file (or its node, for a default), naming the `--set`
@@ -28,7 +28,7 @@ fn build_error(loaded: &dynaflow_engine::Loaded, req: &LoadRequest, e: &runtime:
     let span = spec.map(|n| n.params.iter().find(|(k, _)| &k.text == key).map_or(n.id_span, |(k, _)| k.span));
     // The flag that gave the value: a `--set`, or `--save-map`/`--load-map`/`--localise`.
     let map_flags =
-        loaded.spec.as_ref().and_then(|s| req.map.overrides(s, &dynaflow::registry()).ok()).unwrap_or_default();
+        loaded.spec.as_ref().and_then(|s| req.map.overrides(s, &crate::registry()).ok()).unwrap_or_default();
     let set = req.overrides.iter().chain(&map_flags).rev().find(|o| &o.node == node && &o.param == key);
     let from = set.map_or_else(String::new, |o| format!("`{}`: ", o.text));
     let d = Diagnostic::error("param-value", span, format!("{from}node `{node}`: param `{key}`: {message}"));
@@ -253,7 +253,9 @@ fn execute(graph: &ResolvedGraph, args: &RunArgs, sinks: Vec<Box<dyn Sink>>) -> 
     let result = rt.block_on(async {
         // A second signal aborts at once: the CLI owns the exit code (130, as a shell reports
         // a SIGINT).
-        runtime::stop_on_signals(options.stop.clone(), || std::process::exit(i32::from(EXIT_INTERRUPTED)));
+        if crate::cli::handles_signals() {
+            runtime::stop_on_signals(options.stop.clone(), || std::process::exit(i32::from(EXIT_INTERRUPTED)));
+        }
         let progress = show_progress.then(|| spawn_progress(&options));
         let mut options = options.clone();
         let wire = match join_machines(graph, args).await {

@@ -9,7 +9,7 @@ use dynaflow_datasets::synth::{
     rig_calibration, scaled_fr3, write_euroc, write_kitti, write_tum,
 };
 
-use crate::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 
 /// `dynaflow synth` arguments.
 #[derive(Debug, clap::Args)]

@@ -5,7 +5,7 @@ use std::path::Path;
 use dynaflow_engine::LoadRequest;
 use dynaflow_engine::spec::{Join, QueuePolicy, ResolvedGraph};
 
-use crate::{EXIT_BAD_INPUT, EXIT_OK};
+use crate::cli::{EXIT_BAD_INPUT, EXIT_OK};
 
 pub fn graph(path: &Path, dot: bool, variant: Option<String>) -> u8 {
     let req = LoadRequest { variant, ..LoadRequest::default() };
