@@ -26,12 +26,13 @@ log="$target/test-output.txt"
 cargo test --workspace --release --features zenoh,python --no-run "$@" 2>&1 | tee "$target/build-output.txt"
 status=${PIPESTATUS[0]}
 # dynaflow as a Python package: `pip install .` into a fresh virtual environment (maturin,
-# pinned, builds the extension module into the same target folder); tests/python.rs imports
-# it from there.
+# pinned, builds the extension module into the same target folder; matplotlib for the
+# ablation example); tests/python.rs imports it from there.
 pkg="$target/py-package"
 if [ "$status" -eq 0 ]; then
   rm -rf "$pkg" && python3 -m venv "$pkg" &&
-    "$pkg/bin/pip" install -q --disable-pip-version-check maturin==1.16.0 "numpy==$(sed -n 's/^numpy==//p' tests/peers/requirements.txt)" &&
+    "$pkg/bin/pip" install -q --disable-pip-version-check maturin==1.16.0 matplotlib==3.11.2 \
+      "numpy==$(sed -n 's/^numpy==//p' tests/peers/requirements.txt)" &&
     PATH="$pkg/bin:$PATH" "$pkg/bin/pip" install -q --disable-pip-version-check --no-build-isolation . 2>&1 | tee -a "$target/build-output.txt"
   status=${PIPESTATUS[0]}
   [ "$status" -eq 0 ] || echo "error: pip install . failed" >&2

@@ -292,3 +292,74 @@ print(json.dumps({"py_op_frames": py_op.frames, "py_op_status": py_op.status, "s
     assert_eq!(r["version"], env!("CARGO_PKG_VERSION"));
     assert_eq!((r["py_op_frames"].as_u64(), r["py_op_status"].as_str()), (Some(10), Some("completed")), "{r}");
 }
+
+#[test]
+fn the_notebook_style_ablation_runs_from_python_and_plots_each_rows_ate() {
+    let comparison = "python: the ablation script (dynaflow package, matplotlib)";
+    let venv = std::env::var_os("DYNAFLOW_PY_PACKAGE").map(std::path::PathBuf::from);
+    let probe = || match &venv {
+        Some(v)
+            if Command::new(v.join("bin/python"))
+                .args(["-c", "import dynaflow, matplotlib"])
+                .output()
+                .is_ok_and(|o| o.status.success()) =>
+        {
+            Ok(())
+        }
+        _ => Err("DYNAFLOW_PY_PACKAGE names no environment with dynaflow and matplotlib (scripts/test.sh makes it)"
+            .to_owned()),
+    };
+    if !common::peers::peer_runs("numpy", comparison, probe) {
+        return;
+    }
+    let venv = venv.unwrap();
+    let dir = common::TempDir::new("python-ablation");
+    let o = Command::new(venv.join("bin/python"))
+        .arg(common::repo().join("examples/python/ablation.py"))
+        .args(["--frames", "40", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let r: serde_json::Value = serde_json::from_str(stdout.lines().last().unwrap()).unwrap();
+    let rows = r["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 3, "{r}");
+    // Each row's ATE is its run's (read back from the summary the run wrote), and a table line.
+    for row in rows {
+        let s = common::summary(std::path::Path::new(row["summary"].as_str().unwrap()));
+        assert_eq!(row["ate_rmse"].as_f64(), s.ate.map(|a| a.rmse), "{row}");
+        assert!(stdout.contains(row["label"].as_str().unwrap()), "{stdout}");
+    }
+    // The chart: a PNG of the size the script draws (6 x 3.2 in at 100 dpi).
+    let plot = image::open(r["plot"].as_str().unwrap()).unwrap();
+    assert_eq!((plot.width(), plot.height()), (600, 320));
+}
+
+#[test]
+fn two_python_nodes_draw_from_their_own_seeded_generators_run_after_run() {
+    let Some(_) = dynaflow_with_numpy("python: seeded generators") else {
+        return;
+    };
+    let dir = common::TempDir::new("python-seeded");
+    let d = dir.path();
+    std::fs::write(
+        d.join("draw.py"),
+        "class Draw:\n    inputs = {\"tracks\": \"tracks\"}\n    outputs = {\"draw\": \"scalars\"}\n\n    def __init__(self, params, rng):\n        self.rng = rng\n\n    def process(self, frame):\n        return {\"draw\": {\"numpy\": float(self.rng.random()), \"seed\": float(frame.seed % 2**52)}}\n",
+    )
+    .unwrap();
+    let yaml = "name: draw\nnodes:\n  camera:\n    op: synth\n    params: { frames: 6, width: 160, height: 120 }\n  flow:\n    op: lk_flow\n    in: { image: camera.rgb }\n  a:\n    op: python\n    in: { tracks: flow.tracks }\n    params: { module: draw.py, class: Draw }\n  b:\n    op: python\n    in: { tracks: flow.tracks }\n    params: { module: draw.py, class: Draw }\n";
+    std::fs::write(d.join("draw.yaml"), yaml).unwrap();
+    let digests = |seed: &str, out: &str| {
+        let mut cmd = common::bin();
+        cmd.env("VIRTUAL_ENV", common::peers::venv());
+        let o = run(&mut cmd, &d.join("draw.yaml"), &d.join(out), &["--digest", "--record", "none", "--seed", seed]);
+        assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+        let s = common::summary(&d.join(out).join("draw.summary.json")).digests.unwrap();
+        (s["a/draw"].digest.clone(), s["b/draw"].digest.clone())
+    };
+    let (first, again, other) = (digests("1", "r1"), digests("1", "r2"), digests("2", "r3"));
+    assert_eq!(first, again, "the same seed draws the same numbers");
+    assert_ne!(first.0, first.1, "two nodes draw from generators of their own");
+    assert_ne!(first.0, other.0, "another graph seed draws others");
+}
