@@ -381,7 +381,10 @@ fn lookup_op<'r>(
             Err(message) => {
                 diags.push(
                     Diagnostic::error("op-declaration", n.op_span, format!("node `{}`: {message}", n.id)).with_hint(
-                        format!("`{0}` declares the node's ports from its `params` (`dynaflow ops {0}`)", op.name),
+                        format!(
+                            "`{}` reads this node's ports and parameters from its `params` when the graph is validated",
+                            op.name
+                        ),
                     ),
                 );
                 None
