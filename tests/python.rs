@@ -12,17 +12,30 @@ mod common;
 use std::path::Path;
 use std::process::Command;
 
+/// Whether the environment `venv` imports `modules` (`numpy, cv2`): the probe of a peer.
+fn imports(venv: &Path, modules: &str) -> Result<(), String> {
+    let ok = Command::new(venv.join("bin/python"))
+        .args(["-c", &format!("import {modules}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if ok { Ok(()) } else { Err(format!("{}/bin/python cannot import {modules}", venv.display())) }
+}
+
+/// The environment `scripts/test.sh` installs the package into (`DYNAFLOW_PY_PACKAGE`), if
+/// it imports `modules`.
+fn package_env(comparison: &str, modules: &str) -> Option<std::path::PathBuf> {
+    let venv = std::env::var_os("DYNAFLOW_PY_PACKAGE").map(std::path::PathBuf::from);
+    let probe = || match &venv {
+        Some(v) => imports(v, modules),
+        None => Err("DYNAFLOW_PY_PACKAGE names no environment with the package (scripts/test.sh makes it)".to_owned()),
+    };
+    if common::peers::peer_runs("numpy", comparison, probe) { venv } else { None }
+}
+
 /// `dynaflow` with the peers' environment active, if it has numpy.
 fn dynaflow_with_numpy(comparison: &str) -> Option<Command> {
     let venv = common::peers::venv();
-    let probe = || {
-        let ok = Command::new(venv.join("bin/python"))
-            .args(["-c", "import numpy"])
-            .output()
-            .is_ok_and(|o| o.status.success());
-        if ok { Ok(()) } else { Err(format!("{}/bin/python cannot import numpy", venv.display())) }
-    };
-    if !common::peers::peer_runs("numpy", comparison, probe) {
+    if !common::peers::peer_runs("numpy", comparison, || imports(&venv, "numpy")) {
         return None;
     }
     let mut cmd = common::bin();
@@ -158,13 +171,7 @@ fn opencv_lk_in_python_agrees_with_lk_flow() {
     let Some(mut py) = dynaflow_with_numpy(comparison) else {
         return;
     };
-    let venv = common::peers::venv();
-    let cv2 = || {
-        let ok =
-            Command::new(venv.join("bin/python")).args(["-c", "import cv2"]).output().is_ok_and(|o| o.status.success());
-        if ok { Ok(()) } else { Err(format!("{}/bin/python cannot import cv2", venv.display())) }
-    };
-    if !common::peers::peer_runs("opencv", comparison, cv2) {
+    if !common::peers::peer_runs("opencv", comparison, || imports(&common::peers::venv(), "cv2")) {
         return;
     }
     let dir = common::TempDir::new("python-opencv-lk");
@@ -244,15 +251,9 @@ fn the_python_package_runs_a_graph_and_its_recording_gives_back_the_ate() {
     // `scripts/test.sh` installs the package (`pip install .`) into a fresh virtual
     // environment and names it in DYNAFLOW_PY_PACKAGE.
     let comparison = "python: the dynaflow package installed by pip";
-    let venv = std::env::var_os("DYNAFLOW_PY_PACKAGE").map(std::path::PathBuf::from);
-    let probe = || match &venv {
-        Some(v) if v.join("bin/python").exists() => Ok(()),
-        _ => Err("DYNAFLOW_PY_PACKAGE names no environment with the package (scripts/test.sh makes it)".to_owned()),
-    };
-    if !common::peers::peer_runs("numpy", comparison, probe) {
+    let Some(venv) = package_env(comparison, "dynaflow") else {
         return;
-    }
-    let venv = venv.unwrap();
+    };
     let dir = common::TempDir::new("python-package");
     let script = r#"
 import json, sys
@@ -296,23 +297,9 @@ print(json.dumps({"py_op_frames": py_op.frames, "py_op_status": py_op.status, "s
 #[test]
 fn the_notebook_style_ablation_runs_from_python_and_plots_each_rows_ate() {
     let comparison = "python: the ablation script (dynaflow package, matplotlib)";
-    let venv = std::env::var_os("DYNAFLOW_PY_PACKAGE").map(std::path::PathBuf::from);
-    let probe = || match &venv {
-        Some(v)
-            if Command::new(v.join("bin/python"))
-                .args(["-c", "import dynaflow, matplotlib"])
-                .output()
-                .is_ok_and(|o| o.status.success()) =>
-        {
-            Ok(())
-        }
-        _ => Err("DYNAFLOW_PY_PACKAGE names no environment with dynaflow and matplotlib (scripts/test.sh makes it)"
-            .to_owned()),
-    };
-    if !common::peers::peer_runs("numpy", comparison, probe) {
+    let Some(venv) = package_env(comparison, "dynaflow, matplotlib") else {
         return;
-    }
-    let venv = venv.unwrap();
+    };
     let dir = common::TempDir::new("python-ablation");
     let o = Command::new(venv.join("bin/python"))
         .arg(common::repo().join("examples/python/ablation.py"))

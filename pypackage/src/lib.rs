@@ -21,16 +21,8 @@ enum Trajectory {
 impl Trajectory {
     fn poses(self) -> PyResult<Vec<dynaflow_slam::eval::Stamped>> {
         match self {
-            Self::Path(p) => {
-                let path = std::path::Path::new(&p);
-                if dynaflow::cli::is_euroc_csv(path) {
-                    dynaflow_datasets::euroc::read_ground_truth_csv(path)
-                        .map(|g| g.into_iter().map(|g| (g.stamp, g.world_from_body)).collect())
-                        .map_err(|e| PyOSError::new_err(e.to_string()))
-                } else {
-                    dynaflow_datasets::tum::read_trajectory(path).map_err(|e| PyOSError::new_err(e.to_string()))
-                }
-            }
+            // As `dynaflow eval` reads its ground truth: a EuRoC CSV or a TUM file.
+            Self::Path(p) => dynaflow::cli::read_ground_truth(std::path::Path::new(&p)).map_err(PyOSError::new_err),
             Self::Rows(rows) => rows
                 .iter()
                 .map(|r| {

@@ -330,6 +330,11 @@ fn bools(v: &Bound<'_, PyAny>, what: &str) -> Result<Vec<bool>, String> {
     Ok(read_rows::<u8>(&bytes, what, "bool", None, None)?.into_iter().map(|b| b != 0).collect())
 }
 
+/// The dict's `key`, unless absent or `None` (an optional field left out).
+fn optional<'py>(d: &Bound<'py, PyDict>, key: &str) -> Option<Bound<'py, PyAny>> {
+    d.get_item(key).ok().flatten().filter(|x| !x.is_none())
+}
+
 fn field<'py>(d: &Bound<'py, PyDict>, port: &str, key: &str) -> Result<Bound<'py, PyAny>, String> {
     d.get_item(key).ok().flatten().ok_or_else(|| format!("`{port}`: the dict has no `{key}` field"))
 }
@@ -377,7 +382,7 @@ pub(crate) fn from_py(ty: PortType, port: &str, v: &Bound<'_, PyAny>) -> Result<
             let [h, w] = shape.as_slice() else {
                 return Err(format!("`{port}`.classes: expected shape (H, W), got {shape:?}"));
             };
-            let instances = match d.get_item("instances").ok().flatten().filter(|i| !i.is_none()) {
+            let instances = match optional(d, "instances") {
                 Some(i) => {
                     let (data, s) = read::<u16>(&i, &format!("`{port}`.instances"), "uint16")?;
                     if s != shape {
@@ -435,17 +440,17 @@ pub(crate) fn from_py(ty: PortType, port: &str, v: &Bound<'_, PyAny>) -> Result<
             let xy = read_rows::<f32>(&field(d, port, "xy")?, &w("xy"), "float32", None, Some(2))?;
             let n = xy.len() / 2;
             let opt = |k: &str, default: f32| -> Result<Vec<f32>, String> {
-                match d.get_item(k).ok().flatten().filter(|x| !x.is_none()) {
+                match optional(d, k) {
                     Some(x) => read_rows::<f32>(&x, &w(k), "float32", Some(n), None),
                     None => Ok(vec![default; n]),
                 }
             };
             let (size, angle, response) = (opt("size", 31.0)?, opt("angle", -1.0)?, opt("response", 0.0)?);
-            let octave = match d.get_item("octave").ok().flatten().filter(|x| !x.is_none()) {
+            let octave = match optional(d, "octave") {
                 Some(x) => read_rows::<u8>(&x, &w("octave"), "uint8", Some(n), None)?,
                 None => vec![0; n],
             };
-            let descriptors = match d.get_item("descriptors").ok().flatten().filter(|x| !x.is_none()) {
+            let descriptors = match optional(d, "descriptors") {
                 Some(x) => {
                     let (data, shape) = read::<u8>(&x, &w("descriptors"), "uint8")?;
                     if shape.len() != 2 || shape[0] != n {
@@ -475,7 +480,7 @@ pub(crate) fn from_py(ty: PortType, port: &str, v: &Bound<'_, PyAny>) -> Result<
             let n = ids.len();
             let prev = read_rows::<f32>(&field(d, port, "prev")?, &w("prev"), "float32", Some(n), Some(2))?;
             let cur = read_rows::<f32>(&field(d, port, "cur")?, &w("cur"), "float32", Some(n), Some(2))?;
-            let error = match d.get_item("error").ok().flatten().filter(|x| !x.is_none()) {
+            let error = match optional(d, "error") {
                 Some(x) => read_rows::<f32>(&x, &w("error"), "float32", Some(n), None)?,
                 None => vec![0.0; n],
             };
@@ -494,7 +499,7 @@ pub(crate) fn from_py(ty: PortType, port: &str, v: &Bound<'_, PyAny>) -> Result<
             let w = |k: &str| format!("`{port}`.{k}");
             let dynamic = bools(&field(d, port, "dynamic")?, &w("dynamic"))?;
             let n = dynamic.len();
-            let index = match d.get_item("index").ok().flatten().filter(|x| !x.is_none()) {
+            let index = match optional(d, "index") {
                 Some(x) => read_rows::<u32>(&x, &w("index"), "uint32", Some(n), None)?,
                 None => (0..n as u32).collect(),
             };
@@ -507,7 +512,7 @@ pub(crate) fn from_py(ty: PortType, port: &str, v: &Bound<'_, PyAny>) -> Result<
                 })
                 .collect::<Result<Vec<_>, _>>()?;
             let score = read_rows::<f32>(&field(d, port, "score")?, &w("score"), "float32", Some(n), None)?;
-            let at = match d.get_item("at").ok().flatten().filter(|x| !x.is_none()) {
+            let at = match optional(d, "at") {
                 Some(x) => read_rows::<f32>(&x, &w("at"), "float32", Some(n), Some(2))?,
                 None => vec![f32::NAN; 2 * n],
             };

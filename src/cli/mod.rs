@@ -15,7 +15,7 @@ macro_rules! say {
 pub(crate) mod commands;
 mod plot;
 
-pub use commands::eval::is_euroc_csv;
+pub use commands::eval::read_ground_truth;
 
 use std::path::PathBuf;
 

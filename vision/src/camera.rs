@@ -104,6 +104,13 @@ impl KannalaBrandt {
         Self { pinhole, k }
     }
 
+    /// The fisheye a camera-info message describes (its first four coefficients), or `None`
+    /// for another lens model.
+    pub fn from_camera_info(k: &dynaflow_msg::CameraInfo) -> Option<Self> {
+        let [k1, k2, k3, k4, _] = k.distortion;
+        (k.model == dynaflow_msg::LensModel::KannalaBrandt).then(|| Self::new(Pinhole::from(k), [k1, k2, k3, k4]))
+    }
+
     /// `theta_d` of `theta` and its derivative.
     fn radius(&self, theta: f64) -> (f64, f64) {
         let [k1, k2, k3, k4] = self.k;

@@ -32,14 +32,8 @@ pub enum Lens {
 impl Lens {
     /// The lens of a camera-info message.
     pub fn from_camera_info(k: &dynaflow_msg::CameraInfo) -> Self {
-        let pinhole = Pinhole::from(k);
-        match k.model {
-            dynaflow_msg::LensModel::KannalaBrandt => {
-                let [k1, k2, k3, k4, _] = k.distortion;
-                Self::KannalaBrandt(KannalaBrandt::new(pinhole, [k1, k2, k3, k4]))
-            }
-            _ => Self::BrownConrady { pinhole, k: k.distortion },
-        }
+        KannalaBrandt::from_camera_info(k)
+            .map_or_else(|| Self::BrownConrady { pinhole: Pinhole::from(k), k: k.distortion }, Self::KannalaBrandt)
     }
 
     /// Pixel of a point in the camera frame, as OpenCV's map builders compute it for a point

@@ -257,7 +257,7 @@ impl Generator {
             let next_parts = self.scene.people_parts(t1);
             let cam1_from_world = self.pose(k + 1).inverse();
             let k_ = &c.intrinsics;
-            let lens = render::fisheye(k_);
+            let lens = dynaflow_vision::camera::KannalaBrandt::from_camera_info(k_);
             r.hits
                 .iter()
                 .enumerate()

@@ -15,15 +15,6 @@ use super::texture::Texture;
 /// image must stay within 90 degrees of the axis: a z-depth has no meaning beyond).
 pub type Intrinsics = dynaflow_msg::CameraInfo;
 
-/// The fisheye of `k`, if it is one.
-pub(super) fn fisheye(k: &Intrinsics) -> Option<dynaflow_vision::camera::KannalaBrandt> {
-    use dynaflow_vision::camera::{KannalaBrandt, Pinhole};
-    (k.model == dynaflow_msg::LensModel::KannalaBrandt).then(|| {
-        let [k1, k2, k3, k4, _] = k.distortion;
-        KannalaBrandt::new(Pinhole::from(k), [k1, k2, k3, k4])
-    })
-}
-
 /// The ray through image point `(u, v)`, scaled to `z = 1`.
 fn ray(k: &Intrinsics, lens: Option<&dynaflow_vision::camera::KannalaBrandt>, u: f64, v: f64) -> Vector3<f64> {
     match lens {
@@ -412,7 +403,14 @@ fn render_rows(
 ) {
     let w = k.width as usize;
     let h = k.height as usize;
-    let rays = Rays { scene, objects, k, lens: fisheye(k), world_from_cam_rot, origin };
+    let rays = Rays {
+        scene,
+        objects,
+        k,
+        lens: dynaflow_vision::camera::KannalaBrandt::from_camera_info(k),
+        world_from_cam_rot,
+        origin,
+    };
     // Centre rays of a whole row (the ground truth: depth, class, flow anchor) and their
     // lit colours; the rows above and below decide which pixels straddle an edge.
     let centre_row = |v: usize| -> Vec<Seen> {

@@ -70,20 +70,29 @@ impl Undistort {
     }
 }
 
+/// That the `what` input (`width` x `height`, `len` `unit`s, `per_pixel` a pixel) is the
+/// camera's size.
+fn check_size(
+    what: &str,
+    (width, height): (u32, u32),
+    (len, unit): (usize, &str),
+    per_pixel: usize,
+    k: &CameraInfo,
+) -> Result<(), OpError> {
+    if (width, height) != (k.width, k.height) || len != width as usize * height as usize * per_pixel {
+        return Err(OpError::Input(format!(
+            "`{what}` is {width}x{height} with {len} {unit}; `camera_info` is {}x{}",
+            k.width, k.height
+        )));
+    }
+    Ok(())
+}
+
 /// `image` through `table`, checked against the camera's size.
 fn remap(table: &RemapTable, image: &Image, k: &CameraInfo, what: &str) -> Result<Image, OpError> {
     let (w, h) = (image.width as usize, image.height as usize);
     let channels = image.format.channels();
-    if (image.width, image.height) != (k.width, k.height) || image.data.len() != w * h * channels {
-        return Err(OpError::Input(format!(
-            "`{what}` is {}x{} with {} bytes; `camera_info` is {}x{}",
-            image.width,
-            image.height,
-            image.data.len(),
-            k.width,
-            k.height
-        )));
-    }
+    check_size(what, (image.width, image.height), (image.data.len(), "bytes"), channels, k)?;
     let mut data = Vec::new();
     table.remap_u8(&image.data, w, h, channels, &mut data);
     Ok(Image { width: image.width, height: image.height, format: image.format, data })
@@ -101,17 +110,8 @@ impl Operator for Undistort {
             new.clone(),
         );
         if let Some(depth) = DEPTH.get(inputs)? {
+            check_size("depth", (depth.width, depth.height), (depth.data.len(), "values"), 1, k)?;
             let (w, h) = (depth.width as usize, depth.height as usize);
-            if (depth.width, depth.height) != (k.width, k.height) || depth.data.len() != w * h {
-                return Err(OpError::Input(format!(
-                    "`depth` is {}x{} with {} values; `camera_info` is {}x{}",
-                    depth.width,
-                    depth.height,
-                    depth.data.len(),
-                    k.width,
-                    k.height
-                )));
-            }
             let mut data = Vec::new();
             table.remap_nearest(&depth.data, w, h, &mut data);
             out = out.send(&DEPTH_OUT, header.clone(), DepthImage { width: depth.width, height: depth.height, data });

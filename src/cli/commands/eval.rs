@@ -50,7 +50,7 @@ fn row(name: &str, unit: &str, s: &Stats) -> String {
 /// Whether `path` is a EuRoC ground-truth CSV: its first data line (not blank, not a `#`
 /// comment, which may hold commas in either format) has commas (a TUM file separates with
 /// spaces).
-pub fn is_euroc_csv(path: &std::path::Path) -> bool {
+fn is_euroc_csv(path: &std::path::Path) -> bool {
     use std::io::BufRead;
     std::fs::File::open(path)
         .ok()
@@ -63,18 +63,22 @@ pub fn is_euroc_csv(path: &std::path::Path) -> bool {
         .is_some_and(|l| l.contains(','))
 }
 
+/// A ground-truth trajectory: a EuRoC ground-truth CSV (the body's poses) or a TUM file, told
+/// apart by [`is_euroc_csv`]; the error names the file.
+pub fn read_ground_truth(path: &std::path::Path) -> Result<Vec<(f64, nalgebra::Isometry3<f64>)>, String> {
+    if is_euroc_csv(path) {
+        dynaflow_datasets::euroc::read_ground_truth_csv(path)
+            .map(|g| g.into_iter().map(|g| (g.stamp, g.world_from_body)).collect())
+            .map_err(|e| e.to_string())
+    } else {
+        read_trajectory(path).map_err(|e| e.to_string())
+    }
+}
+
 /// Exit 0 with the report, 2 on unreadable or incomparable input.
 pub fn eval(args: &EvalArgs) -> u8 {
     let read = |p: &PathBuf| read_trajectory(p).map_err(|e| eprintln!("error: {e}"));
-    let read_gt = |p: &PathBuf| {
-        if is_euroc_csv(p) {
-            dynaflow_datasets::euroc::read_ground_truth_csv(p)
-                .map(|g| g.into_iter().map(|g| (g.stamp, g.world_from_body)).collect())
-                .map_err(|e| eprintln!("error: {e}"))
-        } else {
-            read(p)
-        }
-    };
+    let read_gt = |p: &PathBuf| read_ground_truth(p).map_err(|e| eprintln!("error: {e}"));
     let (Ok(gt), Ok(est)) = (read_gt(&args.gt), read(&args.est)) else { return EXIT_BAD_INPUT };
     let align = match args.align.as_str() {
         "sim3" => Align::Sim3,
