@@ -310,6 +310,53 @@ variants:
 }
 
 #[test]
+fn variants_compose_in_order_and_two_setting_one_thing_differently_is_a_located_error() {
+    let text = r"name: v
+nodes:
+  cam: { op: testing.test_pattern, params: { frames: 5 } }
+  p: { op: passthrough, in: { input: cam.tick } }
+variants:
+  short: { cam: { params: { frames: 3 } } }
+  off: { p: { disabled: true } }
+  long: { cam: { params: { frames: 9 } } }
+  S+G: { p: { disabled: true } }
+  same: { cam: { params: { frames: 3 } } }
+";
+    let load = |v: &str| {
+        let req = LoadRequest { variant: Some(v.into()), ..LoadRequest::default() };
+        load_str("test.yaml", text, None, &dynaflow::registry(), &req)
+    };
+    let frames = |v: &str| {
+        let spec = load(v).spec.unwrap();
+        let (out, diags) = dynaflow_engine::spec::apply_variant(&spec, v).unwrap();
+        assert!(diags.is_empty(), "{v}: {diags:?}");
+        let cam = out.nodes.iter().find(|n| n.id == "cam").unwrap();
+        let f = cam.params.iter().find(|(k, _)| k.text == "frames").map(|(_, y)| format!("{:?}", y.kind)).unwrap();
+        (f, out.nodes.iter().find(|n| n.id == "p").unwrap().disabled)
+    };
+    // Both apply, whatever the order; a name with `+` of its own is taken whole first.
+    for v in ["short+off", "off+short", "S+G+short"] {
+        let (f, disabled) = frames(v);
+        assert!(f.contains("\"3\""), "{v}: {f}");
+        assert!(disabled, "{v}");
+        assert!(load(v).graph.is_some(), "{v}: {:?}", load(v).diagnostics);
+    }
+    // The same value twice is no conflict; the later of two values is an error at the later
+    // variant's patch, naming both.
+    assert!(load("short+same").graph.is_some());
+    let bad = load("short+long");
+    assert!(bad.graph.is_none());
+    let msgs: Vec<String> = bad.diagnostics.iter().map(|d| bad.source.plain(d)).collect();
+    let m = msgs.iter().find(|m| m.contains("variant-conflict") || m.contains("which variant `short` before it sets"));
+    let m = m.unwrap_or_else(|| panic!("{msgs:?}"));
+    assert!(m.contains("test.yaml:8:") && m.contains("param `frames`") && m.contains("variant `long`"), "{m}");
+    // An unknown part is named.
+    let unknown = load("short+nope");
+    let msgs: Vec<String> = unknown.diagnostics.iter().map(|d| unknown.source.plain(d)).collect();
+    assert!(msgs.iter().any(|m| m.contains("unknown variant `short+nope`")), "{msgs:?}");
+}
+
+#[test]
 fn invalid_delay_is_one_error_not_also_a_cycle() {
     let d = diagnostics(&graph_text("bad_delay", "{ from: smooth.sum, delay: -1 }"));
     assert_eq!(d.len(), 1, "{d:?}");

@@ -123,9 +123,9 @@ enum Command {
         /// Output format.
         #[arg(long, value_enum, default_value_t = GraphFormat::Mermaid)]
         format: GraphFormat,
-        /// Apply a variant first.
+        /// Apply a variant first (repeat, or join with `+`, to apply several in order).
         #[arg(long)]
-        variant: Option<String>,
+        variant: Vec<String>,
     },
 }
 
@@ -137,9 +137,10 @@ pub struct RunArgs {
     /// Output folder for the summary and recordings.
     #[arg(long, default_value = "out")]
     pub out: PathBuf,
-    /// Apply a named variant of the graph.
+    /// Apply a named variant of the graph; repeated (or joined with `+`: `mono+no_loop`),
+    /// several apply in order, and two that set the same thing are an error.
     #[arg(long)]
-    pub variant: Option<String>,
+    pub variant: Vec<String>,
     /// Override a parameter: `node.param=value` (repeatable).
     #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
     pub set: Vec<String>,
@@ -308,7 +309,12 @@ where
         Command::Inspect(args) => commands::inspect::inspect(&args),
         Command::View { file } => commands::view::view(&file),
         Command::Graph { graph, format, variant } => {
-            commands::graph::graph(&graph, matches!(format, GraphFormat::Dot), variant)
+            commands::graph::graph(&graph, matches!(format, GraphFormat::Dot), joined_variants(&variant))
         }
     }
+}
+
+/// `--variant a --variant b` as one composed variant name, `a+b` (`None` for none).
+pub(crate) fn joined_variants(variants: &[String]) -> Option<String> {
+    (!variants.is_empty()).then(|| variants.join("+"))
 }

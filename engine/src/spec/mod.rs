@@ -50,7 +50,7 @@ mod variant;
 pub use parse::{parse_graph, valid_id};
 pub use resolved::{ResolvedEdge, ResolvedGraph, ResolvedInput, ResolvedNode, ResolvedOutput};
 pub use validate::{ResolveContext, validate};
-pub use variant::{Override, OverrideOrigins, apply_overrides, apply_variant};
+pub use variant::{Override, OverrideOrigins, apply_overrides, apply_variant, variant_parts};
 
 use crate::yaml::{Key, Span, Yaml};
 

@@ -1,7 +1,7 @@
 //! Variants and command-line overrides: both patch a [`GraphSpec`] before validation, so a
 //! variant is checked exactly like the base graph.
 
-use super::{GraphSpec, NodePatch};
+use super::{GraphSpec, NodePatch, VariantSpec};
 use crate::diag::{Diagnostic, did_you_mean};
 use crate::yaml::{self, Key, Yaml, YamlKind};
 
@@ -70,16 +70,119 @@ fn apply_patch(spec: &mut GraphSpec, patch: &NodePatch) -> bool {
     true
 }
 
-/// Apply the variant `name`. An unknown variant is an `Err`. Patches of unknown nodes are
-/// errors too, returned beside the spec with the other patches applied, so validation of the
-/// rest still runs and reports everything else at once.
+/// The variants `name` stands for, in order: the variant of that name, or variants joined
+/// by `+` (`mono+no_loop`). A variant's own name may contain `+` (an ablation row such as
+/// `S+G`): the longest name that is a variant is taken first at each step, so `S+G+no_loop` is
+/// `S+G` then `no_loop`. `None` when no split names only variants.
+pub fn variant_parts<'a>(spec: &'a GraphSpec, name: &str) -> Option<Vec<&'a VariantSpec>> {
+    fn split<'a>(spec: &'a GraphSpec, tokens: &[&str], out: &mut Vec<&'a VariantSpec>) -> bool {
+        if tokens.is_empty() {
+            return !out.is_empty();
+        }
+        for end in (1..=tokens.len()).rev() {
+            let candidate = tokens[..end].join("+");
+            if let Some(v) = spec.variants.iter().find(|v| v.name == candidate) {
+                out.push(v);
+                if split(spec, &tokens[end..], out) {
+                    return true;
+                }
+                out.pop();
+            }
+        }
+        false
+    }
+    let tokens: Vec<&str> = name.split('+').collect();
+    let mut out = Vec::new();
+    split(spec, &tokens, &mut out).then_some(out)
+}
+
+/// What a patch sets, for telling whether two composed variants set the same thing.
+#[derive(Clone, Debug, PartialEq)]
+enum Setting {
+    Disabled(bool),
+    Machine(String),
+    Op(String),
+    Param(String, Yaml),
+    Input(String),
+    Record,
+}
+
+impl Setting {
+    fn of(patch: &NodePatch) -> Vec<Self> {
+        let mut out = Vec::new();
+        if let Some(d) = patch.disabled {
+            out.push(Self::Disabled(d));
+        }
+        if let Some((m, _)) = &patch.machine {
+            out.push(Self::Machine(m.clone()));
+        }
+        if let Some((op, _)) = &patch.op {
+            out.push(Self::Op(op.clone()));
+        }
+        out.extend(patch.params.iter().map(|(k, v)| Self::Param(k.text.clone(), v.clone())));
+        out.extend(patch.inputs.iter().map(|i| Self::Input(i.port.clone())));
+        if patch.record.is_some() {
+            out.push(Self::Record);
+        }
+        out
+    }
+
+    /// Whether `self` and a later `other` on the same node collide: both set one thing (a
+    /// flag or a parameter set to the same value is no collision: the order cannot matter),
+    /// or `other` puts an operator in the node (even the same one), which drops what `self`
+    /// set on it.
+    fn collides(&self, other: &Self) -> bool {
+        match (self, other) {
+            (Self::Disabled(a), Self::Disabled(b)) => a != b,
+            (Self::Machine(a), Self::Machine(b)) => a != b,
+            (Self::Param(a, va), Self::Param(b, vb)) => a == b && !same_value(va, vb),
+            (Self::Input(a), Self::Input(b)) => a == b,
+            (Self::Record, Self::Record) => true,
+            (Self::Param(..) | Self::Input(_) | Self::Op(_), Self::Op(_)) => true,
+            _ => false,
+        }
+    }
+
+    fn describe(&self) -> String {
+        match self {
+            Self::Disabled(_) => "`disabled`".into(),
+            Self::Machine(_) => "`machine`".into(),
+            Self::Op(_) => "`op`".into(),
+            Self::Param(k, _) => format!("param `{k}`"),
+            Self::Input(p) => format!("input `{p}`"),
+            Self::Record => "`record`".into(),
+        }
+    }
+}
+
+/// Two YAML values equal as values (their places in the file aside).
+fn same_value(a: &Yaml, b: &Yaml) -> bool {
+    match (&a.kind, &b.kind) {
+        (YamlKind::Scalar { text: x, .. }, YamlKind::Scalar { text: y, .. }) => x == y,
+        (YamlKind::Seq(x), YamlKind::Seq(y)) => x.len() == y.len() && x.iter().zip(y).all(|(p, q)| same_value(p, q)),
+        (YamlKind::Map(x), YamlKind::Map(y)) => {
+            x.len() == y.len() && x.iter().zip(y).all(|((kp, p), (kq, q))| kp.text == kq.text && same_value(p, q))
+        }
+        _ => false,
+    }
+}
+
+/// Apply the variant `name`: one variant, or several joined by `+`, applied in order
+/// ([`variant_parts`]). An unknown variant is an `Err`. Patches of unknown nodes are errors
+/// too, returned beside the spec with the other patches applied, so validation of the rest
+/// still runs and reports everything else at once; so is a composed variant setting what an
+/// earlier one in the list set (to another value), located at the later one's patch.
 pub fn apply_variant(spec: &GraphSpec, name: &str) -> Result<(GraphSpec, Vec<Diagnostic>), Vec<Diagnostic>> {
-    let Some(variant) = spec.variants.iter().find(|v| v.name == name) else {
-        let hint = did_you_mean(name, spec.variants.iter().map(|v| v.name.as_str())).unwrap_or_else(|| {
+    let Some(parts) = variant_parts(spec, name) else {
+        let unknown = name.split('+').find(|p| !spec.variants.iter().any(|v| v.name == *p)).unwrap_or(name);
+        let hint = did_you_mean(unknown, spec.variants.iter().map(|v| v.name.as_str())).unwrap_or_else(|| {
             if spec.variants.is_empty() {
                 "this graph defines no variants".to_owned()
             } else {
-                format!("variants: {}", spec.variants.iter().map(|v| v.name.as_str()).collect::<Vec<_>>().join(", "))
+                format!(
+                    "variants: {} (join several with `+`, or repeat `--variant`)",
+                    spec.variants.iter().map(|v| v.name.as_str()).collect::<Vec<_>>().join(", ")
+                )
             }
         });
         return Err(vec![
@@ -87,21 +190,61 @@ pub fn apply_variant(spec: &GraphSpec, name: &str) -> Result<(GraphSpec, Vec<Dia
         ]);
     };
     let mut out = spec.clone();
-    if variant.oracle.is_some() {
-        out.oracle = variant.oracle;
-    }
     let mut diags = Vec::new();
-    for patch in &variant.patches {
-        if !apply_patch(&mut out, patch) {
-            diags.push(
-                Diagnostic::error(
-                    "unknown-node",
-                    patch.node_span,
-                    format!("variant `{name}` patches unknown node `{}`", patch.node),
-                )
-                .with_opt_hint(did_you_mean(&patch.node, spec.nodes.iter().map(|n| n.id.as_str()))),
-            );
+    // What each earlier variant of the list set: (variant, node, setting).
+    let mut set: Vec<(&str, &str, Setting)> = Vec::new();
+    let mut oracle_by: Option<(&str, bool)> = None;
+    for variant in &parts {
+        if let Some((o, span)) = variant.oracle {
+            if let Some((by, earlier)) = oracle_by.filter(|&(_, e)| e != o) {
+                diags.push(
+                    Diagnostic::error(
+                        "variant-conflict",
+                        Some(span),
+                        format!(
+                            "variant `{}` sets `oracle: {o}`, variant `{by}` before it `oracle: {earlier}`",
+                            variant.name
+                        ),
+                    )
+                    .with_hint("leave one of the two out, or write a variant that combines them"),
+                );
+            }
+            oracle_by = Some((&variant.name, o));
+            out.oracle = variant.oracle;
         }
+        let mut mine = Vec::new();
+        for patch in &variant.patches {
+            for s in Setting::of(patch) {
+                if let Some((by, _, first)) = set.iter().find(|(_, n, e)| *n == patch.node && e.collides(&s)) {
+                    diags.push(
+                        Diagnostic::error(
+                            "variant-conflict",
+                            Some(patch.node_span),
+                            format!(
+                                "variant `{}` sets {} of node `{}`, which variant `{by}` before it sets ({})",
+                                variant.name,
+                                s.describe(),
+                                patch.node,
+                                first.describe()
+                            ),
+                        )
+                        .with_hint("leave one of the two out, or write a variant that combines them"),
+                    );
+                }
+                mine.push((variant.name.as_str(), patch.node.as_str(), s));
+            }
+            if !apply_patch(&mut out, patch) {
+                diags.push(
+                    Diagnostic::error(
+                        "unknown-node",
+                        patch.node_span,
+                        format!("variant `{}` patches unknown node `{}`", variant.name, patch.node),
+                    )
+                    .with_opt_hint(did_you_mean(&patch.node, spec.nodes.iter().map(|n| n.id.as_str()))),
+                );
+            }
+        }
+        set.extend(mine);
     }
     Ok((out, diags))
 }

@@ -138,7 +138,14 @@ fn load_request(args: &RunArgs) -> Result<LoadRequest, String> {
         load: args.load_map.clone(),
         localise: args.localise,
     };
-    Ok(LoadRequest { variant: args.variant.clone(), overrides, seed: args.seed, all_variants: false, source, map })
+    Ok(LoadRequest {
+        variant: crate::cli::joined_variants(&args.variant),
+        overrides,
+        seed: args.seed,
+        all_variants: false,
+        source,
+        map,
+    })
 }
 
 /// With `--machine NAME`: the machine exists, the link settings are sane, and this machine's

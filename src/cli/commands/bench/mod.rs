@@ -1,4 +1,4 @@
-//! `dynaflow bench GRAPH... [--inputs DIR...] [--variants all|a,b] [--jobs N] [--out DIR]`:
+//! `dynaflow bench GRAPH... [--inputs DIR...] [--variants all|a,b,a+b] [--jobs N] [--out DIR]`:
 //! every graph x variant x sequence as its own `dynaflow run` process (spread over `--jobs`),
 //! then the papers' tables (markdown and CSV: ATE, RPE, time per frame, improvement over
 //! `orb_baseline`) and plots (trajectories against ground truth, ATE per variant, time per
@@ -35,7 +35,7 @@ pub struct BenchArgs {
     #[arg(long)]
     pub intrinsics: Option<String>,
     /// Variants: `all` (the graph as written, then each variant), or a comma-separated list
-    /// where `base` names the graph as written.
+    /// where `base` names the graph as written and `a+b` applies variants `a` then `b`.
     #[arg(long, default_value = "all")]
     pub variants: String,
     /// Runs at a time (each its own process).
@@ -155,7 +155,7 @@ fn jobs(args: &BenchArgs) -> Result<Vec<Job>, String> {
             for v in args.variants.split(',').map(str::trim).filter(|v| !v.is_empty()) {
                 if v == "base" {
                     w.push(None);
-                } else if spec.variants.iter().any(|s| s.name == v) {
+                } else if dynaflow_engine::spec::variant_parts(&spec, v).is_some() {
                     w.push(Some(v.to_string()));
                 } else if args.graphs.len() == 1 {
                     return Err(format!("{} has no variant `{v}`", g.display()));
