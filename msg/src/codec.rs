@@ -18,15 +18,15 @@ use std::sync::Arc;
 use nalgebra::{Point3, Quaternion, Translation3, UnitQuaternion};
 
 use crate::{
-    Body, CameraInfo, DepthImage, Descriptors, Detection, Detections, Header, Image, Isometry3, Keypoint, Keypoints,
-    LabelReason, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, Message, OctreeUpdate, PixelFormat,
-    PointCloud, PointLabel, PointLabels, PortType, Pose, Scalars, SegmentationMask, SparseMap, StampedPose, StereoRig,
-    Track, Tracks, Trajectory,
+    Body, CameraInfo, CulledKeyFrame, DepthImage, Descriptors, Detection, Detections, Header, Image, Isometry3,
+    Keypoint, Keypoints, LabelReason, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, Message,
+    OctreeUpdate, PixelFormat, PointCloud, PointLabel, PointLabels, PortType, Pose, Scalars, SegmentationMask,
+    SparseMap, StampedPose, StereoRig, Track, Tracks, Trajectory,
 };
 use crate::{ImuBatch, ImuCalibration, ImuSample, LensModel};
 
 /// The encoding's version byte; a reader refuses any other.
-pub const VERSION: u8 = 2;
+pub const VERSION: u8 = 3;
 
 /// Why bytes do not decode to a message.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -361,6 +361,12 @@ fn map(w: &mut W, m: &SparseMap) {
             }
         }
     }
+    w.len(m.culled.len());
+    for c in &m.culled {
+        w.u64(c.id);
+        w.u64(c.anchor);
+        w.iso(&c.anchor_from_culled);
+    }
 }
 
 struct R<'a> {
@@ -674,7 +680,13 @@ fn read_map(r: &mut R<'_>) -> Result<SparseMap, CodecError> {
         let point = if r.flag()? { Some(r.u64()?) } else { None };
         keypoints.push(MapKeypoint { keyframe, uv, octave, depth, descriptor, point });
     }
-    Ok(SparseMap { map_id, keyframes, points, observations, removed, features, keypoints })
+    let n = r.len(72)?;
+    let mut culled = Vec::with_capacity(n);
+    for _ in 0..n {
+        let (id, anchor) = (r.u64()?, r.u64()?);
+        culled.push(CulledKeyFrame { id, anchor, anchor_from_culled: checked_iso(r)? });
+    }
+    Ok(SparseMap { map_id, keyframes, points, observations, removed, features, keypoints, culled })
 }
 
 #[cfg(test)]
@@ -780,6 +792,7 @@ mod tests {
                     descriptor: desc,
                     point: Some(5),
                 }],
+                culled: vec![CulledKeyFrame { id: 0, anchor: 1, anchor_from_culled: iso(0.1) }],
             }),
             Body::Scalars(Scalars { values: vec![("ate".into(), 0.01), ("nan".into(), f64::NAN)] }),
             Body::StereoRig(StereoRig { baseline: 0.12 }),

@@ -197,6 +197,22 @@ pub struct SparseMap {
     pub features: Vec<MapFeature>,
     /// Every static keypoint of a new key frame (tracking, forwarded by mapping: loop closing).
     pub keypoints: Vec<MapKeypoint>,
+    /// Key frames local mapping culled (ORB-SLAM2's `KeyFrameCulling`), each with the key frame
+    /// that stands in for it: frames tracked against it, its spanning-tree children and its
+    /// loop edges move to that one.
+    pub culled: Vec<CulledKeyFrame>,
+}
+
+/// A key frame culled as redundant, and the covisible key frame that takes its place.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CulledKeyFrame {
+    /// The culled key frame.
+    pub id: u64,
+    /// Its best covisible key frame when it was culled.
+    pub anchor: u64,
+    /// The culled key frame's pose in the anchor's frame (`anchor_from_culled`), as local
+    /// mapping last refined both.
+    pub anchor_from_culled: Isometry3<f64>,
 }
 
 impl SparseMap {
@@ -249,6 +265,12 @@ impl SparseMap {
             d.bytes(&[k.octave]);
             d.bytes(&k.descriptor);
             d.u64(k.point.map_or(u64::MAX, |p| p));
+        }
+        d.u64(self.culled.len() as u64);
+        for c in &self.culled {
+            d.u64(c.id);
+            d.u64(c.anchor);
+            digest_iso(d, &c.anchor_from_culled);
         }
     }
 }

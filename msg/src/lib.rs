@@ -28,8 +28,8 @@ use std::sync::Arc;
 pub use digest::{DIGEST_SCHEME, Digest};
 pub use features::{Descriptors, Keypoint, Keypoints, LabelReason, PointLabel, PointLabels, Track, Tracks};
 pub use geometry::{
-    Isometry3, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, OctreeUpdate, Point3, PointCloud, Pose,
-    SparseMap, StampedPose, Trajectory,
+    CulledKeyFrame, Isometry3, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, OctreeUpdate, Point3,
+    PointCloud, Pose, SparseMap, StampedPose, Trajectory,
 };
 pub use image::{CameraInfo, DepthImage, Image, LensModel, PixelFormat, StereoRig};
 pub use inertial::{ImuBatch, ImuCalibration, ImuSample, STANDARD_GRAVITY};

@@ -117,6 +117,12 @@ pub struct LocalMappingReport {
     pub keyframes: usize,
     /// Map points.
     pub points: usize,
+    /// Key frames culled as redundant (ORB-SLAM2's `KeyFrameCulling`).
+    #[serde(default)]
+    pub culled_keyframes: usize,
+    /// Points culled (the recent-observation test, or left unobserved by a culled key frame).
+    #[serde(default)]
+    pub culled_points: usize,
     /// Local BA per key frame.
     pub local_ba_ms: Timing,
 }

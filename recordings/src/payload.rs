@@ -149,6 +149,7 @@ fn data(body: &Body) -> Value {
             "points": m.points.len(),
             "observations": m.observations.len(),
             "removed": m.removed.len(),
+            "culled_keyframes": m.culled.iter().map(|c| c.id).collect::<Vec<_>>(),
         }),
         Body::OctreeUpdate(o) => {
             json!({"occupied": o.occupied.len(), "freed": o.freed.len(), "resolution": o.resolution})

@@ -173,6 +173,40 @@ impl KeyFrameMap {
         Some((id, bow))
     }
 
+    /// Drop the key frames local mapping culled ([`SparseMap::culled`]), each as ORB-SLAM2's
+    /// `KeyFrame::SetBadFlag`: out of the database (its words) and of its points' observers (a
+    /// point no key frame observes any more goes too); its spanning-tree children take its
+    /// parent (the key frame standing in for it when it had none), and its loop edges move to
+    /// the key frame standing in for it, so the essential graph stays connected.
+    pub fn cull_keyframes(&mut self, batch: &SparseMap) {
+        for c in &batch.culled {
+            let Some(kf) = self.kfs.remove(&c.id) else { continue };
+            self.db.erase(c.id);
+            for p in kf.keypoints.iter().filter_map(|k| k.point) {
+                if let Some(set) = self.observers.get_mut(&p) {
+                    set.remove(&c.id);
+                    if set.is_empty() {
+                        self.observers.remove(&p);
+                        self.points.remove(&p);
+                    }
+                }
+            }
+            let anchor = Some(c.anchor).filter(|a| self.kfs.contains_key(a));
+            let parent = kf.parent.filter(|p| self.kfs.contains_key(p)).or(anchor);
+            for other in self.kfs.values_mut() {
+                if other.parent == Some(c.id) {
+                    other.parent = parent.filter(|&p| p != other.info.id);
+                }
+                if other.loops.remove(&c.id) && Some(other.info.id) != anchor {
+                    other.loops.extend(anchor);
+                }
+            }
+            if let Some(a) = anchor.and_then(|a| self.kfs.get_mut(&a)) {
+                a.loops.extend(kf.loops.iter().filter(|&&l| l != c.anchor));
+            }
+        }
+    }
+
     /// Drop a point and every keypoint's reference to it.
     pub fn remove_point(&mut self, id: u64) {
         self.points.remove(&id);

@@ -6,8 +6,12 @@
 //! between, as ORB-SLAM's `LocalBundleAdjustment`), key frames outside the window that see its
 //! points held fixed. Afterwards bad observations are erased and points culled (ORB-SLAM's
 //! `MapPointCulling`: two key frames after creation a point must be seen by at least two key
-//! frames). Memory stays bounded: the oldest key frames are forgotten beyond `keep_keyframes`
-//! (there is no loop closing to need them).
+//! frames). Key frames are culled as ORB-SLAM2's `KeyFrameCulling` does
+//! ([`LocalMapper::cull_keyframes`]): one whose points are nearly all seen by three others
+//! goes, so a camera that stays in one place keeps a bounded map; each culled key frame is
+//! named in the output with the key frame that stands in for it, so tracking and loop closing
+//! drop it too. The window itself stays bounded: beyond `keep_keyframes` the oldest key frames
+//! are forgotten here (loop closing keeps the whole map).
 //!
 //! Monocular (a batch that carries the key frame's unmatched keypoints): new points are
 //! triangulated between the new key frame and its best covisible neighbours, as ORB-SLAM2's
@@ -19,7 +23,7 @@
 //! With RGB-D and stereo, tracking creates points from depth at every key frame and nothing
 //! is triangulated or fused (ORB-SLAM2 does both in every mode: not done here yet).
 
-use std::collections::{BTreeMap, BTreeSet};
+use std::collections::{BTreeMap, BTreeSet, HashMap};
 
 use dynaflow_vision::camera::Pinhole;
 use nalgebra::Point3;
@@ -28,7 +32,8 @@ use crate::ba::{BaObservation, BaPose, BaReport, bundle_adjust, chi2, chi2_bound
 use dynaflow_vision::geometry::{CHI2_1DOF, CHI2_2DOF, triangulate};
 use dynaflow_vision::matching::hamming;
 
-use crate::map::{MapFeature, MapKeyFrame, MapObservation, MapPoint, SparseMap, sigma};
+use crate::keyframe_map::COVISIBILITY_MIN;
+use crate::map::{CulledKeyFrame, MapFeature, MapKeyFrame, MapObservation, MapPoint, SparseMap, sigma};
 
 /// Local-mapping settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -48,6 +53,11 @@ pub struct LocalMapConfig {
     pub cull_observations: u32,
     /// Covisible neighbours a new monocular key frame triangulates against (ORB-SLAM2: 20).
     pub triangulation_neighbours: usize,
+    /// Cull redundant key frames (ORB-SLAM2's `KeyFrameCulling`, [`LocalMapper::cull_keyframes`]).
+    pub cull_keyframes: bool,
+    /// With depth, only observations closer than this count in key-frame culling (ORB-SLAM2's
+    /// `ThDepth`: 40 baselines; RGB-D: 40 x 8 cm).
+    pub close_depth: f64,
 }
 
 impl LocalMapConfig {
@@ -61,14 +71,22 @@ impl LocalMapConfig {
             iterations: (5, 10),
             cull_observations: 3,
             triangulation_neighbours: 20,
+            cull_keyframes: true,
+            close_depth: 40.0 * 0.08,
         }
     }
 
     /// ORB-SLAM2's monocular defaults: no depth residual, the monocular culling threshold.
     pub fn monocular(fx: f64) -> Self {
-        Self { bf: 0.0, cull_observations: 2, ..Self::rgbd(fx) }
+        Self { bf: 0.0, cull_observations: 2, close_depth: f64::INFINITY, ..Self::rgbd(fx) }
     }
 }
+
+/// ORB-SLAM2's `KeyFrameCulling`: a key frame goes when more than this share of its (close)
+/// points are each seen by at least [`REDUNDANT_OBSERVERS`] other key frames at the same or a
+/// finer scale (its octave + 1 at most).
+const REDUNDANT_SHARE: f64 = 0.9;
+const REDUNDANT_OBSERVERS: usize = 3;
 
 /// Ids of points made by local mapping start here (tracking counts from 0).
 const MAPPING_POINT_IDS: u64 = 1 << 48;
@@ -109,6 +127,12 @@ pub struct LocalMapper {
     next_point: u64,
     triangulated: usize,
     fused: usize,
+    /// The current map's first key frame (never culled, as ORB-SLAM2's key frame 0).
+    first: Option<u64>,
+    /// Key frames culled, in all.
+    culled_keyframes: usize,
+    /// Points culled (`MapPointCulling`, and left without a key frame by key-frame culling).
+    culled_points: usize,
 }
 
 impl LocalMapper {
@@ -124,7 +148,20 @@ impl LocalMapper {
             next_point: MAPPING_POINT_IDS,
             triangulated: 0,
             fused: 0,
+            first: None,
+            culled_keyframes: 0,
+            culled_points: 0,
         }
+    }
+
+    /// Key frames culled as redundant so far.
+    pub fn culled_keyframes(&self) -> usize {
+        self.culled_keyframes
+    }
+
+    /// Points culled so far (observation test, or left unobserved by a culled key frame).
+    pub fn culled_points(&self) -> usize {
+        self.culled_points
     }
 
     /// Points triangulated by the last insertion (monocular).
@@ -204,6 +241,7 @@ impl LocalMapper {
             self.kfs.clear();
             self.points.clear();
             self.map_id = batch.map_id;
+            self.first = None;
         }
         let Some(info) = batch.keyframes.last().copied() else {
             return SparseMap { map_id: self.map_id, ..SparseMap::default() };
@@ -212,6 +250,9 @@ impl LocalMapper {
             self.points.entry(p.id).or_insert(Mp { point: *p, kfs: Vec::new(), weight: 0 });
         }
         // Every key frame of the batch (one; two for a monocular map's start), oldest first.
+        if self.first.is_none() {
+            self.first = batch.keyframes.first().map(|k| k.id);
+        }
         for kinfo in &batch.keyframes {
             let mut obs = Vec::new();
             for o in batch.observations.iter().filter(|o| o.keyframe == kinfo.id) {
@@ -336,10 +377,13 @@ impl LocalMapper {
             })
             .map(|(&id, _)| id)
             .collect();
+        self.culled_points += culled.len();
         for id in culled {
             self.remove_point(id);
             removed.push(id);
         }
+        let culled_keyframes =
+            if self.config.cull_keyframes { self.cull_keyframes(newest, &mut removed) } else { Vec::new() };
         // Bounded memory: forget the oldest key frames.
         while self.kfs.len() > self.config.keep_keyframes.max(self.config.window) {
             let Some((&old, _)) = self.kfs.iter().next() else { break };
@@ -373,12 +417,109 @@ impl LocalMapper {
         };
         // The new key frame's keypoints go on to loop closing.
         let keypoints = batch.keypoints.clone();
-        SparseMap { map_id: self.map_id, keyframes, points, observations, removed, features: Vec::new(), keypoints }
+        SparseMap {
+            map_id: self.map_id,
+            keyframes,
+            points,
+            observations,
+            removed,
+            features: Vec::new(),
+            keypoints,
+            culled: culled_keyframes,
+        }
+    }
+
+    /// ORB-SLAM2's `KeyFrameCulling` after key frame `current`'s insertion: each of its
+    /// covisible key frames (best first; never the map's first) goes when more than 90 % of
+    /// the points it observes (with depth: only those closer than `close_depth`) are each seen
+    /// by at least three other key frames at the same or a finer scale (octave + 1 at most), and
+    /// only where its points are seen more than three times (ORB-SLAM2's observation count: 2
+    /// per observation with depth). A culled key frame's observations leave its points; a point
+    /// left without any key frame is removed (its id in `removed`). Returns the culled key
+    /// frames, each with its best covisible key frame, which stands in for it downstream.
+    pub fn cull_keyframes(&mut self, current: u64, removed: &mut Vec<u64>) -> Vec<CulledKeyFrame> {
+        let mut out = Vec::new();
+        // ORB-SLAM2's covisible key frames: those sharing at least 15 points (the best one
+        // when none does).
+        let all = self.covisibility(current);
+        let mut candidates: Vec<u64> = all.iter().filter(|&&(_, c)| c >= COVISIBILITY_MIN).map(|&(k, _)| k).collect();
+        if candidates.is_empty() {
+            candidates.extend(all.first().map(|&(k, _)| k));
+        }
+        if candidates.is_empty() {
+            return out;
+        }
+        // Each observation's octave, by (key frame, point).
+        let mut octave: HashMap<(u64, u64), u8> = HashMap::new();
+        for (&id, kf) in &self.kfs {
+            for o in &kf.obs {
+                octave.insert((id, o.point), o.octave);
+            }
+        }
+        let with_depth = self.config.bf > 0.0;
+        for k in candidates {
+            if Some(k) == self.first {
+                continue;
+            }
+            let Some(kf) = self.kfs.get(&k) else { continue };
+            let (mut points, mut redundant) = (0usize, 0usize);
+            for o in &kf.obs {
+                let Some(mp) = self.points.get(&o.point) else { continue };
+                if with_depth && o.depth.is_none_or(|d| d <= 0.0 || d > self.config.close_depth) {
+                    continue;
+                }
+                points += 1;
+                if mp.weight as usize > REDUNDANT_OBSERVERS {
+                    let finer = mp
+                        .kfs
+                        .iter()
+                        .filter(|&&x| x != k)
+                        .filter(|&&x| {
+                            octave.get(&(x, o.point)).is_some_and(|&l| u16::from(l) <= u16::from(o.octave) + 1)
+                        })
+                        .take(REDUNDANT_OBSERVERS)
+                        .count();
+                    if finer >= REDUNDANT_OBSERVERS {
+                        redundant += 1;
+                    }
+                }
+            }
+            if (redundant as f64) <= REDUNDANT_SHARE * points as f64 {
+                continue;
+            }
+            let Some(anchor) = self.covisible(k, 1).first().copied() else { continue };
+            let Some(anchor_pose) = self.kfs.get(&anchor).map(|a| a.info.world_from_cam) else { continue };
+            let Some(kf) = self.kfs.remove(&k) else { continue };
+            let anchor_from_culled = anchor_pose.inverse() * kf.info.world_from_cam;
+            for o in kf.obs {
+                let Some(mp) = self.points.get_mut(&o.point) else { continue };
+                let before = mp.kfs.len();
+                mp.kfs.retain(|&x| x != k);
+                if mp.kfs.len() < before {
+                    mp.weight =
+                        mp.weight.saturating_sub(if o.depth.is_some() { 2 } else { 1 }).max(mp.kfs.len() as u32);
+                }
+                if mp.kfs.is_empty() {
+                    self.points.remove(&o.point);
+                    removed.push(o.point);
+                    self.culled_points += 1;
+                }
+            }
+            self.culled_keyframes += 1;
+            out.push(CulledKeyFrame { id: k, anchor, anchor_from_culled });
+        }
+        out
     }
 
     /// Key frame `kf`'s `n` best covisible key frames: most points shared first, then the
     /// newest.
     fn covisible(&self, kf: u64, n: usize) -> Vec<u64> {
+        self.covisibility(kf).into_iter().take(n).map(|(k, _)| k).collect()
+    }
+
+    /// Key frame `kf`'s covisible key frames with the points each shares, most first (then
+    /// the newest).
+    fn covisibility(&self, kf: u64) -> Vec<(u64, usize)> {
         let mut shared: BTreeMap<u64, usize> = BTreeMap::new();
         for o in self.kfs.get(&kf).map_or(&[][..], |k| k.obs.as_slice()) {
             if let Some(mp) = self.points.get(&o.point) {
@@ -389,7 +530,7 @@ impl LocalMapper {
         }
         let mut v: Vec<(u64, usize)> = shared.into_iter().collect();
         v.sort_by_key(|&(k, c)| (std::cmp::Reverse(c), std::cmp::Reverse(k)));
-        v.into_iter().take(n).map(|(k, _)| k).collect()
+        v
     }
 
     fn erase_observation(&mut self, kf: u64, point: u64) {
@@ -736,3 +877,6 @@ impl LocalMapper {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -241,7 +241,9 @@ impl LoopCloser {
         {
             return Err(LoopError::Monocular(k.keyframe));
         }
-        let Some((id, bow)) = self.map.add_keyframe(update) else { return Ok(None) };
+        let added = self.map.add_keyframe(update);
+        self.map.cull_keyframes(update);
+        let Some((id, bow)) = added else { return Ok(None) };
         self.since_loop += 1;
         let closed = self.detect(id, &bow);
         self.map.db.add(id, bow);
@@ -633,6 +635,7 @@ impl LoopCloser {
             removed: self.fused_removed.clone(),
             features: Vec::new(),
             keypoints: Vec::new(),
+            culled: Vec::new(),
         }
     }
 }

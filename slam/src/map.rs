@@ -2,7 +2,7 @@
 //! ([`SparseMap`] and its parts) is the message type of `dynaflow-msg`, re-exported here, so
 //! tracking, local mapping and loop closing exchange exactly what a graph edge carries.
 
-pub use dynaflow_msg::{MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, SparseMap};
+pub use dynaflow_msg::{CulledKeyFrame, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, SparseMap};
 
 /// One keypoint of a frame as tracking sees it.
 #[derive(Clone, Copy, Debug, PartialEq)]

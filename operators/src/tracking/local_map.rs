@@ -18,6 +18,8 @@ params! {
         keep_keyframes: u64 [2, 100_000] = 60,
         /// virtual baseline, metres (as `pnp_track`'s)
         baseline: f64 [0.0, 10.0] = 0.08,
+        /// cull redundant key frames (ORB-SLAM2's `KeyFrameCulling`: 90 % of a key frame's close points seen by three other key frames at the same or a finer scale); tracking and `loop_close` drop them too
+        cull_keyframes: bool = true,
     }
 }
 
@@ -32,7 +34,7 @@ const MAP: Out<SparseMap> = Out::new("map", "the refined local window: key frame
 const POINTS: Out<PointCloud> = Out::new("points", "every map point held (on key frames)");
 const STATS: Out<Scalars> = Out::new(
     "stats",
-    "`keyframes`, `points`, `window`, `removed`, `triangulated`, `fused` (monocular), `ba_iterations`, `ba_cost_before`, `ba_cost_after` (insertion times: the summary's `report.local_ba_ms`)",
+    "`keyframes`, `points`, `window`, `removed`, `triangulated`, `fused` (monocular), `culled_keyframes` (by this key frame's insertion), `ba_iterations`, `ba_cost_before`, `ba_cost_after` (insertion times: the summary's `report.local_ba_ms`)",
 );
 
 /// The `local_map` operator (its doc: `dynaflow ops local_map`).
@@ -75,8 +77,12 @@ impl Operator for LocalMap {
                 if batch.features.is_empty() { LocalMapConfig::rgbd(k.fx) } else { LocalMapConfig::monocular(k.fx) };
             c.window = self.config.window as usize;
             c.keep_keyframes = self.config.keep_keyframes as usize;
+            c.cull_keyframes = self.config.cull_keyframes;
             if batch.features.is_empty() {
-                c.bf = k.fx * rig.unwrap_or(self.config.baseline);
+                let baseline = rig.unwrap_or(self.config.baseline);
+                c.bf = k.fx * baseline;
+                // ORB-SLAM2's `ThDepth`: 40 baselines.
+                c.close_depth = 40.0 * baseline;
             }
             LocalMapper::new(c, Pinhole::from(k))
         });
@@ -97,6 +103,7 @@ impl Operator for LocalMap {
             ("removed".into(), update.removed.len() as f64),
             ("triangulated".into(), mapper.last_triangulated() as f64),
             ("fused".into(), mapper.last_fused() as f64),
+            ("culled_keyframes".into(), update.culled.len() as f64),
             ("ba_iterations".into(), ba.iterations as f64),
             ("ba_cost_before".into(), ba.initial_cost),
             ("ba_cost_after".into(), ba.final_cost),
@@ -119,6 +126,8 @@ impl Operator for LocalMap {
         let report = LocalMappingReport {
             keyframes: self.mapper.as_ref().map_or(0, LocalMapper::keyframes),
             points: self.mapper.as_ref().map_or(0, LocalMapper::points),
+            culled_keyframes: self.mapper.as_ref().map_or(0, LocalMapper::culled_keyframes),
+            culled_points: self.mapper.as_ref().map_or(0, LocalMapper::culled_points),
             local_ba_ms: Timing::of(&self.ba_ms),
         };
         ctx.report = Some(NodeReport::from(report).to_json());

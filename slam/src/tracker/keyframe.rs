@@ -20,9 +20,12 @@ impl Tracker {
         let tracked_close = features.iter().zip(&fit.matched).filter(|(f, m)| m.is_some() && close(f)).count();
         let untracked_close = features.iter().zip(&fit.matched).filter(|(f, m)| m.is_none() && close(f)).count();
         let need_close = tracked_close < 100 && untracked_close > 70;
-        // ORB-SLAM2 also asks whether local mapping is idle; in lockstep it always is.
+        // ORB-SLAM2's `(c1a || c1b || c1c) && c2`: c1b (local mapping idle, `mMinFrames` 0)
+        // always holds in lockstep, so c2 decides: fewer than 75 % of the reference's points
+        // tracked, or too few close ones. `max_frames` (c1a) alone makes no key frame: a camera
+        // that keeps seeing the same place adds none.
         let fewer = (fit.inliers as f64) < 0.75 * self.ref_tracked as f64;
-        (fewer || need_close || self.frames_since_kf >= self.config.max_frames) && fit.inliers > 15
+        (fewer || need_close) && fit.inliers > 15
     }
 
     /// A key frame: observations of the matched points, new points from depth.
@@ -122,6 +125,7 @@ impl Tracker {
             removed: Vec::new(),
             features,
             keypoints,
+            culled: Vec::new(),
         };
         if let Some(places) = &mut self.places {
             places.switch_map(self.map_id);

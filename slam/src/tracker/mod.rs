@@ -14,8 +14,8 @@
 //! first; with mapping off no key frames are made.
 //!
 //! Key frames ([`keyframe`]) follow ORB-SLAM2's rules (tracked points fall below 75 % of the
-//! reference key frame's, or too few close points are tracked while many are not, or
-//! `max_frames` passed); with depth a key frame creates map points for its unmatched keypoints
+//! reference key frame's, or too few close points are tracked while many are not; time alone
+//! makes none, as local mapping is always idle in lockstep); with depth a key frame creates map points for its unmatched keypoints
 //! (all of them for RGB-D, ORB-SLAM2's close-point rule for stereo), and is handed to local
 //! mapping as a [`SparseMap`] batch, whose triangulation adds the rest. A single camera starts
 //! its map from two views ([`monocular`]). Every observation with a depth is an RGB-D
@@ -74,8 +74,6 @@ pub struct TrackerConfig {
     pub ransac_threshold: f64,
     /// Points with depth a frame needs to start a map (ORB-SLAM2 wants 500 keypoints).
     pub min_init_points: usize,
-    /// A key frame at least this often, frames (ORB-SLAM: the frame rate).
-    pub max_frames: u64,
     /// Lost frames in a row after which a new map starts.
     pub reset_after: u32,
     /// Which of ORB-SLAM2's three sensor modes.
@@ -111,7 +109,6 @@ impl TrackerConfig {
             min_inliers: 30,
             ransac_threshold: 3.0,
             min_init_points: 100,
-            max_frames: 30,
             reset_after: 5,
             sensor: Sensor::Rgbd,
         }
@@ -368,8 +365,10 @@ impl Tracker {
         }
         let mut delta: BTreeMap<u64, Isometry3<f64>> = BTreeMap::new();
         for k in &correction.keyframes {
-            if let Some(old) = self.keyframe_poses.insert(k.id, k.world_from_cam) {
-                delta.insert(k.id, k.world_from_cam * old.inverse());
+            // (A key frame culled since loop closing sent this is not brought back.)
+            if let Some(slot) = self.keyframe_poses.get_mut(&k.id) {
+                delta.insert(k.id, k.world_from_cam * slot.inverse());
+                *slot = k.world_from_cam;
             }
         }
         let newest = self.reference.and_then(|r| delta.get(&r).copied());
@@ -416,6 +415,12 @@ impl Tracker {
         {
             places.apply_refinements(update);
         }
+        if let Some(places) = &mut self.places
+            && places.map_id == update.map_id
+        {
+            places.cull_keyframes(update);
+        }
+        self.cull_keyframes(update);
         let incoming: BTreeSet<u64> = update.points.iter().map(|p| p.id).collect();
         for p in &update.points {
             self.points.insert(
@@ -438,6 +443,25 @@ impl Tracker {
                 .iter()
                 .filter(|o| o.keyframe == newest && seen.get(&o.point).is_some_and(|&n| n >= min_obs))
                 .count();
+        }
+    }
+
+    /// Forget the key frames local mapping culled: the frames anchored to one are anchored to
+    /// the key frame standing in for it, through the relative pose local mapping gave (they
+    /// follow that key frame's later corrections, as ORB-SLAM2's frames follow a culled key
+    /// frame's parent).
+    fn cull_keyframes(&mut self, update: &SparseMap) {
+        for c in &update.culled {
+            if !self.keyframe_poses.contains_key(&c.anchor) {
+                continue;
+            }
+            for a in self.anchors.iter_mut().filter(|a| a.1 == c.id) {
+                *a = (a.0, c.anchor, renormalised(&(c.anchor_from_culled * a.2)));
+            }
+            self.keyframe_poses.remove(&c.id);
+            if self.reference == Some(c.id) {
+                self.reference = Some(c.anchor);
+            }
         }
     }
 

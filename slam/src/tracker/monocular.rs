@@ -159,6 +159,7 @@ impl Tracker {
             features: candidates,
             // (Loop closing takes no monocular map: it would need Sim(3).)
             keypoints: Vec::new(),
+            culled: Vec::new(),
         };
         TrackingResult {
             world_from_cam: Some(world_from_c2),
