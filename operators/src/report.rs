@@ -4,6 +4,7 @@
 
 use std::collections::BTreeMap;
 
+use dynaflow_slam::memory::MapMemory;
 use serde::{Deserialize, Serialize};
 
 pub use dynaflow_ros::sequence::BagReport;
@@ -123,6 +124,9 @@ pub struct LocalMappingReport {
     /// Points culled (the recent-observation test, or left unobserved by a culled key frame).
     #[serde(default)]
     pub culled_points: usize,
+    /// Bytes its window holds at the end, per component (an estimate from the containers).
+    #[serde(default)]
+    pub memory_bytes: MapMemory,
     /// Local BA per key frame.
     pub local_ba_ms: Timing,
 }
@@ -198,6 +202,9 @@ pub struct LoopClosingReport {
     pub vocabulary: VocabularyReport,
     /// Key frames in the map.
     pub keyframes: usize,
+    /// Bytes the whole map holds at the end, per component (an estimate from the containers).
+    #[serde(default)]
+    pub memory_bytes: MapMemory,
     /// The loops closed, in order.
     pub loops: Vec<LoopReport>,
     /// Loops whose views do not overlap in the ground truth (`None` without it; an oracle).
@@ -426,6 +433,10 @@ pub struct TrackerReport {
     pub frames: FrameStates,
     /// Maps started.
     pub maps: u32,
+    /// Bytes it holds at the end, per component (key-frame poses and frame anchors, the local
+    /// map, the whole map kept for relocalisation; an estimate from the containers).
+    #[serde(default)]
+    pub memory_bytes: MapMemory,
     /// Relocalisations in the whole map.
     pub map_relocalisations: usize,
     /// `rgbd`, `stereo` or `mono`.

@@ -44,6 +44,15 @@ impl KeyFrameDatabase {
         self.bows.len()
     }
 
+    /// Bytes of the inverted index and the stored bags of words ([`crate::memory`]).
+    pub fn memory(&self) -> usize {
+        use crate::memory::{map_bytes, set_bytes};
+        map_bytes(&self.index)
+            + self.index.values().map(set_bytes).sum::<usize>()
+            + map_bytes(&self.bows)
+            + self.bows.values().map(map_bytes).sum::<usize>()
+    }
+
     /// Whether no key frame is held.
     pub fn is_empty(&self) -> bool {
         self.bows.is_empty()

@@ -15,6 +15,7 @@ use nalgebra::{Isometry3, Point3};
 use crate::bow::{BowVector, Descriptor, FeatureVector, Vocabulary};
 use crate::keyframe_db::KeyFrameDatabase;
 use crate::map::{Feature, MapKeyFrame, MapKeypoint, MapPoint, SparseMap, sigma};
+use crate::memory::{MapMemory, map_bytes, set_bytes, vec_bytes};
 
 /// Hamming distance of a BoW or projection match (ORB-SLAM2 `TH_LOW`) and the BoW ratio.
 pub const MAX_DISTANCE: u32 = 50;
@@ -84,6 +85,23 @@ impl KeyFrameMap {
             observers: BTreeMap::new(),
             db: KeyFrameDatabase::new(),
         }
+    }
+
+    /// Bytes per component ([`crate::memory`]): key frames with their keypoints, points with
+    /// their observers, and the words (each key frame's bag of words and direct index, the
+    /// database).
+    pub fn memory(&self) -> MapMemory {
+        let mut m = MapMemory { bow_index: self.db.memory(), ..MapMemory::default() };
+        m.keyframes = map_bytes(&self.kfs);
+        for k in self.kfs.values() {
+            m.keyframes += vec_bytes(&k.keypoints) + set_bytes(&k.loops);
+            m.bow_index +=
+                map_bytes(&k.bow) + map_bytes(&k.features) + k.features.values().map(vec_bytes).sum::<usize>();
+        }
+        m.points = map_bytes(&self.points)
+            + map_bytes(&self.observers)
+            + self.observers.values().map(set_bytes).sum::<usize>();
+        m
     }
 
     /// The vocabulary.

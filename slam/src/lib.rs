@@ -37,6 +37,7 @@ pub mod local_map;
 pub mod loop_closing;
 pub mod map;
 pub mod map_file;
+pub mod memory;
 pub mod pose_graph;
 pub mod tracker;
 

@@ -34,6 +34,7 @@ use dynaflow_vision::matching::hamming;
 
 use crate::keyframe_map::COVISIBILITY_MIN;
 use crate::map::{CulledKeyFrame, MapFeature, MapKeyFrame, MapObservation, MapPoint, SparseMap, sigma};
+use crate::memory::{MapMemory, map_bytes, vec_bytes};
 
 /// Local-mapping settings.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -152,6 +153,15 @@ impl LocalMapper {
             culled_keyframes: 0,
             culled_points: 0,
         }
+    }
+
+    /// Bytes per component ([`crate::memory`]): the window's key frames (observations and
+    /// triangulation candidates) and its points.
+    pub fn memory(&self) -> MapMemory {
+        let keyframes =
+            map_bytes(&self.kfs) + self.kfs.values().map(|k| vec_bytes(&k.obs) + vec_bytes(&k.features)).sum::<usize>();
+        let points = map_bytes(&self.points) + self.points.values().map(|p| vec_bytes(&p.kfs)).sum::<usize>();
+        MapMemory { keyframes, points, bow_index: 0 }
     }
 
     /// Key frames culled as redundant so far.

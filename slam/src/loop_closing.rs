@@ -212,6 +212,11 @@ impl LoopCloser {
         self.map.points.len()
     }
 
+    /// Bytes per component of the whole map it keeps ([`crate::memory`]).
+    pub fn memory(&self) -> crate::memory::MapMemory {
+        self.map.memory()
+    }
+
     /// Every loop closed so far.
     pub fn loops(&self) -> &[LoopClosure] {
         &self.loops

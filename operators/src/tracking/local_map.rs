@@ -128,6 +128,7 @@ impl Operator for LocalMap {
             points: self.mapper.as_ref().map_or(0, LocalMapper::points),
             culled_keyframes: self.mapper.as_ref().map_or(0, LocalMapper::culled_keyframes),
             culled_points: self.mapper.as_ref().map_or(0, LocalMapper::culled_points),
+            memory_bytes: self.mapper.as_ref().map(LocalMapper::memory).unwrap_or_default(),
             local_ba_ms: Timing::of(&self.ba_ms),
         };
         ctx.report = Some(NodeReport::from(report).to_json());

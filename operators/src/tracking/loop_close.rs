@@ -223,6 +223,7 @@ impl Operator for LoopClose {
                 load_ms: self.load_ms,
             },
             keyframes: self.closer.as_ref().map_or(0, LoopCloser::keyframes),
+            memory_bytes: self.closer.as_ref().map(LoopCloser::memory).unwrap_or_default(),
             loops,
             false_loops: (!self.ground_truth.is_empty()).then_some(false_loops),
             rejected_candidates: self

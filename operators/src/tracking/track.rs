@@ -485,6 +485,7 @@ impl Operator for Track {
         let mut report = TrackerReport {
             frames: FrameStates { not_initialised, new_map, tracked, relocalised, lost, inertial },
             maps: self.tracker.as_ref().map_or(0, Tracker::maps),
+            memory_bytes: self.tracker.as_ref().map(Tracker::memory).unwrap_or_default(),
             map_relocalisations: self.tracker.as_ref().map_or(0, Tracker::map_relocalisations),
             sensor: sensor_name(sensor).to_owned(),
             first_pose_frame: self.first_pose_frame,

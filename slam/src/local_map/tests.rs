@@ -70,9 +70,15 @@ fn a_key_frame_whose_points_three_others_see_is_culled_best_covisible_first_neve
     assert_eq!(m.points(), 100);
     // Switched off, nothing goes.
     let off = LocalMapConfig { cull_keyframes: false, ..LocalMapConfig::rgbd(CAM.fx) };
-    let (m, culled, _) = run(off, &batch(4, 0.04, 0..100, 0, false));
+    let (all, culled, _) = run(off, &batch(4, 0.04, 0..100, 0, false));
     assert!(culled.iter().all(Vec::is_empty));
-    assert_eq!(m.keyframes(), 5);
+    assert_eq!(all.keyframes(), 5);
+    // The memory report sees it: 3 key frames of 100 observations against 5, the same points.
+    let (kept, full) = (m.memory(), all.memory());
+    let per_kf = 100 * std::mem::size_of::<MapObservation>();
+    assert!(kept.keyframes >= 3 * per_kf && full.keyframes >= 5 * per_kf, "{kept:?} {full:?}");
+    assert!(full.keyframes - kept.keyframes >= 2 * per_kf, "{kept:?} {full:?}");
+    assert_eq!(kept.bow_index, 0);
 }
 
 #[test]

@@ -332,6 +332,19 @@ impl Tracker {
         }
     }
 
+    /// Bytes per component ([`crate::memory`]): the key frames' poses and each frame's anchor
+    /// (key frames), the local map's points, and with a vocabulary the whole map it keeps for
+    /// relocalisation.
+    pub fn memory(&self) -> crate::memory::MapMemory {
+        use crate::memory::{MapMemory, map_bytes, vec_bytes};
+        let own = MapMemory {
+            keyframes: map_bytes(&self.keyframe_poses) + vec_bytes(&self.anchors),
+            points: map_bytes(&self.points),
+            bow_index: 0,
+        };
+        own + self.places.as_ref().map(KeyFrameMap::memory).unwrap_or_default()
+    }
+
     /// The whole map kept for relocalisation (with a vocabulary), e.g. to save it.
     pub fn places(&self) -> Option<&KeyFrameMap> {
         self.places.as_ref()
