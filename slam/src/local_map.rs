@@ -7,9 +7,8 @@
 //! points held fixed. Afterwards bad observations are erased and points culled (ORB-SLAM's
 //! `MapPointCulling`: two key frames after creation a point must be seen by at least two key
 //! frames). Key frames are culled as ORB-SLAM2's `KeyFrameCulling` does
-//! ([`LocalMapper::cull_keyframes`]): one whose points are nearly all seen by three others
-//! goes, so a camera that stays in one place keeps a bounded map; each culled key frame is
-//! named in the output with the key frame that stands in for it, so tracking and loop closing
+//! ([`LocalMapper::cull_keyframes`]): one whose close points are nearly all seen by three
+//! others goes; each culled key frame is named in the output with the key frame that stands in for it, so tracking and loop closing
 //! drop it too. The window itself stays bounded: beyond `keep_keyframes` the oldest key frames
 //! are forgotten here (loop closing keeps the whole map).
 //!
@@ -73,7 +72,7 @@ impl LocalMapConfig {
             cull_observations: 3,
             triangulation_neighbours: 20,
             cull_keyframes: true,
-            close_depth: 40.0 * 0.08,
+            close_depth: crate::tracker::CLOSE_BASELINES * 0.08,
         }
     }
 
@@ -114,6 +113,18 @@ struct Mp {
     kfs: Vec<u64>,
     /// ORB-SLAM's observation count: 2 for an RGB-D observation, 1 for a pixel alone.
     weight: u32,
+}
+
+impl Mp {
+    /// Key frame `kf`'s observation (with a depth or not) is gone for good: it leaves the
+    /// observers and the observation count.
+    fn erase(&mut self, kf: u64, with_depth: bool) {
+        let before = self.kfs.len();
+        self.kfs.retain(|&k| k != kf);
+        if self.kfs.len() < before {
+            self.weight = self.weight.saturating_sub(if with_depth { 2 } else { 1 }).max(self.kfs.len() as u32);
+        }
+    }
 }
 
 /// Local mapping state.
@@ -394,20 +405,11 @@ impl LocalMapper {
         }
         let culled_keyframes =
             if self.config.cull_keyframes { self.cull_keyframes(newest, &mut removed) } else { Vec::new() };
-        // Bounded memory: forget the oldest key frames.
+        // Bounded memory: forget the oldest key frames (their observations stand in the whole
+        // map, so the points keep their observation counts).
         while self.kfs.len() > self.config.keep_keyframes.max(self.config.window) {
             let Some((&old, _)) = self.kfs.iter().next() else { break };
-            if let Some(kf) = self.kfs.remove(&old) {
-                for o in kf.obs {
-                    if let Some(mp) = self.points.get_mut(&o.point) {
-                        mp.kfs.retain(|&k| k != old);
-                        if mp.kfs.is_empty() {
-                            self.points.remove(&o.point);
-                            removed.push(o.point);
-                        }
-                    }
-                }
-            }
+            self.drop_keyframe(old, false, &mut removed);
         }
 
         let keyframes = window.iter().filter_map(|k| self.kfs.get(k)).map(|kf| kf.info).collect();
@@ -499,26 +501,34 @@ impl LocalMapper {
             }
             let Some(anchor) = self.covisible(k, 1).first().copied() else { continue };
             let Some(anchor_pose) = self.kfs.get(&anchor).map(|a| a.info.world_from_cam) else { continue };
-            let Some(kf) = self.kfs.remove(&k) else { continue };
+            let before = removed.len();
+            let Some(kf) = self.drop_keyframe(k, true, removed) else { continue };
             let anchor_from_culled = anchor_pose.inverse() * kf.info.world_from_cam;
-            for o in kf.obs {
-                let Some(mp) = self.points.get_mut(&o.point) else { continue };
-                let before = mp.kfs.len();
-                mp.kfs.retain(|&x| x != k);
-                if mp.kfs.len() < before {
-                    mp.weight =
-                        mp.weight.saturating_sub(if o.depth.is_some() { 2 } else { 1 }).max(mp.kfs.len() as u32);
-                }
-                if mp.kfs.is_empty() {
-                    self.points.remove(&o.point);
-                    removed.push(o.point);
-                    self.culled_points += 1;
-                }
-            }
+            self.culled_points += removed.len() - before;
             self.culled_keyframes += 1;
             out.push(CulledKeyFrame { id: k, anchor, anchor_from_culled });
         }
         out
+    }
+
+    /// Take key frame `k` out of the window: its observations leave their points (`erase`: for
+    /// good, so each point's observation count drops too; otherwise only forgotten here), and
+    /// a point left without any key frame goes (its id pushed on `removed`). Returns it.
+    fn drop_keyframe(&mut self, k: u64, erase: bool, removed: &mut Vec<u64>) -> Option<Kf> {
+        let kf = self.kfs.remove(&k)?;
+        for o in &kf.obs {
+            let Some(mp) = self.points.get_mut(&o.point) else { continue };
+            if erase {
+                mp.erase(k, o.depth.is_some());
+            } else {
+                mp.kfs.retain(|&x| x != k);
+            }
+            if mp.kfs.is_empty() {
+                self.points.remove(&o.point);
+                removed.push(o.point);
+            }
+        }
+        Some(kf)
     }
 
     /// Key frame `kf`'s `n` best covisible key frames: most points shared first, then the
@@ -550,11 +560,7 @@ impl LocalMapper {
             k.obs.retain(|o| o.point != point);
         }
         if let Some(mp) = self.points.get_mut(&point) {
-            let before = mp.kfs.len();
-            mp.kfs.retain(|&k| k != kf);
-            if mp.kfs.len() < before {
-                mp.weight = mp.weight.saturating_sub(if with_depth { 2 } else { 1 }).max(mp.kfs.len() as u32);
-            }
+            mp.erase(kf, with_depth);
         }
     }
 

@@ -19,13 +19,6 @@ pub struct MapMemory {
     pub bow_index: usize,
 }
 
-impl MapMemory {
-    /// All of it.
-    pub fn total(&self) -> usize {
-        self.keyframes + self.points + self.bow_index
-    }
-}
-
 impl std::ops::Add for MapMemory {
     type Output = Self;
     fn add(self, o: Self) -> Self {

@@ -81,8 +81,7 @@ impl Operator for LocalMap {
             if batch.features.is_empty() {
                 let baseline = rig.unwrap_or(self.config.baseline);
                 c.bf = k.fx * baseline;
-                // ORB-SLAM2's `ThDepth`: 40 baselines.
-                c.close_depth = 40.0 * baseline;
+                c.close_depth = dynaflow_slam::tracker::CLOSE_BASELINES * baseline;
             }
             LocalMapper::new(c, Pinhole::from(k))
         });

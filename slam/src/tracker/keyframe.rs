@@ -34,7 +34,6 @@ impl Tracker {
         self.next_keyframe += 1;
         self.keyframe_poses.insert(id, fit.world_from_cam);
         self.reference = Some(id);
-        self.frames_since_kf = 0;
         let info = MapKeyFrame { id, stamp, world_from_cam: fit.world_from_cam };
         let depth_of = |f: &Feature| f.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth);
         let mut observations = Vec::new();

@@ -15,8 +15,8 @@
 //!
 //! Key frames ([`keyframe`]) follow ORB-SLAM2's rules (tracked points fall below 75 % of the
 //! reference key frame's, or too few close points are tracked while many are not; time alone
-//! makes none, as local mapping is always idle in lockstep); with depth a key frame creates map points for its unmatched keypoints
-//! (all of them for RGB-D, ORB-SLAM2's close-point rule for stereo), and is handed to local
+//! makes none, as local mapping is always idle in lockstep); with depth a key frame creates
+//! map points for its unmatched keypoints (all of them for RGB-D, ORB-SLAM2's close-point rule for stereo), and is handed to local
 //! mapping as a [`SparseMap`] batch, whose triangulation adds the rest. A single camera starts
 //! its map from two views ([`monocular`]). Every observation with a depth is an RGB-D
 //! observation in BA (pixel plus virtual right coordinate), as in ORB-SLAM2.
@@ -100,7 +100,7 @@ impl TrackerConfig {
     pub fn rgbd(fx: f64) -> Self {
         Self {
             bf: fx * 0.08,
-            th_depth: 40.0 * 0.08,
+            th_depth: CLOSE_BASELINES * 0.08,
             max_depth: 6.0,
             scale_factor: 1.2,
             search_radius: 15.0,
@@ -120,7 +120,7 @@ impl TrackerConfig {
     pub fn stereo(fx: f64, baseline: f64) -> Self {
         Self {
             bf: fx * baseline,
-            th_depth: STEREO_CLOSE_BASELINES * baseline,
+            th_depth: CLOSE_BASELINES * baseline,
             max_depth: f64::INFINITY,
             sensor: Sensor::Stereo,
             ..Self::rgbd(fx)
@@ -138,8 +138,8 @@ impl TrackerConfig {
 /// ORB-SLAM2's monocular initialisation: matches between the reference and the current
 /// frame needed to try (`SearchForInitialization` < 100 restarts from the current frame).
 pub const MONO_INIT_MATCHES: usize = 100;
-/// ORB-SLAM2's `ThDepth` for stereo cameras: points closer than 40 baselines are close.
-const STEREO_CLOSE_BASELINES: f64 = 40.0;
+/// ORB-SLAM2's `ThDepth`: points closer than 40 baselines (RGB-D: the virtual one) are close.
+pub const CLOSE_BASELINES: f64 = 40.0;
 /// ORB-SLAM2's `CreateNewKeyFrame` (stereo): at least this many new points, nearest first.
 const STEREO_MIN_NEW_POINTS: usize = 100;
 /// Search window of the initial matching, pixels (ORB-SLAM2: 100).
@@ -254,7 +254,6 @@ pub struct Tracker {
     last: Option<Isometry3<f64>>,
     /// `prev_from_cur` of the last tracked motion.
     velocity: Isometry3<f64>,
-    frames_since_kf: u64,
     ref_tracked: usize,
     /// First key frame of the current map.
     first_keyframe: u64,
@@ -315,7 +314,6 @@ impl Tracker {
             next_keyframe: 0,
             last: None,
             velocity: Isometry3::identity(),
-            frames_since_kf: 0,
             ref_tracked: 0,
             first_keyframe: 0,
             lost_run: 0,
@@ -427,10 +425,6 @@ impl Tracker {
             && places.map_id == update.map_id
         {
             places.apply_refinements(update);
-        }
-        if let Some(places) = &mut self.places
-            && places.map_id == update.map_id
-        {
             places.cull_keyframes(update);
         }
         self.cull_keyframes(update);

@@ -124,7 +124,6 @@ impl Tracker {
         self.keyframe_poses.insert(k1, world_from_c2);
         self.reference = Some(k1);
         self.first_keyframe = k0;
-        self.frames_since_kf = 0;
         let mut points = Vec::new();
         let mut observations = Vec::new();
         let mut matched0 = vec![None; reference.len()];

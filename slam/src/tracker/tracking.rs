@@ -68,7 +68,6 @@ impl Tracker {
                     _ => Isometry3::identity(),
                 };
                 self.last = Some(f.world_from_cam);
-                self.frames_since_kf += 1;
                 if !self.mapping {
                     self.follow_loaded_map(&f.matched);
                 }
