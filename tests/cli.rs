@@ -426,7 +426,7 @@ fn constants_table_lists_every_default() {
         "octomap.dynamic_classes",
         "octomap.color",
         "octomap.snapshot_every",
-        "local_map.baseline",
+        "local_map.bf",
     ];
     for op in [
         "cull_epipolar",

@@ -215,8 +215,6 @@ pub struct LoopClosingReport {
     pub detection_ms: Timing,
     /// Each loop correction.
     pub loop_correction_ms: Timing,
-    /// Why loop closing refused to run, if it did.
-    pub refused: Option<String>,
 }
 
 /// Mask IoU against a reference, pooled over the run.

@@ -39,6 +39,7 @@ pub mod map;
 pub mod map_file;
 pub mod memory;
 pub mod pose_graph;
+pub mod sim3;
 pub mod tracker;
 
 pub use local_map::{LocalMapConfig, LocalMapper};

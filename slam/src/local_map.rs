@@ -56,23 +56,24 @@ pub struct LocalMapConfig {
     /// Cull redundant key frames (ORB-SLAM2's `KeyFrameCulling`, [`LocalMapper::cull_keyframes`]).
     pub cull_keyframes: bool,
     /// With depth, only observations closer than this count in key-frame culling (ORB-SLAM2's
-    /// `ThDepth`: 40 baselines; RGB-D: 40 x 8 cm).
+    /// `ThDepth`: 40 baselines; RGB-D: 40 x bf / fx).
     pub close_depth: f64,
 }
 
 impl LocalMapConfig {
-    /// ORB-SLAM2's defaults for an RGB-D camera with focal length `fx` (virtual baseline 8 cm).
+    /// ORB-SLAM2's defaults for an RGB-D camera with focal length `fx` (bf 40 px, its TUM
+    /// configurations' [`crate::tracker::RGBD_BF`]).
     pub fn rgbd(fx: f64) -> Self {
         Self {
             window: 10,
             keep_keyframes: 60,
-            bf: fx * 0.08,
+            bf: crate::tracker::RGBD_BF,
             scale_factor: 1.2,
             iterations: (5, 10),
             cull_observations: 3,
             triangulation_neighbours: 20,
             cull_keyframes: true,
-            close_depth: crate::tracker::CLOSE_BASELINES * 0.08,
+            close_depth: crate::tracker::CLOSE_BASELINES * crate::tracker::RGBD_BF / fx,
         }
     }
 

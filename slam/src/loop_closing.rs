@@ -1,4 +1,5 @@
-//! ORB-SLAM2's third thread, loop closing, for rigid maps (RGB-D and stereo: SE(3)).
+//! ORB-SLAM2's third thread, loop closing: SE(3) for maps with depth (RGB-D, stereo), Sim(3)
+//! for a single camera's, whose scale drifts.
 //! Why one file of this size: it mirrors one ORB-SLAM2 class (`LoopClosing`), step for step.
 //!
 //! Key frames arrive after local mapping with all their keypoints (descriptor, depth and the
@@ -10,33 +11,35 @@
 //!    database, candidates scoring above the lowest score of its covisible key frames and not
 //!    connected to it, accepted when consistent over three consecutive key frames; none within
 //!    [`LoopConfig::min_keyframes_between`] key frames of the map's start or the last loop.
-//! 2. **Geometry** (`ComputeSim3` with the scale fixed): BoW-guided matches between the key
-//!    frame and the candidate (`SearchByBoW`: same vocabulary node, Hamming <= 50, ratio 0.75),
-//!    SE(3) RANSAC on their 3-D points (Horn/Umeyama on three, inliers by reprojection in both
-//!    images at chi2 9.21 sigma^2, ORB-SLAM2's `Sim3Solver`), then the candidate's and its
-//!    covisible key frames' points projected into the key frame (`SearchByProjection`) and the
-//!    pose refined on all of them (motion-only BA); accepted with at least 40 matches.
+//! 2. **Geometry** (`ComputeSim3`): BoW-guided matches between the key frame and the
+//!    candidate (`SearchByBoW`: same vocabulary node, Hamming <= 50, ratio 0.75), RANSAC on
+//!    their 3-D points (Horn/Umeyama on three, inliers by reprojection in both images at chi2
+//!    9.21 sigma^2, ORB-SLAM2's `Sim3Solver`; the scale fixed with depth, free for a single
+//!    camera), then the candidate's and its covisible key frames' points projected into the
+//!    key frame (`SearchByProjection`) and the pose refined on all of them (motion-only BA;
+//!    ORB-SLAM2 refines the similarity with `OptimizeSim3` and searches again with it: here the
+//!    scale stays RANSAC's, refitted on its inliers); accepted with at least 40 matches.
 //! 3. **Correction** (`CorrectLoop`): the key frame and its covisible key frames moved by the
-//!    loop's correction, their points with them; the loop side's points fused into them
+//!    loop's correction (a similarity: a single camera's points are rescaled), their points
+//!    with them; the loop side's points fused into them
 //!    (`SearchAndFuse`: a keypoint's duplicate point is replaced by the loop's); the essential
 //!    graph (spanning tree, covisibility edges of weight >= 100, loop edges) optimised with the
-//!    loop key frame fixed ([`crate::pose_graph`]); every point moved with its reference key
-//!    frame.
+//!    loop key frame fixed ([`crate::pose_graph`], in Sim(3) for a single camera); every point
+//!    moved with its reference key frame's similarity; each key frame keeps the rotation and
+//!    centre (ORB-SLAM2's `[R | t/s]`).
 //! 4. **Global bundle adjustment** (`RunGlobalBundleAdjustment`): every key frame and every
 //!    point seen twice, 10 iterations, the first key frame fixed; run in place (ORB-SLAM2 runs
 //!    it in a thread and drops it for a new loop; in lockstep the next key frame waits).
 //!
 //! The result is the whole corrected map ([`LoopCloser::correction`]), which tracking and local
-//! mapping apply (the `loop_close` node sends it over the graph's feedback edges). A monocular
-//! map needs Sim(3) (scale drifts): not built, [`LoopCloser::insert`] refuses key frames
-//! without depth.
+//! mapping apply (the `loop_close` node sends it over the graph's feedback edges).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
 use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{Estimator, PoseObservation, RansacConfig, Sampler, SplitMix64, optimize_pose, ransac};
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 
 use crate::ba::{BaObservation, BaPose, BaReport, bundle_adjust};
 use crate::bow::{BowVector, Vocabulary, score};
@@ -44,7 +47,8 @@ use crate::eval::umeyama;
 use crate::keyframe_db::LoopConsistency;
 use crate::keyframe_map::KeyFrameMap;
 use crate::map::{MapKeyFrame, MapKeypoint, MapObservation, SparseMap, sigma};
-use crate::pose_graph::{PoseEdge, optimise};
+use crate::pose_graph::{Edge, PoseEdge, optimise, optimise_sim3};
+use crate::sim3::Sim3;
 
 /// Loop-closing settings (ORB-SLAM2's values).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -119,8 +123,11 @@ pub struct LoopClosure {
     pub inliers: usize,
     /// Matches after the projection search.
     pub matches: usize,
-    /// `loop_from_current` as estimated (SE(3)).
+    /// `loop_from_current` as estimated (the rigid part).
     pub loop_from_current: Isometry3<f64>,
+    /// The current key frame's map units in the loop key frame's: 1 with depth; a single
+    /// camera's scale drift along the loop (ORB-SLAM2's Sim(3) scale `s`).
+    pub scale: f64,
     /// Translation (metres) the loop moved the current key frame by: the drift.
     pub correction_m: f64,
     /// Rotation (degrees) it moved it by.
@@ -176,16 +183,6 @@ impl Rejection {
     pub const NAMES: [&'static str; 4] = ["bow_matches", "ransac_inliers", "projection_matches", "refined_matches"];
 }
 
-/// Why a key frame was not taken.
-#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
-pub enum LoopError {
-    /// A key frame without any depth: a monocular map.
-    #[error(
-        "key frame {0} has no keypoint with a depth: a monocular map needs Sim(3) loop closing, which is not built (run loop closing with RGB-D or stereo)"
-    )]
-    Monocular(u64),
-}
-
 impl LoopCloser {
     /// An empty map; `seed` drives RANSAC.
     pub fn new(config: LoopConfig, cam: Pinhole, vocabulary: Arc<Vocabulary>, seed: u64) -> Self {
@@ -234,25 +231,20 @@ impl LoopCloser {
 
     /// Take local mapping's update: the refined window (poses, points, removed points) and the
     /// new key frame's keypoints (`update.keypoints`). Returns the loop it closed, if any.
-    pub fn insert(&mut self, update: &SparseMap) -> Result<Option<LoopClosure>, LoopError> {
+    pub fn insert(&mut self, update: &SparseMap) -> Option<LoopClosure> {
         if self.map.switch_map(update.map_id) {
             // A new map (tracking was lost for good): start over.
             self.consistency = LoopConsistency::new();
             self.since_loop = 0;
         }
         self.map.apply_refinements(update);
-        if let Some(k) = update.keypoints.first()
-            && !update.keypoints.iter().any(|k| k.depth.is_some())
-        {
-            return Err(LoopError::Monocular(k.keyframe));
-        }
         let added = self.map.add_keyframe(update);
         self.map.cull_keyframes(update);
-        let Some((id, bow)) = added else { return Ok(None) };
+        let (id, bow) = added?;
         self.since_loop += 1;
         let closed = self.detect(id, &bow);
         self.map.db.add(id, bow);
-        Ok(closed)
+        closed
     }
 
     fn detect(&mut self, kf: u64, bow: &BowVector) -> Option<LoopClosure> {
@@ -286,8 +278,8 @@ impl LoopCloser {
         None
     }
 
-    fn reprojects(&self, pose: &Isometry3<f64>, x: &Point3<f64>, kp: &MapKeypoint) -> bool {
-        let Some(uv) = self.map.cam.project(&(pose * x)) else { return false };
+    fn reprojects(&self, pose: &Sim3, x: &Point3<f64>, kp: &MapKeypoint) -> bool {
+        let Some(uv) = self.map.cam.project(&pose.transform_point(x)) else { return false };
         let s = sigma(self.config.scale_factor, kp.octave);
         let (du, dv) = (uv[0] - kp.uv[0], uv[1] - kp.uv[1]);
         du * du + dv * dv <= CHI2_RANSAC * s * s
@@ -313,11 +305,14 @@ impl LoopCloser {
         if pairs.len() < self.config.min_bow_matches {
             return Err(Rejection::BowMatches);
         }
-        // SE(3) between the two key frames' 3-D points by RANSAC (ORB-SLAM2's Sim3Solver with the
-        // scale fixed: 3-point samples, both-way reprojection within the chi-square bound).
-        let estimator = Se3Estimator {
+        // The transform between the two key frames' 3-D points by RANSAC (ORB-SLAM2's
+        // Sim3Solver: 3-point samples, both-way reprojection within the chi-square bound), with
+        // the scale fixed where depth gives it (RGB-D, stereo) and free for a single camera.
+        let monocular = self.monocular(a);
+        let estimator = Sim3Estimator {
             pairs: &pairs,
-            agrees: |(t, inv): &Se3, k: usize| {
+            with_scale: monocular,
+            agrees: |(t, inv): &(Sim3, Sim3), k: usize| {
                 let (xa, xb, i, j) = &pairs[k];
                 self.reprojects(t, xa, &b.keypoints[*j]) && self.reprojects(inv, xb, &a.keypoints[*i])
             },
@@ -336,8 +331,10 @@ impl LoopCloser {
         };
         let (cand_from_cur, count) = (consensus.model.0, consensus.count);
         // The loop side's points (the candidate and its covisible key frames) projected into
-        // the current key frame at the estimated pose; the pose refined on every match.
-        let world_from_cur = b.info.world_from_cam * cand_from_cur;
+        // the current key frame at the estimated pose; the pose refined on every match (the
+        // scale between the two sides' maps stays the solver's: a single camera's projections
+        // do not see it).
+        let world_from_cur = b.info.world_from_cam * cand_from_cur.rigid();
         let mut group: Vec<u64> = vec![candidate];
         group.extend(self.map.covisible(candidate));
         let loop_points = self.map.points_of(&group);
@@ -365,6 +362,7 @@ impl LoopCloser {
         }
         Ok(Found {
             world_from_cur: refined.cam_from_world.inverse(),
+            scale: cand_from_cur.scale,
             bow_matches: matches.len(),
             inliers: count,
             matches: good,
@@ -372,17 +370,26 @@ impl LoopCloser {
         })
     }
 
+    /// A single camera's key frame: none of its keypoints has a depth.
+    fn monocular(&self, kf: &crate::keyframe_map::PlaceKeyFrame) -> bool {
+        !kf.keypoints.iter().any(|k| k.depth.is_some())
+    }
+
     fn correct(&mut self, current: u64, candidate: u64, found: &Found) -> LoopClosure {
-        let old: BTreeMap<u64, Isometry3<f64>> =
-            self.map.kfs.iter().map(|(&k, kf)| (k, kf.info.world_from_cam)).collect();
+        let old: BTreeMap<u64, Sim3> =
+            self.map.kfs.iter().map(|(&k, kf)| (k, Sim3::from_isometry(&kf.info.world_from_cam))).collect();
+        let monocular = self.map.kfs.get(&current).is_some_and(|k| self.monocular(k));
+        // The current key frame's corrected pose, as a similarity from its camera (in its
+        // map's units) to the world (the loop side's units).
         let old_cur = old[&current];
-        let delta = found.world_from_cur * old_cur.inverse();
-        let correction_m = delta.translation.vector.norm();
-        let correction_deg = delta.rotation.angle().to_degrees();
+        let new_cur = Sim3 { scale: found.scale, ..Sim3::from_isometry(&found.world_from_cur) };
+        let delta = new_cur * old_cur.inverse();
+        let correction_m = (new_cur.translation - old_cur.translation).norm();
+        let correction_deg = (new_cur.rotation * old_cur.rotation.inverse()).angle().to_degrees();
         // The current key frame and its covisible ones move with the loop's correction.
         let mut connected = vec![current];
         connected.extend(self.map.covisible(current));
-        let mut corrected: BTreeMap<u64, Isometry3<f64>> = BTreeMap::new();
+        let mut corrected: BTreeMap<u64, Sim3> = BTreeMap::new();
         for k in &connected {
             corrected.insert(*k, delta * old[k]);
         }
@@ -394,7 +401,7 @@ impl LoopCloser {
         let mut fused = 0;
         for k in &connected {
             let Some(kf) = self.map.kfs.get(k) else { continue };
-            let pose = corrected[k];
+            let pose = corrected[k].rigid();
             let pairs = if *k == current {
                 found.matches.clone()
             } else {
@@ -414,19 +421,19 @@ impl LoopCloser {
         }
         let ids: Vec<u64> = self.map.kfs.keys().copied().collect();
         let index: BTreeMap<u64, usize> = ids.iter().enumerate().map(|(i, &k)| (k, i)).collect();
-        let mut poses: Vec<Isometry3<f64>> = ids.iter().map(|k| corrected.get(k).copied().unwrap_or(old[k])).collect();
-        let mut edges = Vec::new();
+        let mut poses: Vec<Sim3> = ids.iter().map(|k| corrected.get(k).copied().unwrap_or(old[k])).collect();
+        let mut edges: Vec<Edge<Sim3>> = Vec::new();
         let mut seen = BTreeSet::new();
         let group: BTreeSet<u64> = found.group.iter().copied().collect();
         let connected_set: BTreeSet<u64> = connected.iter().copied().collect();
-        let mut edge = |a: u64, b: u64, after: bool, edges: &mut Vec<PoseEdge>| {
+        let mut edge = |a: u64, b: u64, after: bool, edges: &mut Vec<Edge<Sim3>>| {
             let key = (a.min(b), a.max(b));
             if a == b || !seen.insert(key) {
                 return;
             }
             let (Some(&ia), Some(&ib)) = (index.get(&a), index.get(&b)) else { return };
             let pose = |k: u64| if after { corrected.get(&k).copied().unwrap_or(old[&k]) } else { old[&k] };
-            edges.push(PoseEdge { a: ia, b: ib, a_from_b: pose(a).inverse() * pose(b) });
+            edges.push(Edge { a: ia, b: ib, a_from_b: pose(a).inverse() * pose(b) });
         };
         // The loop connections first (they are measured after the correction).
         for &k in &connected {
@@ -454,17 +461,30 @@ impl LoopCloser {
         if let Some(&i) = index.get(&candidate) {
             fixed[i] = true;
         }
-        let report = optimise(&mut poses, &fixed, &edges, self.config.pose_graph_iterations);
-        let final_poses: BTreeMap<u64, Isometry3<f64>> = ids.iter().copied().zip(poses).collect();
+        // A single camera's scale drifts: the essential graph in Sim(3) corrects it along the
+        // loop; with depth the scale is known and the graph is SE(3) (ORB-SLAM2 fixes the scale).
+        let report = if monocular {
+            optimise_sim3(&mut poses, &fixed, &edges, self.config.pose_graph_iterations)
+        } else {
+            let mut rigid: Vec<Isometry3<f64>> = poses.iter().map(Sim3::rigid).collect();
+            let rigid_edges: Vec<PoseEdge> =
+                edges.iter().map(|e| PoseEdge { a: e.a, b: e.b, a_from_b: e.a_from_b.rigid() }).collect();
+            let report = optimise(&mut rigid, &fixed, &rigid_edges, self.config.pose_graph_iterations);
+            poses = rigid.iter().map(Sim3::from_isometry).collect();
+            report
+        };
+        let final_poses: BTreeMap<u64, Sim3> = ids.iter().copied().zip(poses).collect();
         // Points move with their reference key frame: back to before the first step, then on.
         let mut start = old.clone();
         for (k, p) in &corrected {
             start.insert(*k, *p);
         }
         self.move_points(&final_poses, &start);
+        // Each key frame's pose: the similarity's rotation and camera centre (its scale went
+        // into the points).
         for (k, p) in &final_poses {
             if let Some(kf) = self.map.kfs.get_mut(k) {
-                kf.info.world_from_cam = *p;
+                kf.info.world_from_cam = p.rigid();
             }
         }
         let t0 = std::time::Instant::now();
@@ -480,7 +500,8 @@ impl LoopCloser {
             bow_matches: found.bow_matches,
             inliers: found.inliers,
             matches: found.matches.len(),
-            loop_from_current: old[&candidate].inverse() * found.world_from_cur,
+            loop_from_current: old[&candidate].rigid().inverse() * found.world_from_cur,
+            scale: found.scale,
             correction_m,
             correction_deg,
             fused,
@@ -557,7 +578,7 @@ impl LoopCloser {
 
     /// Move every point with its reference key frame (the one that created it, or the first
     /// observer) from pose `from` to pose `to`, for key frames in `to`.
-    fn move_points(&mut self, to: &BTreeMap<u64, Isometry3<f64>>, from: &BTreeMap<u64, Isometry3<f64>>) {
+    fn move_points(&mut self, to: &BTreeMap<u64, Sim3>, from: &BTreeMap<u64, Sim3>) {
         for (id, p) in &mut self.map.points {
             let first = p.first_keyframe;
             let reference = if self.map.kfs.contains_key(&first) {
@@ -567,7 +588,7 @@ impl LoopCloser {
             };
             let Some(r) = reference else { continue };
             if let (Some(t), Some(f)) = (to.get(&r), from.get(&r)) {
-                p.position = t * (f.inverse() * p.position);
+                p.position = t.transform_point(&f.inverse().transform_point(&p.position));
             }
         }
     }
@@ -647,48 +668,52 @@ impl LoopCloser {
 
 struct Found {
     world_from_cur: Isometry3<f64>,
+    /// The current key frame's map units in the loop side's (1 with depth).
+    scale: f64,
     bow_matches: usize,
     inliers: usize,
     matches: Vec<(usize, u64)>,
     group: Vec<u64>,
 }
 
-/// SE(3) from 3-D point pairs as a RANSAC estimator: 3-point samples solved by Umeyama's
-/// method (scale fixed), a pair agreeing when it reprojects both ways (`agrees`: residual 0,
-/// else infinite), Umeyama on all agreeing pairs as refit.
-/// A transform and its inverse (each pair is checked both ways, so the inverse is computed once
-/// per model, not once per pair).
-type Se3 = (Isometry3<f64>, Isometry3<f64>);
-
-struct Se3Estimator<'a, F: Fn(&Se3, usize) -> bool> {
+/// Sim(3) from 3-D point pairs as a RANSAC estimator: 3-point samples solved by Umeyama's
+/// method (the scale fixed to 1 unless `with_scale`), a pair agreeing when it reprojects both
+/// ways (`agrees`: residual 0, else infinite), Umeyama on all agreeing pairs as refit. A model
+/// is the transform and its inverse (each pair is checked both ways, so the inverse is computed
+/// once per model, not once per pair).
+struct Sim3Estimator<'a, F: Fn(&(Sim3, Sim3), usize) -> bool> {
     /// `(x in the current key frame, x in the candidate, keypoint there, keypoint here)`.
     pairs: &'a [(Point3<f64>, Point3<f64>, usize, usize)],
+    with_scale: bool,
     agrees: F,
 }
 
-impl<F: Fn(&Se3, usize) -> bool> Se3Estimator<'_, F> {
-    fn solve(&self, idx: &[usize]) -> Option<Se3> {
+impl<F: Fn(&(Sim3, Sim3), usize) -> bool> Sim3Estimator<'_, F> {
+    fn solve(&self, idx: &[usize]) -> Option<(Sim3, Sim3)> {
         let xa: Vec<Vector3<f64>> = idx.iter().map(|&k| self.pairs[k].0.coords).collect();
         let xb: Vec<Vector3<f64>> = idx.iter().map(|&k| self.pairs[k].1.coords).collect();
-        let (r, t, _) = umeyama(&xa, &xb, false)?;
-        let t = Isometry3::from_parts(Translation3::from(t), UnitQuaternion::from_matrix(&r));
+        let (r, t, scale) = umeyama(&xa, &xb, self.with_scale)?;
+        if !(scale.is_finite() && scale > 0.0) {
+            return None;
+        }
+        let t = Sim3 { rotation: UnitQuaternion::from_matrix(&r), translation: t, scale };
         Some((t, t.inverse()))
     }
 }
 
-impl<F: Fn(&Se3, usize) -> bool> Estimator for Se3Estimator<'_, F> {
-    type Model = Se3;
+impl<F: Fn(&(Sim3, Sim3), usize) -> bool> Estimator for Sim3Estimator<'_, F> {
+    type Model = (Sim3, Sim3);
     const SAMPLE_SIZE: usize = 3;
     fn len(&self) -> usize {
         self.pairs.len()
     }
-    fn fit(&self, sample: &[usize]) -> Vec<Se3> {
+    fn fit(&self, sample: &[usize]) -> Vec<(Sim3, Sim3)> {
         self.solve(sample).into_iter().collect()
     }
-    fn residual(&self, t: &Se3, i: usize) -> f64 {
+    fn residual(&self, t: &(Sim3, Sim3), i: usize) -> f64 {
         if (self.agrees)(t, i) { 0.0 } else { f64::INFINITY }
     }
-    fn refit(&self, inliers: &[usize]) -> Option<Se3> {
+    fn refit(&self, inliers: &[usize]) -> Option<(Sim3, Sim3)> {
         self.solve(inliers)
     }
 }

@@ -16,8 +16,8 @@ params! {
         window: u64 [2, 100] = 10,
         /// key frames kept at most (the oldest are forgotten: `loop_close` keeps the whole map)
         keep_keyframes: u64 [2, 100_000] = 60,
-        /// virtual baseline, metres (as `pnp_track`'s)
-        baseline: f64 [0.0, 10.0] = 0.08,
+        /// ORB-SLAM2's `Camera.bf`, pixels (as `track_rgbd`'s): the depth residual's weight and the close depth of key-frame culling (40 x bf / fx); a stereo rig's own replaces it
+        bf: f64 [0.0, 10000.0] = 40.0,
         /// cull redundant key frames (ORB-SLAM2's `KeyFrameCulling`: 90 % of a key frame's close points seen by three other key frames at the same or a finer scale); tracking and `loop_close` drop them too
         cull_keyframes: bool = true,
     }
@@ -79,9 +79,8 @@ impl Operator for LocalMap {
             c.keep_keyframes = self.config.keep_keyframes as usize;
             c.cull_keyframes = self.config.cull_keyframes;
             if batch.features.is_empty() {
-                let baseline = rig.unwrap_or(self.config.baseline);
-                c.bf = k.fx * baseline;
-                c.close_depth = dynaflow_slam::tracker::CLOSE_BASELINES * baseline;
+                c.bf = rig.map_or(self.config.bf, |b| k.fx * b);
+                c.close_depth = dynaflow_slam::tracker::CLOSE_BASELINES * c.bf / k.fx;
             }
             LocalMapper::new(c, Pinhole::from(k))
         });

@@ -9,7 +9,7 @@ use dynaflow_engine::msg::{CameraInfo, Header, Pose, Scalars, SparseMap, Stamped
 use dynaflow_engine::op::{Context, In, InputRole, Inputs, Instance, OpError, OpSpec, Operator, Out, Outputs, Params};
 use dynaflow_engine::params;
 use dynaflow_slam::bow::Vocabulary;
-use dynaflow_slam::loop_closing::{LoopCloser, LoopConfig, LoopError, Rejection};
+use dynaflow_slam::loop_closing::{LoopCloser, LoopConfig, Rejection};
 use dynaflow_vision::camera::Pinhole;
 use rand_core::Rng;
 
@@ -17,8 +17,8 @@ params! {
     struct Config {
         /// vocabulary file (`dynaflow vocab train`); empty: the embedded default (k 10, L 5, trained on synthetic frames of seed 31 and nine real frames: slam/vocabulary/SOURCE.md)
         vocabulary: PathBuf = PathBuf::new(),
-        /// virtual baseline, metres (as `pnp_track`'s): weighs the depth term of the loop pose's refinement
-        baseline: f64 [0.0, 10.0] = 0.08,
+        /// ORB-SLAM2's `Camera.bf`, pixels (fx x a virtual baseline; as `track_rgbd`'s): weighs the depth term of the loop pose's refinement; a stereo rig's own replaces it
+        bf: f64 [0.0, 10000.0] = 40.0,
     }
 }
 
@@ -60,7 +60,6 @@ pub const LOOP_CLOSE: OpSpec = OpSpec::transform(
             closer: None,
             insert_ms: Vec::new(),
             loop_ms: Vec::new(),
-            refused: None,
             ground_truth: Vec::new(),
         })))
     },
@@ -79,8 +78,6 @@ struct LoopClose {
     /// Milliseconds per key frame without a loop (detection), and per closed loop.
     insert_ms: Vec<f64>,
     loop_ms: Vec<f64>,
-    /// Why key frames are not taken (a monocular map).
-    refused: Option<String>,
     /// Ground truth at the key frames' stamps (evaluation only).
     ground_truth: Vec<(f64, nalgebra::Isometry3<f64>)>,
 }
@@ -102,11 +99,8 @@ impl Operator for LoopClose {
         let (msg, update) = MAP.require(inputs)?;
         let (_, k) = CAMERA_INFO.require(inputs)?;
         let rig = STEREO.get(inputs)?.map(crate::frontend::stereo_baseline).transpose()?;
-        if self.refused.is_some() {
-            return Ok(Outputs::new());
-        }
         let closer = self.closer.get_or_insert_with(|| {
-            let bf = k.fx * rig.unwrap_or(self.config.baseline);
+            let bf = rig.map_or(self.config.bf, |b| k.fx * b);
             let cam = Pinhole::from(k);
             LoopCloser::new(
                 LoopConfig::new(bf, f64::from(k.width), f64::from(k.height)),
@@ -119,14 +113,7 @@ impl Operator for LoopClose {
             self.ground_truth.push((msg.header.stamp, gt.world_from_cam));
         }
         let t0 = Instant::now();
-        let closed = match closer.insert(update) {
-            Ok(c) => c,
-            Err(e @ LoopError::Monocular(_)) => {
-                tracing::warn!("`{}`: {e}", ctx.node);
-                self.refused = Some(e.to_string());
-                return Ok(Outputs::new());
-            }
-        };
+        let closed = closer.insert(update);
         let ms = t0.elapsed().as_secs_f64() * 1e3;
         if update.keypoints.is_empty() {
             return Ok(Outputs::new());
@@ -232,7 +219,6 @@ impl Operator for LoopClose {
                 .map(|c| Rejection::NAMES.iter().zip(c.rejected()).map(|(n, v)| ((*n).to_owned(), v)).collect()),
             detection_ms: Timing::of(&self.insert_ms),
             loop_correction_ms: Timing::of(&self.loop_ms),
-            refused: self.refused.clone(),
         };
         ctx.report = Some(NodeReport::from(report).to_json());
         Ok(())

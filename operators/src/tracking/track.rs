@@ -80,10 +80,10 @@ params! {
 params! {
     /// A depth camera's parameters (`track_rgbd`).
     struct DepthCamera {
-        /// virtual baseline, metres: bf = fx x baseline weighs the depth residual (ORB-SLAM2 TUM configs: bf 40 at fx 525); 0 uses pixels only
-        baseline: f64 [0.0, 10.0] = 0.08,
-        /// points closer than this are `close` in the key-frame rule (ORB-SLAM2 ThDepth 40 x baseline)
-        close_depth: f64 [0.1, 1000.0] = 3.2,
+        /// ORB-SLAM2's `Camera.bf`, pixels: fx x a virtual baseline, weighs the depth residual (its TUM RGB-D configurations: 40 at any fx); 0 uses pixels only
+        bf: f64 [0.0, 10000.0] = 40.0,
+        /// points closer than this (metres) are `close` in the key-frame rule; 0: ORB-SLAM2's ThDepth, 40 baselines (40 x bf / fx: 2.99 m at fx 535.4)
+        close_depth: f64 [0.0, 1000.0] = 0.0,
         /// depths beyond this (metres) are not used (Kinect noise grows with the square)
         max_depth: f64 [0.1, 1000.0] = 6.0,
     }
@@ -312,8 +312,12 @@ impl Track {
             (Setup::Stereo, Some(rig)) => TrackerConfig::stereo(k.fx, crate::frontend::stereo_baseline(rig)?),
             (Setup::Stereo, None) => return Err(OpError::Input("`track_stereo` has no rig".into())),
             (Setup::Rgbd(d), _) => TrackerConfig {
-                bf: k.fx * d.baseline,
-                th_depth: d.close_depth,
+                bf: d.bf,
+                th_depth: if d.close_depth > 0.0 {
+                    d.close_depth
+                } else {
+                    dynaflow_slam::tracker::CLOSE_BASELINES * d.bf / k.fx
+                },
                 max_depth: d.max_depth,
                 ..TrackerConfig::rgbd(k.fx)
             },

@@ -54,9 +54,10 @@ pub use inertial::{
 /// Tracking settings (defaults: ORB-SLAM2's for an RGB-D camera, see [`TrackerConfig::rgbd`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrackerConfig {
-    /// `fx` times the virtual baseline (ORB-SLAM2 `bf`; TUM configs: 40 = 525 px x 7.6 cm).
+    /// `fx` times the virtual baseline (ORB-SLAM2 `bf`; its TUM configs: 40, [`RGBD_BF`]).
     pub bf: f64,
-    /// "Close" depth for the key-frame rule (ORB-SLAM2 `ThDepth` x baseline: 40 x 8 cm = 3.2 m).
+    /// "Close" depth for the key-frame rule (ORB-SLAM2 `ThDepth` x baseline: 40 x bf / fx; 2.99 m
+    /// at the TUM fr3 camera's fx 535.4).
     pub th_depth: f64,
     /// Depths beyond this are not used at all (Kinect noise grows with the square).
     pub max_depth: f64,
@@ -96,11 +97,11 @@ pub enum Sensor {
 }
 
 impl TrackerConfig {
-    /// ORB-SLAM2's RGB-D settings for focal length `fx` (virtual baseline 8 cm).
+    /// ORB-SLAM2's RGB-D settings for focal length `fx` (bf 40 px, [`RGBD_BF`]).
     pub fn rgbd(fx: f64) -> Self {
         Self {
-            bf: fx * 0.08,
-            th_depth: CLOSE_BASELINES * 0.08,
+            bf: RGBD_BF,
+            th_depth: CLOSE_BASELINES * RGBD_BF / fx,
             max_depth: 6.0,
             scale_factor: 1.2,
             search_radius: 15.0,
@@ -140,6 +141,9 @@ impl TrackerConfig {
 pub const MONO_INIT_MATCHES: usize = 100;
 /// ORB-SLAM2's `ThDepth`: points closer than 40 baselines (RGB-D: the virtual one) are close.
 pub const CLOSE_BASELINES: f64 = 40.0;
+/// ORB-SLAM2's `Camera.bf` for a depth camera, pixels: fx times a virtual baseline (its TUM
+/// RGB-D configurations, `TUM1/2/3.yaml`: 40 whatever fx, so the baseline is 40 / fx).
+pub const RGBD_BF: f64 = 40.0;
 /// ORB-SLAM2's `CreateNewKeyFrame` (stereo): at least this many new points, nearest first.
 const STEREO_MIN_NEW_POINTS: usize = 100;
 /// Search window of the initial matching, pixels (ORB-SLAM2: 100).
