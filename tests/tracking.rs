@@ -279,46 +279,39 @@ fn default_run(variant: Option<&str>, frames: Option<u64>, out: &Path) -> (Strin
 }
 
 #[test]
-fn default_graph_prints_mg_slam_next_to_the_baseline() {
+fn default_graph_prints_mg_slam_next_to_the_baseline_as_the_readme_quotes() {
     // The README's first command: MG-SLAM (S+G) and the unculled baseline side by side in
     // one run, on the same frames and keypoints; each ATE printed, MG-SLAM's against the
     // baseline's, and both kept in the summary.
     let dir = common::TempDir::new("tracking-default");
-    let (stdout, s) = default_run(None, Some(150), dir.path());
-    assert!(stdout.contains("ATE of `baseline` (150 poses"), "{stdout}");
+    let (stdout, s) = default_run(None, None, &dir.path().join("default"));
+    // The README quotes the two ATE lines; they must be what the default graph prints
+    // (lockstep runs are deterministic), so they are refreshed when the result changes.
+    let readme = std::fs::read_to_string(common::repo().join("README.md")).unwrap();
+    let quoted: Vec<&str> = readme.lines().filter(|l| l.starts_with("ATE of `")).collect();
+    assert_eq!(quoted.len(), 2, "{quoted:?}");
+    for line in quoted {
+        assert!(stdout.lines().any(|l| l == line), "README says\n{line}\nthe run printed\n{stdout}");
+    }
+    assert!(stdout.contains("ATE of `baseline` (300 poses"), "{stdout}");
     let line = stdout.lines().find(|l| l.starts_with("ATE of `track`")).unwrap_or_default();
     assert!(line.contains("% vs `baseline`)"), "{stdout}");
     let (baseline, mg) = (&s.trackers["baseline"], &s.trackers["track"]);
     assert_eq!(s.ate.as_ref().and_then(|a| a.node.as_deref()), Some("baseline"), "the first tracker is the reference");
-    assert_eq!(baseline.pairs, 150);
-    assert_eq!(mg.pairs, 150);
+    assert_eq!(baseline.pairs, 300);
+    assert_eq!(mg.pairs, 300);
     let (b, m) = (baseline.rmse, mg.rmse);
     assert!(stdout.lines().all(|l| !l.contains("(oracle)")), "the default graph decides without ground truth");
     // The bound on culling, computed here: the same graph and frames with the generator's
     // masks in place of the detector's (`masked`, an oracle), whose tracker sees no walker.
-    let (printed, s) = default_run(Some("masked"), Some(150), &dir.path().join("masked"));
+    let (printed, s) = default_run(Some("masked"), None, &dir.path().join("masked"));
     assert!(printed.contains("ATE of `track` (oracle)"), "the oracle run says so: {printed}");
     let oracle = s.trackers["track"].rmse;
-    eprintln!("150 frames: baseline {b:.4} m, MG-SLAM {m:.4} m, with ground-truth masks {oracle:.4} m");
+    eprintln!("300 frames: baseline {b:.4} m, MG-SLAM {m:.4} m, with ground-truth masks {oracle:.4} m");
     // MG-SLAM within twice what perfect masks give, and the walkers' damage to the baseline
-    // at least ten times what is left to MG-SLAM (README: 69.8 cm against 0.7 cm at 300).
+    // at least ten times what is left to MG-SLAM.
     assert!(m <= 2.0 * oracle, "MG-SLAM {m} m against {oracle} m with ground-truth masks");
     assert!(m * 10.0 <= b, "MG-SLAM {m} m vs baseline {b} m");
-}
-
-#[test]
-fn the_readme_example_output_is_what_the_default_graph_prints() {
-    // The README quotes the two ATE lines of its first command; they must be what the
-    // default graph prints (lockstep runs are deterministic), so they are refreshed when the
-    // result changes.
-    let readme = std::fs::read_to_string(common::repo().join("README.md")).unwrap();
-    let quoted: Vec<&str> = readme.lines().filter(|l| l.starts_with("ATE of `")).collect();
-    assert_eq!(quoted.len(), 2, "{quoted:?}");
-    let dir = common::TempDir::new("tracking-readme");
-    let (stdout, _) = default_run(None, None, dir.path());
-    for line in quoted {
-        assert!(stdout.lines().any(|l| l == line), "README says\n{line}\nthe run printed\n{stdout}");
-    }
 }
 
 #[test]

@@ -173,7 +173,7 @@ pub struct LoopReport {
     pub loop_stamp: f64,
     /// Bag-of-words matches of the candidate.
     pub bow_matches: usize,
-    /// SE(3) RANSAC inliers.
+    /// RANSAC inliers (SE(3); Sim(3) for a single camera).
     pub inliers: usize,
     /// Matches after guided search.
     pub matches: usize,
@@ -181,6 +181,10 @@ pub struct LoopReport {
     pub correction_m: f64,
     /// Its rotation, degrees.
     pub correction_deg: f64,
+    /// The current key frame's map units in the loop key frame's: 1 with depth; a single
+    /// camera's scale drift along the loop (the Sim(3) scale; a missing field reads 1).
+    #[serde(default = "one")]
+    pub scale: f64,
     /// Map points fused.
     pub fused: usize,
     /// Key frames in the essential graph.
@@ -193,6 +197,11 @@ pub struct LoopReport {
     pub graph_cost_after: f64,
     /// The global BA that followed.
     pub global_ba: GlobalBaReport,
+}
+
+/// A scale of 1, the default of [`LoopReport::scale`] (summaries written before it).
+fn one() -> f64 {
+    1.0
 }
 
 /// Loop closing over the run.

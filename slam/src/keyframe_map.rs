@@ -14,7 +14,7 @@ use nalgebra::{Isometry3, Point3};
 
 use crate::bow::{BowVector, Descriptor, FeatureVector, Vocabulary};
 use crate::keyframe_db::KeyFrameDatabase;
-use crate::map::{Feature, MapKeyFrame, MapKeypoint, MapPoint, SparseMap, sigma};
+use crate::map::{Feature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, SparseMap, sigma};
 use crate::memory::{MapMemory, map_bytes, set_bytes, vec_bytes};
 
 /// Hamming distance of a BoW or projection match (ORB-SLAM2 `TH_LOW`) and the BoW ratio.
@@ -140,6 +140,29 @@ impl KeyFrameMap {
         for id in &batch.removed {
             self.remove_point(*id);
         }
+        self.link_observations(&batch.observations);
+    }
+
+    /// Observations of known key frames and points: the keypoint at the observation's pixel
+    /// and octave sees that point (a single camera's points triangulated in local mapping,
+    /// fusion's observations after a loop).
+    fn link_observations(&mut self, observations: &[MapObservation]) {
+        for o in observations {
+            if !self.points.contains_key(&o.point) {
+                continue;
+            }
+            let Some(kf) = self.kfs.get_mut(&o.keyframe) else { continue };
+            let Some(kp) = kf.keypoints.iter_mut().find(|k| k.uv == o.uv && k.octave == o.octave) else { continue };
+            if kp.point == Some(o.point) {
+                continue;
+            }
+            if let Some(old) = kp.point.replace(o.point)
+                && let Some(set) = self.observers.get_mut(&old)
+            {
+                set.remove(&o.keyframe);
+            }
+            self.observers.entry(o.point).or_default().insert(o.keyframe);
+        }
     }
 
     /// Take a loop correction: poses, positions, removed points and fusion's observations.
@@ -148,16 +171,6 @@ impl KeyFrameMap {
             return;
         }
         self.apply_refinements(c);
-        for o in &c.observations {
-            if !self.points.contains_key(&o.point) {
-                continue;
-            }
-            let Some(kf) = self.kfs.get_mut(&o.keyframe) else { continue };
-            if let Some(kp) = kf.keypoints.iter_mut().find(|k| k.uv == o.uv && k.octave == o.octave) {
-                kp.point = Some(o.point);
-                self.observers.entry(o.point).or_default().insert(o.keyframe);
-            }
-        }
     }
 
     /// Add the new key frame of `batch` (its `keypoints`); returns its bag of words, or `None`
@@ -184,6 +197,9 @@ impl KeyFrameMap {
             id,
             PlaceKeyFrame { info, keypoints, bow: bow.clone(), features, parent: None, loops: BTreeSet::new() },
         );
+        // Its points from local mapping (a single camera's triangulated ones).
+        let own: Vec<MapObservation> = batch.observations.iter().filter(|o| o.keyframe == id).copied().collect();
+        self.link_observations(&own);
         let parent = self.covisibility(id).into_iter().max_by_key(|&(k, w)| (w, std::cmp::Reverse(k))).map(|c| c.0);
         if let Some(kf) = self.kfs.get_mut(&id) {
             kf.parent = parent;

@@ -421,12 +421,14 @@ impl LocalMapper {
             .collect();
         removed.sort_unstable();
         removed.dedup();
-        // Monocular: the new key frame's observations go back too, so that tracking counts its
-        // reference key frame's points as ORB-SLAM2 does (`TrackedMapPoints(nMinObs)`).
+        // Monocular: the window's observations go back too (the points triangulated here are
+        // seen by the new key frame and its neighbours), so that tracking counts its reference
+        // key frame's points as ORB-SLAM2 does (`TrackedMapPoints(nMinObs)`) and loop closing's
+        // key frames know the points their keypoints see (ORB-SLAM2's threads share one map).
         let observations = if batch.features.is_empty() {
             Vec::new()
         } else {
-            self.kfs.get(&info.id).map(|k| k.obs.clone()).unwrap_or_default()
+            window.iter().filter_map(|k| self.kfs.get(k)).flat_map(|k| k.obs.iter().copied()).collect()
         };
         // The new key frame's keypoints go on to loop closing.
         let keypoints = batch.keypoints.clone();
@@ -514,7 +516,10 @@ impl LocalMapper {
 
     /// Take key frame `k` out of the window: its observations leave their points (`erase`: for
     /// good, so each point's observation count drops too; otherwise only forgotten here), and
-    /// a point left without any key frame goes (its id pushed on `removed`). Returns it.
+    /// a point left without any key frame here leaves the window. Only a culled key frame's
+    /// point whose observation count falls to 2 or less goes from the whole map (its id pushed
+    /// on `removed`: ORB-SLAM2's `EraseObservation`); a forgotten key frame's points stay in it
+    /// (loop closing's and relocalisation's whole map still sees them). Returns it.
     fn drop_keyframe(&mut self, k: u64, erase: bool, removed: &mut Vec<u64>) -> Option<Kf> {
         let kf = self.kfs.remove(&k)?;
         for o in &kf.obs {
@@ -525,8 +530,11 @@ impl LocalMapper {
                 mp.kfs.retain(|&x| x != k);
             }
             if mp.kfs.is_empty() {
+                let weight = mp.weight;
                 self.points.remove(&o.point);
-                removed.push(o.point);
+                if erase && weight <= 2 {
+                    removed.push(o.point);
+                }
             }
         }
         Some(kf)

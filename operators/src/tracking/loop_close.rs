@@ -139,13 +139,14 @@ impl Operator for LoopClose {
         let mut out = Outputs::new().send(&STATS, header.clone(), Scalars { values: stats });
         if let Some(c) = closed {
             tracing::info!(
-                "`{}`: loop closed: key frame {} revisits {} ({} matches), corrected by {:.3} m / {:.2} deg",
+                "`{}`: loop closed: key frame {} revisits {} ({} matches), corrected by {:.3} m / {:.2} deg, scale {:.4}",
                 ctx.node,
                 c.current,
                 c.loop_keyframe,
                 c.matches,
                 c.correction_m,
-                c.correction_deg
+                c.correction_deg,
+                c.scale
             );
             let poses: Vec<StampedPose> = closer
                 .keyframe_poses()
@@ -186,6 +187,7 @@ impl Operator for LoopClose {
                         matches: l.matches,
                         correction_m: l.correction_m,
                         correction_deg: l.correction_deg,
+                        scale: l.scale,
                         fused: l.fused,
                         keyframes: l.keyframes,
                         edges: l.edges,
