@@ -1,5 +1,6 @@
 //! Loop closing and relocalisation: on a synthetic walk around the room that
-//! comes back to its start, static and with walking people, `loop_close` finds the revisit
+//! comes back to its start, static, with walking people and with a single camera (in Sim(3)),
+//! `loop_close` finds the revisit
 //! where the ground truth says the views overlap, never elsewhere, the final trajectory's ATE
 //! drops to at most half of the run without it (0.6 with people), and the run stays deterministic with the
 //! correction fed back; a kidnapped camera relocalises in the map it had. A damaged
