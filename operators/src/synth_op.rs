@@ -10,7 +10,7 @@ use dynaflow_engine::op::{Instance, OpError, OpSpec, Out, Outputs, Param, ParamT
 use dynaflow_engine::params;
 
 use dynaflow_datasets::synth::{
-    Frame, Generator, Motion, PeopleMode, SynthConfig, fisheye, rig_calibration, scaled_fr3,
+    Frame, Generator, Motion, PeopleMode, SynthConfig, fisheye, rig_calibration, scaled_fr3, scaled_kitti,
 };
 
 use crate::decode::{OnError, SequenceSource, ground_truth_pose};
@@ -32,7 +32,7 @@ impl Param for MotionParam {
 
 params! {
     struct Config {
-        /// camera motion, like the TUM fr3 sequences
+        /// camera motion, like the TUM fr3 sequences (`static`, `xyz`, `rpy`, `halfsphere`), round the room (`loop`), in the hand (`handheld`), or a car round a city block in the street scene (`drive`: KITTI's camera, 3 m/s, 583 m a round; with `people: 0`, `rate_hz: 10`, 1241x376 for KITTI's layout)
         motion: MotionParam = MotionParam(Motion::Xyz),
         /// number of people
         people: u64 [0, 16] = 2,
@@ -60,8 +60,10 @@ params! {
         kidnap: u64 [0, 1_000_000] = 0,
         /// a rectified right camera this many metres to the right (`right`, `stereo`); 0: none (a zero baseline has no disparity)
         stereo_baseline: f64 [0.0, 10.0] = 0.0,
-        /// cover the camera at this frame: 30 frames black with no depth while the motion goes on (a visual blackout the IMU carries a tracker through); 0: never
+        /// cover the camera at this frame: `blackout_frames` frames black with no depth while the motion goes on (a visual blackout the IMU carries a tracker through; long, the camera comes back where its map never saw: a new map, merged when an old place returns); 0: never
         blackout: u64 [0, 1_000_000] = 0,
+        /// how many frames a `blackout` lasts
+        blackout_frames: u64 [1, 1_000_000] = 30,
         /// the rig's IMU on `imu`: 200 Hz with EuRoC's ADIS16448 noise and bias walks, the camera mounted as EuRoC's cam0 (what `dynaflow synth --format euroc` writes)
         imu: bool = false,
     }
@@ -108,13 +110,26 @@ fn build(params: &Params) -> Result<Instance, OpError> {
         // Replaced in `start` by the node's seed when the graph sets none.
         seed: c.seed.or(0),
         rate_hz: c.rate_hz,
-        intrinsics: if c.fisheye { fisheye(c.width, c.height) } else { scaled_fr3(c.width, c.height) },
+        intrinsics: if c.fisheye {
+            fisheye(c.width, c.height)
+        } else if c.motion.0 == Motion::Drive {
+            scaled_kitti(c.width, c.height)
+        } else {
+            scaled_fr3(c.width, c.height)
+        },
         depth_noise: c.depth_noise,
         image_noise: c.image_noise as f32,
         blur: c.blur,
         kidnap: (c.kidnap > 0).then_some(c.kidnap),
         blackout: (c.blackout > 0).then_some(c.blackout),
+        blackout_frames: c.blackout_frames,
     };
+    if c.motion.0 == Motion::Drive && c.people > 0 {
+        return Err(OpError::Config {
+            key: "people".into(),
+            message: "with `motion: drive`: the street has no people yet; set `people: 0`".into(),
+        });
+    }
     if c.imu && c.kidnap > 0 {
         return Err(OpError::Config {
             key: "imu".into(),

@@ -23,7 +23,7 @@ mod tum;
 pub use euroc::{EurocWriteOptions, write_euroc};
 pub use imu::{DIFF_STEP, rig_calibration};
 pub use kitti::{KittiWriteOptions, write_kitti};
-pub use motion::{HANDHELD_REST, Motion};
+pub use motion::{DRIVE_SPEED, HANDHELD_REST, Motion, drive_length, drive_period};
 pub use render::Intrinsics;
 pub use scene::PeopleMode;
 pub use tum::{WriteOptions, write_tum};
@@ -61,9 +61,12 @@ pub struct SynthConfig {
     /// (the camera covered and carried away), then the motion resumes [`KIDNAP_REWIND`]
     /// seconds earlier (the camera set down where it was then: a place already seen).
     pub kidnap: Option<u64>,
-    /// Cover the camera at this frame for [`KIDNAP_BLACKOUT`] frames (black, no depth) while
-    /// the motion goes on: what an IMU carries a tracker through.
+    /// Cover the camera at this frame for `blackout_frames` frames (black, no depth) while
+    /// the motion goes on: what an IMU carries a tracker through, or, long, a camera that comes
+    /// back somewhere its map never saw (a new map, merged later).
     pub blackout: Option<u64>,
+    /// Frames a blackout lasts ([`KIDNAP_BLACKOUT`] by default).
+    pub blackout_frames: u64,
 }
 
 /// TUM-VI cam0's Kannala-Brandt coefficients `[k1, k2, k3, k4]` (the published equidistant
@@ -113,7 +116,28 @@ impl Default for SynthConfig {
             blur: true,
             kidnap: None,
             blackout: None,
+            blackout_frames: KIDNAP_BLACKOUT,
         }
+    }
+}
+
+/// KITTI odometry 00-02's left colour camera (`P2`): 1241x376, fx = fy = 718.856 px.
+const KITTI_00: (f64, f64, f64, u32, u32) = (718.856, 607.1928, 185.2157, 1241, 376);
+
+/// KITTI's camera at another resolution, square pixels kept: the focal length scales with
+/// the width, the principal point with each axis. What [`Motion::Drive`] is seen through.
+pub fn scaled_kitti(width: u32, height: u32) -> Intrinsics {
+    let (f, cx, cy, w, h) = KITTI_00;
+    let (sx, sy) = (f64::from(width) / f64::from(w), f64::from(height) / f64::from(h));
+    Intrinsics {
+        width,
+        height,
+        fx: f * sx,
+        fy: f * sx,
+        cx: (cx + 0.5) * sx - 0.5,
+        cy: (cy + 0.5) * sy - 0.5,
+        distortion: [0.0; 5],
+        model: dynaflow_msg::LensModel::BrownConrady,
     }
 }
 
@@ -165,7 +189,12 @@ pub struct Generator {
 impl Generator {
     /// A generator for `config`.
     pub fn new(config: SynthConfig) -> Self {
-        let scene = scene::Scene::new(config.seed, config.people, config.mode, config.motion.walkway());
+        // The drive has its own scene, the street; the people walk rooms only.
+        let scene = if config.motion == Motion::Drive {
+            scene::Scene::street(config.seed)
+        } else {
+            scene::Scene::new(config.seed, config.people, config.mode, config.motion.walkway())
+        };
         Self { config, scene }
     }
 
@@ -190,7 +219,10 @@ impl Generator {
 
     /// Is frame `k` blacked out (by a kidnap or a blackout)?
     pub fn blacked_out(&self, k: u64) -> bool {
-        [self.config.kidnap, self.config.blackout].iter().flatten().any(|&at| (at..at + KIDNAP_BLACKOUT).contains(&k))
+        let kidnapped = self.config.kidnap.is_some_and(|at| (at..at + KIDNAP_BLACKOUT).contains(&k));
+        let covered =
+            self.config.blackout.is_some_and(|at| (at..at.saturating_add(self.config.blackout_frames)).contains(&k));
+        kidnapped || covered
     }
 
     /// The people's body parts at frame `k` as oriented boxes (world from box centre, half

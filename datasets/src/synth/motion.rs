@@ -1,7 +1,8 @@
 //! Camera trajectories modelled on the TUM fr3 sequences (`static`, `xyz`, `rpy`, `halfsphere`),
 //! `loop`, a walk around the room that comes back to where it started (loop closing), and
 //! `handheld`, a camera held in the hand that rests, then shakes and turns (visual-inertial
-//! initialisation).
+//! initialisation), and `drive`, a car driving round a city block again and again (a
+//! KITTI-like long sequence in the street scene, [`super::scene::Scene::street`]).
 
 use std::f64::consts::PI;
 
@@ -32,6 +33,78 @@ pub enum Motion {
     /// ±14°, periods of 3.7 to 5.3 s), so that scale, gravity and the biases are observable
     /// from the first seconds of motion.
     Handheld,
+    /// A car driving counter-clockwise round a city block at [`DRIVE_SPEED`], the camera
+    /// [`DRIVE_CAMERA_HEIGHT`] above the road looking along it (KITTI's rig): a rounded
+    /// rectangle of [`DRIVE_HALF_X`] x [`DRIVE_HALF_Y`] metres with corners of
+    /// [`DRIVE_CORNER`] m radius, back at its start after [`drive_period`] seconds, then round
+    /// again (4,500 frames at 10 Hz drive it 2.3 times: two revisits). Only in the street scene.
+    Drive,
+}
+
+/// Half extents of [`Motion::Drive`]'s round (the middle of its lane), metres.
+pub const DRIVE_HALF_X: f64 = 95.0;
+/// See [`DRIVE_HALF_X`].
+pub const DRIVE_HALF_Y: f64 = 56.0;
+/// Radius of [`Motion::Drive`]'s corners, metres.
+pub const DRIVE_CORNER: f64 = 12.0;
+/// [`Motion::Drive`]'s speed, m/s (11 km/h: a car in city traffic, 0.3 m a frame at KITTI's
+/// 10 Hz).
+pub const DRIVE_SPEED: f64 = 3.0;
+/// Height of the camera above the road, metres (KITTI's: 1.65 m).
+pub const DRIVE_CAMERA_HEIGHT: f64 = 1.65;
+
+/// Length of one round of [`Motion::Drive`], metres.
+pub fn drive_length() -> f64 {
+    4.0 * (DRIVE_HALF_X - DRIVE_CORNER) + 4.0 * (DRIVE_HALF_Y - DRIVE_CORNER) + 2.0 * PI * DRIVE_CORNER
+}
+
+/// Seconds of one round of [`Motion::Drive`].
+pub fn drive_period() -> f64 {
+    drive_length() / DRIVE_SPEED
+}
+
+/// The four straights of [`Motion::Drive`], in driving order: the middle of the straight
+/// (on the road), the driving direction, and half the straight's length. The round starts at
+/// the middle of the first.
+pub fn drive_sides() -> [(Vector3<f64>, Vector3<f64>, f64); 4] {
+    let (hx, hy) = (DRIVE_HALF_X - DRIVE_CORNER, DRIVE_HALF_Y - DRIVE_CORNER);
+    [
+        (Vector3::new(0.0, -DRIVE_HALF_Y, 0.0), Vector3::x(), hx),
+        (Vector3::new(DRIVE_HALF_X, 0.0, 0.0), Vector3::y(), hy),
+        (Vector3::new(0.0, DRIVE_HALF_Y, 0.0), -Vector3::x(), hx),
+        (Vector3::new(-DRIVE_HALF_X, 0.0, 0.0), -Vector3::y(), hy),
+    ]
+}
+
+/// Where [`Motion::Drive`] is after `s` metres of its round: position on the road and
+/// driving direction.
+fn drive_at(s: f64) -> (Vector3<f64>, Vector3<f64>) {
+    let mut s = s.rem_euclid(drive_length());
+    let sides = drive_sides();
+    // From the middle of straight `i`: its second half, then the corner, then the next one's
+    // first half.
+    for (i, &(mid, dir, half)) in sides.iter().enumerate() {
+        if s <= half {
+            return (mid + dir * s, dir);
+        }
+        s -= half;
+        let arc = 0.5 * PI * DRIVE_CORNER;
+        let left = Vector3::z().cross(&dir);
+        if s <= arc {
+            // Turning left about the corner's centre.
+            let centre = mid + dir * half + left * DRIVE_CORNER;
+            let a = s / DRIVE_CORNER;
+            let p = centre - left * (DRIVE_CORNER * a.cos()) + dir * (DRIVE_CORNER * a.sin());
+            return (p, dir * a.cos() + left * a.sin());
+        }
+        s -= arc;
+        let (next_mid, next_dir, next_half) = sides[(i + 1) % 4];
+        if s <= next_half || i == 3 {
+            return (next_mid - next_dir * (next_half - s), next_dir);
+        }
+        s -= next_half;
+    }
+    (sides[0].0, sides[0].1)
 }
 
 /// Seconds [`Motion::Handheld`] rests before it moves.
@@ -50,7 +123,7 @@ const LOOP_RADIUS: f64 = 0.6;
 
 impl Motion {
     /// Names used in graphs and on the command line.
-    pub const NAMES: &'static [&'static str] = &["static", "xyz", "rpy", "halfsphere", "loop", "handheld"];
+    pub const NAMES: &'static [&'static str] = &["static", "xyz", "rpy", "halfsphere", "loop", "handheld", "drive"];
 
     /// Parse a name.
     pub fn from_name(name: &str) -> Option<Self> {
@@ -61,6 +134,7 @@ impl Motion {
             "halfsphere" => Some(Self::Halfsphere),
             "loop" => Some(Self::Loop),
             "handheld" => Some(Self::Handheld),
+            "drive" => Some(Self::Drive),
             _ => None,
         }
     }
@@ -130,6 +204,11 @@ impl Motion {
                 let roll = 0.12 * w(5.3).sin();
                 let wiggle = UnitQuaternion::from_euler_angles(e * pitch, e * yaw, e * roll);
                 Isometry3::from_parts(Translation3::from(base + e * shake), look * wiggle)
+            }
+            Motion::Drive => {
+                let (p, dir) = drive_at(DRIVE_SPEED * t);
+                let p = p + Vector3::new(0.0, 0.0, DRIVE_CAMERA_HEIGHT);
+                Isometry3::from_parts(Translation3::from(p), look_rotation(&dir, &up))
             }
         }
     }

@@ -8,7 +8,7 @@
 
 use nalgebra::{Isometry3, Matrix3, Point3, Vector3};
 
-use super::scene::{Kind, Part, ROOM_HALF_DEPTH, ROOM_HALF_WIDTH, ROOM_HEIGHT, Scene};
+use super::scene::{Kind, Part, Scene};
 use super::texture::Texture;
 
 /// The rendered camera: a pinhole without distortion, or a Kannala-Brandt fisheye (whose
@@ -274,8 +274,7 @@ impl Rays<'_> {
     /// Trace the ray through image point `(uf, vf)` against `candidates` and the room.
     fn trace(&self, candidates: &[&Prepared<'_>], uf: f64, vf: f64) -> Seen {
         let (scene, k, world_from_cam_rot, origin) = (self.scene, self.k, self.world_from_cam_rot, self.origin);
-        let bounds_min = Vector3::new(-ROOM_HALF_WIDTH, -ROOM_HALF_DEPTH, 0.0);
-        let bounds_max = Vector3::new(ROOM_HALF_WIDTH, ROOM_HALF_DEPTH, ROOM_HEIGHT);
+        let [bounds_min, bounds_max] = *scene.bounds();
         let d = ray(k, self.lens.as_ref(), uf, vf);
         let (ui, vi) = (uf.round() as i64, vf.round() as i64);
         let fisheye = self.lens.is_some();

@@ -1,5 +1,7 @@
-//! The scene: a textured room with furniture boxes and walking people, all made of oriented
-//! boxes, and its state at any time `t` (deterministic by seed).
+//! The scenes, all made of oriented boxes inside a bounding box: a textured room with
+//! furniture and walking people ([`Scene::new`]), or a street round a city block for
+//! [`super::Motion::Drive`] ([`Scene::street`]); and their state at any time `t`
+//! (deterministic by seed).
 
 use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
@@ -69,7 +71,18 @@ pub struct Scene {
     people: Vec<Person>,
     mode: PeopleMode,
     walls: [Texture; 6],
+    /// The enclosing box's corners (the room; the street's sky and far ground), world metres.
+    bounds: [Vector3<f64>; 2],
 }
+
+/// Distance from the middle of [`super::Motion::Drive`]'s lane to the block's facades on its
+/// left, and to the facades across the street on its right, metres (a two-lane street with
+/// pavements; chosen for the synthetic scene).
+pub const STREET_LEFT: f64 = 7.0;
+/// See [`STREET_LEFT`].
+pub const STREET_RIGHT: f64 = 9.0;
+/// Distance from the middle of the lane to the parked cars on its right, metres.
+const PARKED_CARS: f64 = 4.5;
 
 fn unit(h: u32) -> f64 {
     f64::from(h & 0xffff) / 65535.0
@@ -92,6 +105,7 @@ impl Scene {
             contrast,
             photo: None,
             surface: Some(surface),
+            windows: None,
         };
         let walls = [
             tex(1, [0.75, 0.72, 0.65], Surface::Brick, 1.6, 1.0),  // x-
@@ -167,6 +181,7 @@ impl Scene {
                         contrast: 1.0,
                         photo: None,
                         surface: None,
+                        windows: None,
                     },
                     skin: Texture {
                         base: [0.85, 0.68, 0.55],
@@ -175,12 +190,154 @@ impl Scene {
                         contrast: 0.5,
                         photo: None,
                         surface: None,
+                        windows: None,
                     },
                     height: 1.65 + 0.2 * unit(h >> 19),
                 }
             })
             .collect();
-        Self { statics, people, mode, walls }
+        let bounds = [
+            Vector3::new(-ROOM_HALF_WIDTH, -ROOM_HALF_DEPTH, 0.0),
+            Vector3::new(ROOM_HALF_WIDTH, ROOM_HALF_DEPTH, ROOM_HEIGHT),
+        ];
+        Self { statics, people, mode, walls, bounds }
+    }
+
+    /// The street round a city block that [`super::Motion::Drive`] drives: buildings of 8 to
+    /// 20 m frontage, 6 to 20 m high, each with its own photographed surface, tint, tile size
+    /// and photo offset (so no two look alike and a facade does not repeat along the street),
+    /// set back 0 to 1.5 m with alleys between some; on the block's side of the road
+    /// [`STREET_LEFT`] from the lane, across it [`STREET_RIGHT`]; cars parked along the far
+    /// kerb with gaps; a gravel-textured road and a plain sky. No people (yet). Deterministic
+    /// by `seed`.
+    pub fn street(seed: u64) -> Self {
+        use super::motion::{DRIVE_CORNER, DRIVE_HALF_X, DRIVE_HALF_Y, drive_sides};
+        let s = hash((seed ^ (seed >> 32)) as u32 ^ 0x57ee7);
+        let mut statics = Vec::new();
+        let mut n = 0u32;
+        let mut next = || {
+            n += 1;
+            hash(s ^ n.wrapping_mul(0x9e37))
+        };
+        let surfaces = [Surface::Brick, Surface::Brick, Surface::Gravel, Surface::Grass];
+        // A box on a side of the round: `along` and `across` (to the driver's left) from the
+        // middle of the straight, on the ground; half extents along, across and up.
+        let place = |mid: &Vector3<f64>, dir: &Vector3<f64>, along: f64, across: f64, half: Vector3<f64>| {
+            let left = Vector3::z().cross(dir);
+            let c = mid + dir * along + left * across + Vector3::new(0.0, 0.0, half.z);
+            let yaw = dir.y.atan2(dir.x);
+            Isometry3::from_parts(Translation3::from(c), UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw))
+        };
+        for (mid, dir, half_len) in drive_sides() {
+            // The block's side: along the straight only (the corners are open squares).
+            // Across the street: on past the corners, so the rows meet.
+            for (lo, hi, front, depth, inner) in [
+                (-half_len + 2.0, half_len - 2.0, STREET_LEFT, 12.0, true),
+                (
+                    -half_len - DRIVE_CORNER - STREET_RIGHT,
+                    half_len + DRIVE_CORNER + STREET_RIGHT,
+                    -STREET_RIGHT,
+                    8.0,
+                    false,
+                ),
+            ] {
+                let mut at = lo;
+                while at < hi - 4.0 {
+                    let h = next();
+                    let width = (8.0 + 12.0 * unit(h)).min(hi - at);
+                    let height = 6.0 + 14.0 * unit(h >> 5);
+                    let setback = 1.5 * unit(h >> 10);
+                    let sign = if inner { 1.0 } else { -1.0 };
+                    let across = sign * (front.abs() + setback + depth / 2.0);
+                    let tint = [
+                        0.45 + 0.45 * unit(h >> 3) as f32,
+                        0.45 + 0.4 * unit(h >> 7) as f32,
+                        0.4 + 0.4 * unit(h >> 13) as f32,
+                    ];
+                    let texture = Texture {
+                        base: tint,
+                        tile: 1.2 + 1.8 * unit(h >> 17) as f32,
+                        seed: hash(h ^ 0xfacade),
+                        contrast: 1.0,
+                        photo: None,
+                        surface: Some(surfaces[(h >> 27) as usize % 4]),
+                        // Window bays of 2.5 to 4 m, floors of 3 to 3.6 m.
+                        windows: Some([2.5 + 1.5 * unit(h >> 21) as f32, 3.0 + 0.6 * unit(h >> 25) as f32]),
+                    };
+                    statics.push(Part {
+                        world_from_part: place(
+                            &mid,
+                            &dir,
+                            at + width / 2.0,
+                            across,
+                            Vector3::new(width / 2.0, depth / 2.0, height / 2.0),
+                        ),
+                        half: Vector3::new(width / 2.0, depth / 2.0, height / 2.0),
+                        texture,
+                        kind: Kind::Static,
+                    });
+                    // An alley after one building in three.
+                    at += width + if (h >> 23) % 3 == 0 { 2.0 + 2.0 * unit(h >> 19) } else { 0.0 };
+                }
+            }
+            // Parked cars along the far kerb, with gaps.
+            let mut at = -half_len + 3.0;
+            while at < half_len - 5.0 {
+                let h = next();
+                if h % 3 != 0 {
+                    let colour = [
+                        0.2 + 0.7 * unit(h >> 4) as f32,
+                        0.2 + 0.6 * unit(h >> 9) as f32,
+                        0.2 + 0.7 * unit(h >> 14) as f32,
+                    ];
+                    let half = Vector3::new(2.1, 0.9, 0.75);
+                    statics.push(Part {
+                        world_from_part: place(&mid, &dir, at + half.x, -PARKED_CARS, half),
+                        half,
+                        texture: Texture {
+                            base: colour,
+                            tile: 0.4,
+                            seed: hash(h ^ 0xca5),
+                            contrast: 0.8,
+                            photo: None,
+                            surface: None,
+                            windows: None,
+                        },
+                        kind: Kind::Static,
+                    });
+                }
+                at += 5.0 + 6.0 * unit(h >> 18);
+            }
+        }
+        let sky = Texture {
+            base: [0.72, 0.82, 0.95],
+            tile: 10.0,
+            seed: 0,
+            contrast: 0.0,
+            photo: None,
+            surface: None,
+            windows: None,
+        };
+        let road = Texture {
+            base: [0.38, 0.37, 0.36],
+            tile: 1.0,
+            seed: hash(s ^ 5),
+            contrast: 0.9,
+            photo: None,
+            surface: Some(Surface::Gravel),
+            windows: None,
+        };
+        let far = STREET_RIGHT + 8.0 + 1.5 + 30.0;
+        let bounds = [
+            Vector3::new(-DRIVE_HALF_X - far, -DRIVE_HALF_Y - far, 0.0),
+            Vector3::new(DRIVE_HALF_X + far, DRIVE_HALF_Y + far, 60.0),
+        ];
+        Self { statics, people: Vec::new(), mode: PeopleMode::Walking, walls: [sky, sky, sky, sky, road, sky], bounds }
+    }
+
+    /// The enclosing box: its lowest and highest corners (world metres); every ray ends on it.
+    pub fn bounds(&self) -> &[Vector3<f64>; 2] {
+        &self.bounds
     }
 
     /// The texture of room face `f` (`0..6`: x-, x+, y-, y+, floor, ceiling).

@@ -206,6 +206,10 @@ pub struct Texture {
     pub photo: Option<PhotoCrop>,
     /// A photographed surface in place of the procedural tiles.
     pub surface: Option<Surface>,
+    /// A facade's windows on the vertical faces: `[bay width, floor height]` in metres, one
+    /// window a bay from the first floor up, each pane its own shade (so a street of them does
+    /// not repeat); `None`: a plain surface.
+    pub windows: Option<[f32; 2]>,
 }
 
 impl Texture {
@@ -213,16 +217,35 @@ impl Texture {
     /// metres from the face's corner, on a face `size_a x size_b` metres (`b` up).
     /// `footprint`: metres of surface one pixel covers.
     pub fn sample_face(&self, axis: usize, a: f32, b: f32, size_a: f32, size_b: f32, footprint: f32) -> [f32; 3] {
+        if let (Some([bay, floor]), true) = (self.windows, axis != 2)
+            && let Some(shade) = self.pane(a, b, bay, floor)
+        {
+            return shade;
+        }
         match self.photo {
             Some(crop) if axis != 2 && size_a > 0.0 && size_b > 0.0 => crop.sample(a / size_a, 1.0 - b / size_b),
             _ => self.sample(a, b, footprint),
         }
     }
 
+    /// The window pane at `(a, b)` on a facade, if one is there: centred in its bay, 45 % of
+    /// the bay wide and half the floor high, from the first floor up; dark glass, each pane a
+    /// shade of its own.
+    fn pane(&self, a: f32, b: f32, bay: f32, floor: f32) -> Option<[f32; 3]> {
+        let (i, j) = ((a / bay).floor(), (b / floor).floor());
+        let (fa, fb) = (a / bay - i, b / floor - j);
+        if j < 1.0 || (fa - 0.5).abs() > 0.225 || !(0.3..0.8).contains(&fb) {
+            return None;
+        }
+        let h = hash3(i as i32, j as i32, self.seed ^ 0x91a5);
+        let lit = 0.08 + 0.5 * ((h & 0xff) as f32 / 255.0).powi(2);
+        Some([lit * 0.9, lit * 0.95, lit * 1.1 + 0.03])
+    }
+
     /// Whether the colour on face `axis` has hard steps (procedural tiles), which the
     /// renderer integrates with sub-samples; photos are bilinear and smooth.
     pub fn hard_edges(&self, axis: usize) -> bool {
-        self.surface.is_none() && !(self.photo.is_some() && axis != 2)
+        (self.windows.is_some() && axis != 2) || self.surface.is_none() && !(self.photo.is_some() && axis != 2)
     }
 
     /// The colour at surface coordinates `(u, v)` in metres, for a pixel covering

@@ -6,7 +6,7 @@ use std::time::Instant;
 
 use dynaflow_datasets::synth::{
     EurocWriteOptions, Generator, KittiWriteOptions, Motion, PeopleMode, SynthConfig, WriteOptions, fisheye,
-    rig_calibration, scaled_fr3, write_euroc, write_kitti, write_tum,
+    rig_calibration, scaled_fr3, scaled_kitti, write_euroc, write_kitti, write_tum,
 };
 
 use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
@@ -14,7 +14,8 @@ use crate::cli::{EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK};
 /// `dynaflow synth` arguments.
 #[derive(Debug, clap::Args)]
 pub struct SynthArgs {
-    /// Camera motion.
+    /// Camera motion (`drive`: a car round a city block in the street scene, KITTI's camera;
+    /// with `--people 0`, `--rate-hz 10`, `--width 1241 --height 376` for KITTI's own).
     #[arg(long, default_value = "xyz", value_parser = clap::builder::PossibleValuesParser::new(Motion::NAMES))]
     pub motion: String,
     /// Number of people.
@@ -29,7 +30,10 @@ pub struct SynthArgs {
     /// Scene and noise seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Image width (intrinsics are TUM fr3 scaled to it).
+    /// Frame rate, Hz.
+    #[arg(long, default_value_t = 30.0)]
+    pub rate_hz: f64,
+    /// Image width (intrinsics are TUM fr3 scaled to it; KITTI's for `--motion drive`).
     #[arg(long, default_value_t = 640, value_parser = clap::value_parser!(u32).range(16..=4096))]
     pub width: u32,
     /// Image height.
@@ -46,10 +50,13 @@ pub struct SynthArgs {
     /// 10 s earlier (a place already seen; relocalisation)
     #[arg(long)]
     pub kidnap: Option<u64>,
-    /// Cover the camera at this frame: 30 black frames without depth while the motion goes on
+    /// Cover the camera at this frame: black frames without depth while the motion goes on
     /// (the IMU keeps measuring: a visual blackout)
     #[arg(long)]
     pub blackout: Option<u64>,
+    /// Frames a `--blackout` lasts.
+    #[arg(long, default_value_t = dynaflow_datasets::synth::KIDNAP_BLACKOUT, value_parser = clap::value_parser!(u64).range(1..))]
+    pub blackout_frames: u64,
     /// No depth noise, image noise or blur (exact rendering).
     #[arg(long)]
     pub clean: bool,
@@ -79,14 +86,29 @@ pub fn synth(args: &SynthArgs) -> u8 {
         people: args.people as usize,
         mode: if args.sitting { PeopleMode::Sitting } else { PeopleMode::Walking },
         seed: args.seed,
-        intrinsics: if args.fisheye { fisheye(args.width, args.height) } else { scaled_fr3(args.width, args.height) },
+        rate_hz: args.rate_hz,
+        intrinsics: if args.fisheye {
+            fisheye(args.width, args.height)
+        } else if motion == Motion::Drive {
+            scaled_kitti(args.width, args.height)
+        } else {
+            scaled_fr3(args.width, args.height)
+        },
         depth_noise: !args.clean,
         image_noise: if args.clean { 0.0 } else { 2.0 },
         blur: !args.clean,
         kidnap: args.kidnap,
         blackout: args.blackout,
-        ..SynthConfig::default()
+        blackout_frames: args.blackout_frames,
     };
+    if motion == Motion::Drive && args.people > 0 {
+        eprintln!("error: `--motion drive`: the street has no people yet; add `--people 0`");
+        return EXIT_BAD_INPUT;
+    }
+    if !(args.rate_hz > 0.0 && args.rate_hz <= 1000.0) {
+        eprintln!("error: `--rate-hz {}`: a frame rate in (0, 1000] Hz", args.rate_hz);
+        return EXIT_BAD_INPUT;
+    }
     let t = Instant::now();
     let generator = Generator::new(config);
     if args.format != "tum" {
