@@ -3,7 +3,8 @@
 //! `loop_close` finds the revisit
 //! where the ground truth says the views overlap, never elsewhere, the final trajectory's ATE
 //! drops to at most half of the run without it (0.6 with people), and the run stays deterministic with the
-//! correction fed back; a kidnapped camera relocalises in the map it had. A damaged
+//! correction fed back; a kidnapped camera relocalises in the map it had; after a long
+//! blackout a second map starts and is merged into the first when its place returns. A damaged
 //! vocabulary is refused.
 #![allow(clippy::unwrap_used, clippy::panic)]
 
@@ -161,6 +162,47 @@ fn a_single_camera_closes_the_loop_in_sim3_and_halves_the_error() {
     let track = with.tracker("track").unwrap();
     assert_eq!((track.maps, track.frames.lost), (1, 0), "{track:?}");
     println!("mono: scale {:.3} at the first loop", loops[0].scale);
+}
+
+#[test]
+fn after_a_long_blackout_a_second_map_starts_and_merges_into_the_first_deterministically() {
+    // Covered for 8 s (frames 240-479) while the camera walks on a quarter round: it comes back
+    // facing walls its map never saw, starts a second map at the dead-reckoned pose, and walks
+    // back to where the first map began (the round ends at frame 900), where loop closing
+    // finds the first map's place and merges the second into it (ORB-SLAM3's atlas). Twice,
+    // with per-port digests: merging is deterministic in lockstep.
+    let dir = common::TempDir::new("atlas");
+    let extra = |digest: bool| {
+        let mut v = vec!["--set", "camera.frames=1000", "--set", "camera.blackout=240", "--set"];
+        v.push("camera.blackout_frames=240");
+        if digest {
+            v.push("--digest");
+        }
+        v
+    };
+    let a = run_with("orb_baseline", None, 0, 0, &dir.path().join("a"), &extra(true));
+    let track = a.tracker("track").unwrap();
+    let closing = a.report_as::<LoopClosingReport>("closing").unwrap();
+    assert_eq!(track.maps, 2, "a second map after the blackout: {track:?}");
+    assert_eq!((closing.merges, closing.maps), (1, 1), "merged into one map: {closing:?}");
+    let merge = closing.loops.iter().find(|l| l.merged_map.is_some()).unwrap();
+    assert_eq!(merge.ground_truth_overlap, Some(true), "{merge:?}");
+    // The second map started where dead reckoning put it, far from the truth: the online
+    // trajectory (each frame as tracked) is in two frames; the final one, after the merge, in one.
+    let (online, last) = (track.ate.unwrap().rmse, track.ate_final.unwrap().rmse);
+    assert!(merge.correction_m > 0.1, "the second map started elsewhere: {merge:?}");
+    assert!(last <= 0.02, "one frame at the end: final ATE {last:.4} m (online {online:.4} m)");
+    let b = run_with("orb_baseline", None, 0, 0, &dir.path().join("b"), &extra(true));
+    assert_eq!(a.digests, b.digests, "two lockstep runs with a merge differ");
+    println!(
+        "atlas: map {} merged at key frame {}, moved by {:.2} m / {:.1} deg; final ATE {:.2} cm (online {:.1} cm)",
+        merge.merged_map.unwrap(),
+        merge.keyframe,
+        merge.correction_m,
+        merge.correction_deg,
+        last * 100.0,
+        online * 100.0
+    );
 }
 
 #[test]

@@ -185,6 +185,10 @@ pub struct LoopReport {
     /// camera's scale drift along the loop (the Sim(3) scale; a missing field reads 1).
     #[serde(default = "one")]
     pub scale: f64,
+    /// A merge (ORB-SLAM3's atlas): the older map (its number) the loop key frame belonged to,
+    /// taken into the current map; `None` for a loop within one map.
+    #[serde(default)]
+    pub merged_map: Option<u32>,
     /// Map points fused.
     pub fused: usize,
     /// Key frames in the essential graph.
@@ -211,6 +215,13 @@ pub struct LoopClosingReport {
     pub vocabulary: VocabularyReport,
     /// Key frames in the map.
     pub keyframes: usize,
+    /// Maps held at the end: the current one and the older ones (tracking lost for good) that
+    /// no merge took in.
+    #[serde(default)]
+    pub maps: usize,
+    /// Loops that merged an older map into the current one.
+    #[serde(default)]
+    pub merges: usize,
     /// Bytes the whole map holds at the end, per component (an estimate from the containers).
     #[serde(default)]
     pub memory_bytes: MapMemory,

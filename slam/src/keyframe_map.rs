@@ -16,6 +16,7 @@ use crate::bow::{BowVector, Descriptor, FeatureVector, Vocabulary};
 use crate::keyframe_db::KeyFrameDatabase;
 use crate::map::{Feature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, SparseMap, sigma};
 use crate::memory::{MapMemory, map_bytes, set_bytes, vec_bytes};
+use crate::sim3::Sim3;
 
 /// Hamming distance of a BoW or projection match (ORB-SLAM2 `TH_LOW`) and the BoW ratio.
 pub const MAX_DISTANCE: u32 = 50;
@@ -119,12 +120,53 @@ impl KeyFrameMap {
         if map_id == self.map_id {
             return false;
         }
-        self.kfs.clear();
-        self.points.clear();
-        self.observers.clear();
-        self.db = KeyFrameDatabase::new();
-        self.map_id = map_id;
+        self.start_map(map_id);
         true
+    }
+
+    /// Start map `map_id`, empty, and hand back the map held until now (loop closing's atlas
+    /// keeps it).
+    pub fn start_map(&mut self, map_id: u32) -> KeyFrameMap {
+        let fresh = KeyFrameMap {
+            cam: self.cam,
+            width: self.width,
+            height: self.height,
+            scale_factor: self.scale_factor,
+            vocabulary: self.vocabulary.clone(),
+            levels_up: self.levels_up,
+            map_id,
+            kfs: BTreeMap::new(),
+            points: BTreeMap::new(),
+            observers: BTreeMap::new(),
+            db: KeyFrameDatabase::new(),
+        };
+        std::mem::replace(self, fresh)
+    }
+
+    /// Move the whole map by a similarity (another map's frame after a merge): every point
+    /// `x -> t x`, every key frame's pose to `t` times it, keeping the rotation and the camera
+    /// centre (the scale goes into the points, as loop closing's `[R | t/s]`).
+    pub fn move_by(&mut self, t: &Sim3) {
+        for kf in self.kfs.values_mut() {
+            kf.info.world_from_cam = (*t * Sim3::from_isometry(&kf.info.world_from_cam)).rigid();
+        }
+        for p in self.points.values_mut() {
+            p.position = t.transform_point(&p.position);
+        }
+    }
+
+    /// Take in `other`, a map of the atlas in this map's frame (ORB-SLAM3's merge): its key
+    /// frames (into the database), points and observations. Ids are unique across maps (the
+    /// tracker numbers key frames and points over the whole run).
+    pub fn absorb(&mut self, other: KeyFrameMap) {
+        for (id, kf) in other.kfs {
+            self.db.add(id, kf.bow.clone());
+            self.kfs.insert(id, kf);
+        }
+        self.points.extend(other.points);
+        for (p, set) in other.observers {
+            self.observers.entry(p).or_default().extend(set);
+        }
     }
 
     /// Take a batch's points (new or refined), key-frame poses and removed points.

@@ -33,6 +33,17 @@
 //!
 //! The result is the whole corrected map ([`LoopCloser::correction`]), which tracking and local
 //! mapping apply (the `loop_close` node sends it over the graph's feedback edges).
+//!
+//! **The atlas** (ORB-SLAM3's `Atlas`, `MergeLocal`). When tracking is lost for good a new map
+//! starts; the old one is kept, not forgotten. Each key frame of the current map is also
+//! checked against the older maps' databases (candidates above the same score, consistent over
+//! three key frames, the same geometric check). A place found in an older map merges the two:
+//! the current map moves by the transform found (a similarity for a single camera) into the
+//! older map's frame, takes in its key frames, points and words, and the revisit is corrected
+//! as a loop (fusion, the essential graph with the older side's key frame fixed, global BA with
+//! the older map's first key frame fixed), so the trajectory ends in one frame, the first
+//! map's. ORB-SLAM3 optimises a welding window around the two key frames first; here the loop
+//! correction's fusion and global BA play that part.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
@@ -125,6 +136,9 @@ pub struct LoopClosure {
     pub matches: usize,
     /// `loop_from_current` as estimated (the rigid part).
     pub loop_from_current: Isometry3<f64>,
+    /// A merge: the older map the revisited key frame belonged to (its number), taken into
+    /// the current one; `None` for a loop within the map.
+    pub merged_map: Option<u32>,
     /// The current key frame's map units in the loop key frame's: 1 with depth; a single
     /// camera's scale drift along the loop (ORB-SLAM2's Sim(3) scale `s`).
     pub scale: f64,
@@ -163,6 +177,11 @@ pub struct LoopCloser {
     loops: Vec<LoopClosure>,
     /// Candidates accepted by the consistency check whose geometry failed, by [`Rejection`].
     rejected: [usize; 4],
+    /// Older maps (tracking lost for good), oldest first, until a merge takes them in.
+    atlas: Vec<KeyFrameMap>,
+    /// Whether to look for the current map's places in the older ones.
+    merge: bool,
+    merge_consistency: LoopConsistency,
 }
 
 /// Why a consistent candidate's geometry was refused.
@@ -196,7 +215,23 @@ impl LoopCloser {
             fused_removed: Vec::new(),
             loops: Vec::new(),
             rejected: [0; 4],
+            atlas: Vec::new(),
+            merge: true,
+            merge_consistency: LoopConsistency::new(),
         }
+    }
+
+    /// Whether a new map's places are looked for in the older maps and merged (default on;
+    /// off, each map after a loss stays in its own frame).
+    #[must_use]
+    pub fn with_merging(mut self, merge: bool) -> Self {
+        self.merge = merge;
+        self
+    }
+
+    /// Maps held: the current one and the older ones not merged.
+    pub fn maps(&self) -> usize {
+        1 + self.atlas.len()
     }
 
     /// Key frames held.
@@ -209,9 +244,9 @@ impl LoopCloser {
         self.map.points.len()
     }
 
-    /// Bytes per component of the whole map it keeps ([`crate::memory`]).
+    /// Bytes per component of the whole map it keeps, older maps included ([`crate::memory`]).
     pub fn memory(&self) -> crate::memory::MapMemory {
-        self.map.memory()
+        self.atlas.iter().fold(self.map.memory(), |m, a| m + a.memory())
     }
 
     /// Every loop closed so far.
@@ -232,9 +267,14 @@ impl LoopCloser {
     /// Take local mapping's update: the refined window (poses, points, removed points) and the
     /// new key frame's keypoints (`update.keypoints`). Returns the loop it closed, if any.
     pub fn insert(&mut self, update: &SparseMap) -> Option<LoopClosure> {
-        if self.map.switch_map(update.map_id) {
-            // A new map (tracking was lost for good): start over.
+        if update.map_id != self.map.map_id {
+            // A new map (tracking was lost for good): the old one goes to the atlas.
+            let old = self.map.start_map(update.map_id);
+            if !old.kfs.is_empty() {
+                self.atlas.push(old);
+            }
             self.consistency = LoopConsistency::new();
+            self.merge_consistency = LoopConsistency::new();
             self.since_loop = 0;
         }
         self.map.apply_refinements(update);
@@ -270,12 +310,68 @@ impl LoopCloser {
             .collect();
         let accepted = self.consistency.update(&groups);
         for candidate in accepted {
-            match self.compute_se3(kf, candidate) {
+            match self.compute_se3(kf, candidate, None) {
                 Ok(found) => return Some(self.correct(kf, candidate, &found)),
                 Err(why) => self.rejected[why as usize] += 1,
             }
         }
+        self.detect_merge(kf, bow, min_score)
+    }
+
+    /// ORB-SLAM3's merge detection: the key frame's words against each older map's database,
+    /// with the loop's score bound and consistency; the first candidate whose geometry holds
+    /// merges its map into the current one.
+    fn detect_merge(&mut self, kf: u64, bow: &BowVector, min_score: f64) -> Option<LoopClosure> {
+        if !self.merge || self.atlas.is_empty() {
+            return None;
+        }
+        let mut groups: Vec<(u64, BTreeSet<u64>)> = Vec::new();
+        let mut home: BTreeMap<u64, usize> = BTreeMap::new();
+        for (i, m) in self.atlas.iter().enumerate() {
+            let covis = |k: u64| m.covisible(k);
+            for (c, _) in m.db.loop_candidates(kf, bow, &BTreeSet::new(), min_score, &covis) {
+                let mut g: BTreeSet<u64> = m.covisible(c).into_iter().collect();
+                g.insert(c);
+                groups.push((c, g));
+                home.insert(c, i);
+            }
+        }
+        let accepted = self.merge_consistency.update(&groups);
+        for candidate in accepted {
+            let Some(&i) = home.get(&candidate) else { continue };
+            match self.compute_se3(kf, candidate, Some(i)) {
+                Ok(found) => return Some(self.merge(kf, candidate, i, found)),
+                Err(why) => self.rejected[why as usize] += 1,
+            }
+        }
         None
+    }
+
+    /// Merge older map `i` into the current one at the revisit `current` -> `candidate`: the
+    /// current map moved into the older map's frame, the older map taken in, then the revisit
+    /// corrected as a loop.
+    fn merge(&mut self, current: u64, candidate: u64, i: usize, found: Found) -> LoopClosure {
+        let old_cur =
+            self.map.kfs.get(&current).map_or(Sim3::identity(), |k| Sim3::from_isometry(&k.info.world_from_cam));
+        let new_cur = Sim3 { scale: found.scale, ..Sim3::from_isometry(&found.world_from_cur) };
+        let correction_m = (new_cur.translation - old_cur.translation).norm();
+        let correction_deg = (new_cur.rotation * old_cur.rotation.inverse()).angle().to_degrees();
+        self.map.move_by(&(new_cur * old_cur.inverse()));
+        let older = self.atlas.remove(i);
+        let merged_map = older.map_id;
+        self.map.absorb(older);
+        self.merge_consistency = LoopConsistency::new();
+        // The scale went into the move: the loop correction itself is rigid.
+        let scale = found.scale;
+        let mut closure = self.correct(current, candidate, &Found { scale: 1.0, ..found });
+        closure.merged_map = Some(merged_map);
+        closure.scale = scale;
+        closure.correction_m = correction_m;
+        closure.correction_deg = correction_deg;
+        if let Some(last) = self.loops.last_mut() {
+            *last = closure.clone();
+        }
+        closure
     }
 
     fn reprojects(&self, pose: &Sim3, x: &Point3<f64>, kp: &MapKeypoint) -> bool {
@@ -287,8 +383,10 @@ impl LoopCloser {
 
     /// The current key frame's corrected pose with the matches that support it, or why the
     /// candidate was refused.
-    fn compute_se3(&mut self, current: u64, candidate: u64) -> Result<Found, Rejection> {
-        let (Some(a), Some(b)) = (self.map.kfs.get(&current), self.map.kfs.get(&candidate)) else {
+    /// `older`: the candidate is of that map of the atlas (a merge), not of the current one.
+    fn compute_se3(&mut self, current: u64, candidate: u64, older: Option<usize>) -> Result<Found, Rejection> {
+        let loop_map = older.and_then(|i| self.atlas.get(i)).unwrap_or(&self.map);
+        let (Some(a), Some(b)) = (self.map.kfs.get(&current), loop_map.kfs.get(&candidate)) else {
             return Err(Rejection::BowMatches);
         };
         let matches = self.map.search_by_bow(a, b);
@@ -299,7 +397,7 @@ impl LoopCloser {
         let pairs: Vec<(Point3<f64>, Point3<f64>, usize, usize)> = matches
             .iter()
             .filter_map(|&(i, j)| {
-                Some((self.map.point_in(a, &a.keypoints[i])?, self.map.point_in(b, &b.keypoints[j])?, i, j))
+                Some((self.map.point_in(a, &a.keypoints[i])?, loop_map.point_in(b, &b.keypoints[j])?, i, j))
             })
             .collect();
         if pairs.len() < self.config.min_bow_matches {
@@ -336,9 +434,9 @@ impl LoopCloser {
         // do not see it).
         let world_from_cur = b.info.world_from_cam * cand_from_cur.rigid();
         let mut group: Vec<u64> = vec![candidate];
-        group.extend(self.map.covisible(candidate));
-        let loop_points = self.map.points_of(&group);
-        let found = self.map.search_by_projection(&a.keypoints, &world_from_cur, &loop_points, PROJECTION_RADIUS);
+        group.extend(loop_map.covisible(candidate));
+        let loop_points = loop_map.points_of(&group);
+        let found = loop_map.search_by_projection(&a.keypoints, &world_from_cur, &loop_points, PROJECTION_RADIUS);
         if found.len() < self.config.min_total_matches {
             return Err(Rejection::ProjectionMatches);
         }
@@ -347,7 +445,7 @@ impl LoopCloser {
             .filter_map(|&(i, p)| {
                 let kp = &a.keypoints[i];
                 Some(PoseObservation {
-                    point: self.map.points.get(&p)?.position,
+                    point: loop_map.points.get(&p)?.position,
                     uv: kp.uv,
                     sigma: sigma(self.config.scale_factor, kp.octave),
                     depth: kp.depth,
@@ -501,6 +599,7 @@ impl LoopCloser {
             inliers: found.inliers,
             matches: found.matches.len(),
             loop_from_current: old[&candidate].rigid().inverse() * found.world_from_cur,
+            merged_map: None,
             scale: found.scale,
             correction_m,
             correction_deg,
@@ -666,6 +765,7 @@ impl LoopCloser {
     }
 }
 
+#[derive(Clone)]
 struct Found {
     world_from_cur: Isometry3<f64>,
     /// The current key frame's map units in the loop side's (1 with depth).

@@ -19,6 +19,8 @@ params! {
         vocabulary: PathBuf = PathBuf::new(),
         /// ORB-SLAM2's `Camera.bf`, pixels (fx x a virtual baseline; as `track_rgbd`'s): weighs the depth term of the loop pose's refinement; a stereo rig's own replaces it
         bf: f64 [0.0, 10000.0] = 40.0,
+        /// keep the maps tracking lost for good (the atlas) and merge one into the current map when its place comes back (ORB-SLAM3); off, each new map stays in its own frame
+        merge: bool = true,
     }
 }
 
@@ -41,7 +43,7 @@ const LOOP_EDGE: Out<Trajectory> =
     Out::new("loop_edge", "after a loop: the key frame that closed it and the one it revisits (a line in the viewer)");
 const STATS: Out<Scalars> = Out::new(
     "stats",
-    "per key frame: `keyframes`, `points`, `loops`, `loop` (1 when this key frame closed one), `loop_keyframe`, `matches`, `correction_m`, `correction_deg`, `fused` (times: the summary's `report`)",
+    "per key frame: `keyframes`, `points`, `loops`, `maps` (the current one and the older ones not merged), `loop` (1 when this key frame closed one), `merge` (1 when that was a merge of an older map), `loop_keyframe`, `matches`, `correction_m`, `correction_deg`, `fused` (times: the summary's `report`)",
 );
 
 /// The `loop_close` operator (its doc: `dynaflow ops loop_close`).
@@ -108,6 +110,7 @@ impl Operator for LoopClose {
                 self.vocabulary.clone(),
                 ctx.rng.next_u64(),
             )
+            .with_merging(self.config.merge)
         });
         if let Some(gt) = GT_POSE.get(inputs)? {
             self.ground_truth.push((msg.header.stamp, gt.world_from_cam));
@@ -129,7 +132,9 @@ impl Operator for LoopClose {
             ("keyframes".into(), closer.keyframes() as f64),
             ("points".into(), closer.points() as f64),
             ("loops".into(), closer.loops().len() as f64),
+            ("maps".into(), closer.maps() as f64),
             ("loop".into(), if closed.is_some() { 1.0 } else { 0.0 }),
+            ("merge".into(), if c.is_some_and(|c| c.merged_map.is_some()) { 1.0 } else { 0.0 }),
             ("loop_keyframe".into(), c.map_or(-1.0, |c| c.loop_keyframe as f64)),
             ("matches".into(), c.map_or(0.0, |c| c.matches as f64)),
             ("correction_m".into(), c.map_or(0.0, |c| c.correction_m)),
@@ -139,8 +144,9 @@ impl Operator for LoopClose {
         let mut out = Outputs::new().send(&STATS, header.clone(), Scalars { values: stats });
         if let Some(c) = closed {
             tracing::info!(
-                "`{}`: loop closed: key frame {} revisits {} ({} matches), corrected by {:.3} m / {:.2} deg, scale {:.4}",
+                "`{}`: {}: key frame {} revisits {} ({} matches), corrected by {:.3} m / {:.2} deg, scale {:.4}",
                 ctx.node,
+                c.merged_map.map_or_else(|| "loop closed".to_owned(), |m| format!("map {m} merged")),
                 c.current,
                 c.loop_keyframe,
                 c.matches,
@@ -188,6 +194,7 @@ impl Operator for LoopClose {
                         correction_m: l.correction_m,
                         correction_deg: l.correction_deg,
                         scale: l.scale,
+                        merged_map: l.merged_map,
                         fused: l.fused,
                         keyframes: l.keyframes,
                         edges: l.edges,
@@ -212,6 +219,8 @@ impl Operator for LoopClose {
                 load_ms: self.load_ms,
             },
             keyframes: self.closer.as_ref().map_or(0, LoopCloser::keyframes),
+            maps: self.closer.as_ref().map_or(0, LoopCloser::maps),
+            merges: loops.iter().filter(|l| l.merged_map.is_some()).count(),
             memory_bytes: self.closer.as_ref().map(LoopCloser::memory).unwrap_or_default(),
             loops,
             false_loops: (!self.ground_truth.is_empty()).then_some(false_loops),

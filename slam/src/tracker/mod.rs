@@ -5,9 +5,10 @@
 //! distance, ratio test; ORB-SLAM's `SearchByProjection`), widening the radius once when too
 //! few survive; refine by motion-only BA (pixels plus depth as ORB-SLAM2's virtual right
 //! coordinate, Huber, four re-classification rounds). When that still fails ([`relocalise`]),
-//! match descriptors against the whole local map and solve P3P inside RANSAC (the recent key
-//! frames), and with a vocabulary then against every key frame of the map by bag of words
-//! (ORB-SLAM2's `Relocalization`). A frame with too few inliers is *lost*: its pose follows the motion model (the tracking
+//! with a vocabulary, ORB-SLAM2's `Relocalization`: every key frame of the map by bag of words,
+//! then P3P RANSAC on the BoW matches of the likeliest; without one, descriptor matches against
+//! the whole local map (the recent key frames) and P3P. A relocalised pose, and every pose in
+//! the second after it, needs [`RELOCALISATION_MIN_INLIERS`] (ORB-SLAM2's 50). A frame with too few inliers is *lost*: its pose follows the motion model (the tracking
 //! operators leave it out of the trajectory); after `reset_after` lost frames in a row that show something (at least `min_init_points`
 //! static keypoints) a new map starts at the dead-reckoned pose (so the trajectory stays in one
 //! frame, and the jump is reported). A loaded map ([`Tracker::use_map`]) is localised in
@@ -51,6 +52,15 @@ pub use inertial::{
     INIT_MIN_SPAN, InertialEstimate, InertialInitInfo, InitMethod,
 };
 
+/// Inliers a relocalised pose needs, and every pose in the second after it (ORB-SLAM2:
+/// `Relocalization` accepts 50, and `TrackLocalMap` wants 50 for `mMaxFrames`, a second of
+/// frames, after a relocalisation). A view never mapped can match a repeated texture (the same
+/// brick on two walls) with 30.
+pub const RELOCALISATION_MIN_INLIERS: usize = 50;
+/// Seconds after a relocalisation in which [`RELOCALISATION_MIN_INLIERS`] holds (ORB-SLAM2's
+/// `mMaxFrames` = the frame rate).
+const RELOCALISATION_PROBATION_S: f64 = 1.0;
+
 /// Tracking settings (defaults: ORB-SLAM2's for an RGB-D camera, see [`TrackerConfig::rgbd`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct TrackerConfig {
@@ -69,7 +79,8 @@ pub struct TrackerConfig {
     pub max_distance: u32,
     /// Ratio of best to second-best distance in the projection search.
     pub ratio: f32,
-    /// Fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30).
+    /// Fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30;
+    /// a relocalisation and the second after it need [`RELOCALISATION_MIN_INLIERS`]).
     pub min_inliers: usize,
     /// P3P RANSAC reprojection threshold, pixels at level 0.
     pub ransac_threshold: f64,
@@ -262,6 +273,9 @@ pub struct Tracker {
     /// First key frame of the current map.
     first_keyframe: u64,
     lost_run: u32,
+    /// Stamp of the last relocalisation: for a second after it a pose needs
+    /// [`RELOCALISATION_MIN_INLIERS`].
+    relocalised_at: Option<f64>,
     /// Monocular: the reference frame of the initialisation (its stamp and features).
     init_ref: Option<(f64, Vec<Feature>)>,
     /// Monocular: why the last initialisation attempt failed.
@@ -321,6 +335,7 @@ impl Tracker {
             ref_tracked: 0,
             first_keyframe: 0,
             lost_run: 0,
+            relocalised_at: None,
             init_ref: None,
             init_failure: None,
             keyframe_poses: BTreeMap::new(),

@@ -7,11 +7,12 @@ impl Tracker {
     pub(super) fn track_frame(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
         if self.unlocated {
             // A loaded map: no pose until the camera is found in it.
-            let Some(f) = self.relocalise_in_map(features).filter(|f| f.inliers >= self.config.min_inliers) else {
+            let Some(f) = self.relocalise_in_map(features).filter(|f| f.inliers >= RELOCALISATION_MIN_INLIERS) else {
                 return self.untracked(None, TrackState::Lost, features.len());
             };
             self.unlocated = false;
             self.lost_run = 0;
+            self.relocalised_at = Some(stamp);
             self.velocity = Isometry3::identity();
             self.last = Some(f.world_from_cam);
             if !self.mapping {
@@ -43,13 +44,24 @@ impl Tracker {
             fit = self.track_projection(features, &predicted, 3.0 * self.config.search_radius);
         }
         let mut state = TrackState::Tracked;
-        if fit.as_ref().is_none_or(|f| f.inliers < self.config.min_inliers) {
+        // Within a second of a relocalisation a pose needs more support (ORB-SLAM2).
+        let probation = self.relocalised_at.is_some_and(|t| stamp - t < RELOCALISATION_PROBATION_S);
+        let tracked_min = if probation { RELOCALISATION_MIN_INLIERS } else { self.config.min_inliers };
+        // Without a vocabulary: P3P on descriptor matches against the local map. With one,
+        // ORB-SLAM2's relocalisation only: key frames that look alike by their words first (a
+        // brute-force match against every point lets a repeated texture, the same brick on
+        // another wall, pass for the place).
+        if fit.as_ref().is_none_or(|f| f.inliers < tracked_min) && self.places.is_none() {
             fit = self.relocalise(features);
+        }
+        if fit.as_ref().is_none_or(|f| f.inliers < tracked_min) {
             state = TrackState::Relocalised;
         }
-        if fit.as_ref().is_none_or(|f| f.inliers < self.config.min_inliers) {
+        if fit.as_ref().is_none_or(|f| f.inliers < RELOCALISATION_MIN_INLIERS) {
             // ORB-SLAM2's relocalisation: the whole map's key frames by bag of words.
-            if let Some(f) = self.relocalise_in_map(features) {
+            if let Some(f) = self.relocalise_in_map(features)
+                && fit.as_ref().is_none_or(|g| f.inliers > g.inliers)
+            {
                 fit = Some(f);
             }
         }
@@ -57,8 +69,12 @@ impl Tracker {
             let (t, q) = (f.world_from_cam.translation.vector, f.world_from_cam.rotation.coords);
             t.iter().chain(q.iter()).all(|v| v.is_finite())
         };
-        match fit.filter(|f| f.inliers >= self.config.min_inliers && finite(f)) {
+        let needed = if state == TrackState::Relocalised { RELOCALISATION_MIN_INLIERS } else { tracked_min };
+        match fit.filter(|f| f.inliers >= needed && finite(f)) {
             Some(f) => {
+                if state == TrackState::Relocalised {
+                    self.relocalised_at = Some(stamp);
+                }
                 self.inertial_follow(&f, stamp);
                 self.lost_run = 0;
                 // After a relocalisation the motion since the last frame is unknown (ORB-SLAM
