@@ -8,7 +8,7 @@
 //! with a vocabulary, ORB-SLAM2's `Relocalization`: every key frame of the map by bag of words,
 //! then P3P RANSAC on the BoW matches of the likeliest; without one, descriptor matches against
 //! the whole local map (the recent key frames) and P3P. A relocalised pose, and every pose in
-//! the second after it, needs [`RELOCALISATION_MIN_INLIERS`] (ORB-SLAM2's 50). A frame with too few inliers is *lost*: its pose follows the motion model (the tracking
+//! the second after it, needs [`RELOCALISATION_MIN_INLIERS`] (ORB-SLAM2's 50; `min_inliers` if set higher). A frame with too few inliers is *lost*: its pose follows the motion model (the tracking
 //! operators leave it out of the trajectory); after `reset_after` lost frames in a row that show something (at least `min_init_points`
 //! static keypoints) a new map starts at the dead-reckoned pose (so the trajectory stays in one
 //! frame, and the jump is reported). A loaded map ([`Tracker::use_map`]) is localised in

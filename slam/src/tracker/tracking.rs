@@ -7,7 +7,7 @@ impl Tracker {
     pub(super) fn track_frame(&mut self, stamp: f64, features: &[Feature]) -> TrackingResult {
         if self.unlocated {
             // A loaded map: no pose until the camera is found in it.
-            let Some(f) = self.relocalise_in_map(features).filter(|f| f.inliers >= RELOCALISATION_MIN_INLIERS) else {
+            let Some(f) = self.relocalise_in_map(features).filter(|f| f.inliers >= self.relocalisation_min()) else {
                 return self.untracked(None, TrackState::Lost, features.len());
             };
             self.unlocated = false;
@@ -46,18 +46,18 @@ impl Tracker {
         let mut state = TrackState::Tracked;
         // Within a second of a relocalisation a pose needs more support (ORB-SLAM2).
         let probation = self.relocalised_at.is_some_and(|t| stamp - t < RELOCALISATION_PROBATION_S);
-        let tracked_min = if probation { RELOCALISATION_MIN_INLIERS } else { self.config.min_inliers };
+        let tracked_min = if probation { self.relocalisation_min() } else { self.config.min_inliers };
         // Without a vocabulary: P3P on descriptor matches against the local map. With one,
         // ORB-SLAM2's relocalisation only: key frames that look alike by their words first (a
         // brute-force match against every point lets a repeated texture, the same brick on
         // another wall, pass for the place).
-        if fit.as_ref().is_none_or(|f| f.inliers < tracked_min) && self.places.is_none() {
-            fit = self.relocalise(features);
-        }
         if fit.as_ref().is_none_or(|f| f.inliers < tracked_min) {
             state = TrackState::Relocalised;
+            if self.places.is_none() {
+                fit = self.relocalise(features);
+            }
         }
-        if fit.as_ref().is_none_or(|f| f.inliers < RELOCALISATION_MIN_INLIERS) {
+        if fit.as_ref().is_none_or(|f| f.inliers < self.relocalisation_min()) {
             // ORB-SLAM2's relocalisation: the whole map's key frames by bag of words.
             if let Some(f) = self.relocalise_in_map(features)
                 && fit.as_ref().is_none_or(|g| f.inliers > g.inliers)
@@ -69,7 +69,7 @@ impl Tracker {
             let (t, q) = (f.world_from_cam.translation.vector, f.world_from_cam.rotation.coords);
             t.iter().chain(q.iter()).all(|v| v.is_finite())
         };
-        let needed = if state == TrackState::Relocalised { RELOCALISATION_MIN_INLIERS } else { tracked_min };
+        let needed = if state == TrackState::Relocalised { self.relocalisation_min() } else { tracked_min };
         match fit.filter(|f| f.inliers >= needed && finite(f)) {
             Some(f) => {
                 if state == TrackState::Relocalised {
@@ -219,6 +219,12 @@ impl Tracker {
             keyframe: None,
             matched: vec![None; features],
         }
+    }
+
+    /// Inliers a relocalised pose needs: ORB-SLAM2's [`RELOCALISATION_MIN_INLIERS`], or the
+    /// tracking minimum where that is set higher.
+    fn relocalisation_min(&self) -> usize {
+        RELOCALISATION_MIN_INLIERS.max(self.config.min_inliers)
     }
 
     pub(super) fn usable(&self, f: &Feature) -> Option<f64> {
