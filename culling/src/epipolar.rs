@@ -193,6 +193,12 @@ impl EpipolarCull {
         &self.options
     }
 
+    /// A new distance above which a point is dynamic, from the next frame on (a parameter
+    /// tuned while running; the rest of the state carries on).
+    pub fn set_threshold(&mut self, threshold: f32) {
+        self.options.threshold = threshold;
+    }
+
     /// Label this frame's tracks (`ids`, previous and current pixels).
     pub fn label(&mut self, ids: &[u64], prev: &[[f32; 2]], cur: &[[f32; 2]], seed: u64) -> EpipolarFrame {
         let o = &self.options;

@@ -144,6 +144,12 @@ pub struct RunArgs {
     /// Override a parameter: `node.param=value` (repeatable).
     #[arg(long = "set", value_name = "NODE.PARAM=VALUE")]
     pub set: Vec<String>,
+    /// Change a parameter while running, from a frame on: `FRAME:node.param=value`
+    /// (repeatable; only the parameters an operator declares tunable, `dynaflow ops OP`;
+    /// validated as `--set`; recorded in the summary's `parameter_changes`, so a run can be
+    /// replayed exactly).
+    #[arg(long = "set-at", value_name = "FRAME:NODE.PARAM=VALUE")]
+    pub set_at: Vec<String>,
     /// Run on a recorded sequence instead of the graph's own source: a TUM RGB-D folder, a KITTI
     /// odometry sequence, a EuRoC MAV folder, a folder of images, or a ROS 1 / ROS 2 bag
     /// (detected from the files).

@@ -171,6 +171,12 @@ pub trait Operator: Send + 'static {
     fn stop(&mut self, _ctx: &mut Context) -> Result<(), OpError> {
         Ok(())
     }
+    /// Take new values of the parameters the operator declares tunable ([`OpSpec::tunable`]):
+    /// `params` are the node's parameters with the changed ones replaced, each validated as
+    /// `--set` is. Called between two frames; the next frame computes with them.
+    fn set_params(&mut self, _ctx: &mut Context, _params: &Params) -> Result<(), OpError> {
+        Err(OpError::Failed("this operator takes no parameter while running".into()))
+    }
 }
 
 /// A node without inputs that produces frames `0, 1, 2, …`.

@@ -35,6 +35,13 @@ impl Params {
         &self.values
     }
 
+    /// These parameters with `key` set to `value`, and the value it had.
+    pub fn with(&self, key: &str, value: serde_json::Value) -> (Self, Option<serde_json::Value>) {
+        let mut next = self.clone();
+        let old = next.values.insert(key.to_owned(), value);
+        (next, old)
+    }
+
     /// Resolve a path parameter against the graph file's folder.
     pub fn resolve_path(&self, path: &str) -> PathBuf {
         let p = Path::new(path);

@@ -296,6 +296,10 @@ pub struct OpSpec {
     /// static tables above, which then describe what every node has (`dynaflow ops`).
     #[serde(skip)]
     pub declare: Option<DeclareFn>,
+    /// Parameters that may change while the graph runs (thresholds and gates, never model
+    /// files or sizes): `run --set-at FRAME:node.param=value` changes them from a frame on,
+    /// through [`super::Operator::set_params`].
+    pub tunable: &'static [&'static str],
     /// Constructor from validated parameters.
     #[serde(skip)]
     pub build: fn(&Params) -> Result<Instance, OpError>,
@@ -342,6 +346,7 @@ impl OpSpec {
             ground_truth_outputs: None,
             map_store: None,
             declare: None,
+            tunable: &[],
             build,
         }
     }
@@ -379,6 +384,13 @@ impl OpSpec {
     /// With the parameters `dynaflow run --save-map/--load-map/--localise` set.
     pub const fn map_store(mut self, store: MapStore) -> Self {
         self.map_store = Some(store);
+        self
+    }
+
+    /// With these parameters changeable while the graph runs (each one of [`OpSpec::params`];
+    /// the operator takes them in [`super::Operator::set_params`]).
+    pub const fn tunable(mut self, tunable: &'static [&'static str]) -> Self {
+        self.tunable = tunable;
         self
     }
 

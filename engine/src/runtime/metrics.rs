@@ -16,6 +16,21 @@ pub(crate) struct NodeMetrics {
     pub age: Histogram,
     /// The operator's own contribution to the summary.
     pub report: Option<serde_json::Value>,
+    /// Parameters changed while running, in order.
+    pub parameter_changes: Vec<ParameterChange>,
+}
+
+/// A parameter changed while the graph ran (`run --set-at`): from frame `frame` on.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct ParameterChange {
+    /// The first frame computed with the new value.
+    pub frame: u64,
+    /// The parameter.
+    pub param: String,
+    /// Its value before.
+    pub old: serde_json::Value,
+    /// And after.
+    pub new: serde_json::Value,
 }
 
 /// Relative width of a histogram bucket: quantiles are exact to within 1 %.
@@ -134,6 +149,9 @@ pub struct NodeReport {
     pub max_queue: usize,
     /// Messages dropped on the node's inputs.
     pub dropped: u64,
+    /// Parameters changed while running (`run --set-at`), in order.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub parameter_changes: Vec<ParameterChange>,
     /// What the operator reported (e.g. a tracker's ATE), if anything.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub report: Option<serde_json::Value>,

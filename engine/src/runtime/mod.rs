@@ -31,7 +31,8 @@ use rand_core::SeedableRng;
 use tokio::sync::Notify;
 
 pub use edge::EdgeStats;
-pub use metrics::{EdgeReport, Failure, LatencyStats, NodeReport, RunReport, RunStatus};
+pub use metrics::{EdgeReport, Failure, LatencyStats, NodeReport, ParameterChange, RunReport, RunStatus};
+pub use node::ScheduledSet;
 
 use crate::msg::Message;
 use crate::op::{Context, Instance, OpError};
@@ -59,6 +60,8 @@ pub struct RunOptions {
     /// Run only this machine's share of a graph that spans machines (`None`: every node
     /// here, `machines:` or not).
     pub placement: Option<remote::Placement>,
+    /// Parameter changes from a frame on (`run --set-at`), validated against the graph.
+    pub schedule: Vec<ScheduledSet>,
 }
 
 /// How long a stopped run waits for in-flight frames before cancelling the nodes.
@@ -281,7 +284,11 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
             senders: std::mem::take(senders.get_mut(i).unwrap_or(&mut Vec::new())),
             tap: tap_tx.clone(),
         };
+        let mut schedule: Vec<ScheduledSet> =
+            options.schedule.iter().filter(|s| *s.node == *node.id).cloned().collect();
+        schedule.sort_by_key(|s| s.frame);
         let task = node::NodeTask {
+            schedule,
             node: node.clone(),
             ctx,
             outputs,
@@ -382,6 +389,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
                 busy_s: m.busy.as_secs_f64(),
                 max_queue,
                 dropped,
+                parameter_changes: m.parameter_changes,
                 report: m.report,
             }
         })

@@ -6,7 +6,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use super::edge::{EdgeRx, EdgeTx, Envelope, TryRecv};
-use super::metrics::{Failure, NodeMetrics};
+use super::metrics::{Failure, NodeMetrics, ParameterChange};
 use super::{RunOptions, Tap, records};
 use crate::msg::{Message, PortType};
 use crate::op::{Context, Inputs, Instance, OpError, Operator, Outputs as OpOutputs, Source};
@@ -18,6 +18,20 @@ pub(super) struct Outputs {
     pub tap: Vec<tokio::sync::mpsc::Sender<Tap>>,
 }
 
+/// A tunable parameter's new value from frame `frame` on (`run --set-at FRAME:node.param=value`),
+/// applied in lockstep order: the node computes frame `frame` with it.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ScheduledSet {
+    /// The first frame that uses the value.
+    pub frame: u64,
+    /// The node.
+    pub node: String,
+    /// The parameter (one of the node's operator's [`crate::op::OpSpec::tunable`]).
+    pub param: String,
+    /// The value, as validation resolved it.
+    pub value: serde_json::Value,
+}
+
 pub(super) struct NodeTask {
     pub node: ResolvedNode,
     pub ctx: Context,
@@ -27,6 +41,8 @@ pub(super) struct NodeTask {
     pub joins: Vec<Option<(Join, u32)>>,
     pub failures: Arc<Mutex<Vec<Failure>>>,
     pub options: RunOptions,
+    /// This node's scheduled parameter changes (`run --set-at`), by frame.
+    pub schedule: Vec<ScheduledSet>,
 }
 
 struct Slot {
@@ -191,6 +207,8 @@ impl NodeTask {
             })
             .collect();
         let deterministic = !self.options.realtime;
+        let mut params = self.node.params.clone();
+        let mut schedule = std::mem::take(&mut self.schedule).into_iter().peekable();
         // The last frame this node emitted (fired or skipped), and whether it ended because its
         // inputs did (rather than on an error).
         let mut last_frame: Option<u64> = None;
@@ -261,6 +279,29 @@ impl NodeTask {
                 })
                 .collect();
             let born = born.unwrap_or_else(Instant::now);
+            // 5. Parameters scheduled for this frame (or one this node never ran) change now,
+            // between frames, so every run with the same schedule computes the same.
+            while let Some(change) = schedule.next_if(|c| c.frame <= k) {
+                let Some(o) = op.as_mut() else { continue };
+                let (next, old) = params.with(&change.param, change.value.clone());
+                let taken = caught(std::panic::catch_unwind(AssertUnwindSafe(|| o.set_params(&mut self.ctx, &next))));
+                if let Err(e) = taken {
+                    self.fail(format!("setting `{}` at frame {k}: {e}", change.param));
+                    completed = false;
+                    break;
+                }
+                tracing::info!(node = %self.node.id, "frame {k}: `{}` {} -> {}", change.param, old.clone().unwrap_or_default(), change.value);
+                metrics.parameter_changes.push(ParameterChange {
+                    frame: k,
+                    param: change.param,
+                    old: old.unwrap_or_default(),
+                    new: change.value,
+                });
+                params = next;
+            }
+            if !completed {
+                break;
+            }
             let inputs = Inputs::new(k, ports);
             let ready = self.node.inputs.iter().zip(&inputs.ports).all(|(decl, (_, m))| !decl.required || m.is_some());
             let t0 = Instant::now();

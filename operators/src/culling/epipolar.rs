@@ -41,7 +41,7 @@ rule_op!(CULL_EPIPOLAR, "cull_epipolar", &[TRACKS.spec], EpipolarConfig, |c: Epi
         },
         select_model: c.select_model,
     }))
-});
+}, tunable: &["threshold"]);
 
 struct EpipolarOp(rules::EpipolarCull);
 
@@ -61,6 +61,11 @@ impl Operator for EpipolarOp {
             extra.push(("long_homography", f64::from(u8::from(frame.long_homography))));
         }
         Ok(labelled(msg, t, &frame.decisions, &extra))
+    }
+
+    fn set_params(&mut self, _ctx: &mut Context, params: &Params) -> Result<(), OpError> {
+        self.0.set_threshold(EpipolarConfig::from_params(params)?.threshold as f32);
+        Ok(())
     }
 }
 

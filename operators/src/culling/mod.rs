@@ -102,6 +102,20 @@ macro_rules! rule_op {
         .params($config::PARAMS)
         .cpu_heavy();
     };
+    ($spec:ident, $name:literal, $inputs:expr, $config:ident, $build:expr, tunable: $tunable:expr) => {
+        #[doc = concat!("The `", $name, "` operator (its doc: `dynaflow ops ", $name, "`).")]
+        pub const $spec: OpSpec = OpSpec::transform(
+            $name,
+            "culling",
+            doc_line(include_str!(concat!("docs/", $name, ".md"))),
+            |p: &Params| Ok(Instance::Transform(Box::new(($build)($config::from_params(p)?)))),
+        )
+        .inputs($inputs)
+        .outputs(RULE_OUTPUTS)
+        .params($config::PARAMS)
+        .tunable($tunable)
+        .cpu_heavy();
+    };
 }
 
 fn ransac(threshold: f64, confidence: f64) -> RansacConfig {

@@ -39,7 +39,9 @@ pub fn ops(format: &Format) -> u8 {
                     );
                 }
                 for p in op.params {
-                    say!("  param {:<12} {} = {}", p.name, p.ty.describe(), default(p));
+                    let tunable =
+                        if op.tunable.contains(&p.name) { "  (tunable while running: run --set-at)" } else { "" };
+                    say!("  param {:<12} {} = {}{tunable}", p.name, p.ty.describe(), default(p));
                 }
                 say!();
             }
@@ -125,6 +127,13 @@ fn markdown(ops: &[&OpSpec]) -> String {
                 out.push_str(&format!("| `{}` | {} | `{}` | {} |\n", p.name, p.ty.describe(), default(p), p.doc));
             }
             out.push('\n');
+            if !op.tunable.is_empty() {
+                let names: Vec<String> = op.tunable.iter().map(|t| format!("`{t}`")).collect();
+                out.push_str(&format!(
+                    "Tunable while running (`dynaflow run --set-at FRAME:node.param=value`): {}.\n\n",
+                    names.join(", ")
+                ));
+            }
         }
     }
     out

@@ -49,6 +49,10 @@ pub fn run(args: &RunArgs) -> u8 {
     let Some(graph) = loaded.graph.take() else {
         return EXIT_BAD_INPUT;
     };
+    let schedule = match schedule(args, &req, &graph) {
+        Ok(s) => s,
+        Err(e) => return bad_input(&e),
+    };
     if let Err(e) = std::fs::create_dir_all(&args.out) {
         return bad_input(&format!("cannot create output folder {}: {e}", args.out.display()));
     }
@@ -60,7 +64,7 @@ pub fn run(args: &RunArgs) -> u8 {
         Ok(r) => r,
         Err(e) => return bad_input(&e),
     };
-    let report = match execute(&graph, args, sinks) {
+    let report = match execute(&graph, args, sinks, schedule) {
         Ok(r) => r,
         Err(Failed::Start(e)) => {
             eprintln!("error: {e}");
@@ -106,6 +110,65 @@ pub fn run(args: &RunArgs) -> u8 {
 fn bad_input(e: &str) -> u8 {
     eprintln!("error: {e}");
     EXIT_BAD_INPUT
+}
+
+/// `--set-at FRAME:node.param=value`, each checked before the run starts: the node exists, its
+/// operator declares the parameter tunable, and the value passes the same validation as
+/// `--set` (the graph is loaded with it as an override, so an error names the flag and the
+/// parameter's declaration).
+fn schedule(args: &RunArgs, req: &LoadRequest, graph: &ResolvedGraph) -> Result<Vec<runtime::ScheduledSet>, String> {
+    let mut out = Vec::new();
+    for raw in &args.set_at {
+        let flag = format!("--set-at {raw}");
+        let (frame, rest) =
+            raw.split_once(':').ok_or_else(|| format!("`{flag}`: expected `FRAME:node.param=value`"))?;
+        let frame: u64 =
+            frame.trim().parse().map_err(|_| format!("`{flag}`: `{frame}` is not a frame number (0, 1, ...)"))?;
+        let mut o = Override::parse(rest).map_err(|e| e.replace(&format!("--set {rest}"), &flag))?;
+        o.text.clone_from(&flag);
+        let Some(node) = graph.nodes.iter().find(|n| *n.id == o.node) else {
+            let names: Vec<&str> = graph.nodes.iter().map(|n| &*n.id).collect();
+            return Err(format!("`{flag}`: the graph has no node `{}` (its nodes: {})", o.node, names.join(", ")));
+        };
+        let op = node.op;
+        if op.param(&o.param).is_none() {
+            let names: Vec<&str> = op.params.iter().map(|p| p.name).collect();
+            return Err(format!(
+                "`{flag}`: `{}` (op `{}`) has no parameter `{}` (its parameters: {})",
+                o.node,
+                op.name,
+                o.param,
+                names.join(", ")
+            ));
+        }
+        if !op.tunable.contains(&o.param.as_str()) {
+            let tunable = if op.tunable.is_empty() {
+                "none of its parameters".to_owned()
+            } else {
+                op.tunable.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", ")
+            };
+            return Err(format!(
+                "`{flag}`: `{}.{}` cannot change while running: op `{}` declares {tunable} tunable (`dynaflow ops {}`)",
+                o.node, o.param, op.name, op.name
+            ));
+        }
+        let mut with = req.clone();
+        with.overrides.push(o.clone());
+        let registry = crate::registry();
+        let loaded = dynaflow_engine::load(&args.graph, &registry, &with)
+            .map_err(|e| format!("cannot read graph file {}: {e}", args.graph.display()))?;
+        let Some(value) = loaded
+            .graph
+            .as_ref()
+            .and_then(|g| g.nodes.iter().find(|n| *n.id == o.node))
+            .and_then(|n| n.params.get(&o.param).cloned())
+        else {
+            super::print_diagnostics(&loaded);
+            return Err(format!("`{flag}`: the value is refused (above)"));
+        };
+        out.push(runtime::ScheduledSet { frame, node: o.node, param: o.param, value });
+    }
+    Ok(out)
 }
 
 /// What the flags ask of the graph's load: `--set`, `--input`, `--variant`, `--seed` and the
@@ -245,11 +308,17 @@ enum Failed {
 
 /// Runs the graph on a tokio runtime: signals stop it (a second aborts), a progress bar on a
 /// terminal, this machine joined to the others with `--machine`.
-fn execute(graph: &ResolvedGraph, args: &RunArgs, sinks: Vec<Box<dyn Sink>>) -> Result<runtime::RunReport, Failed> {
+fn execute(
+    graph: &ResolvedGraph,
+    args: &RunArgs,
+    sinks: Vec<Box<dyn Sink>>,
+    schedule: Vec<runtime::ScheduledSet>,
+) -> Result<runtime::RunReport, Failed> {
     let options = RunOptions {
         realtime: args.realtime,
         max_frames: args.frames,
         out_dir: Some(args.out.clone()),
+        schedule,
         ..RunOptions::default()
     };
     let rt = tokio::runtime::Builder::new_multi_thread()
