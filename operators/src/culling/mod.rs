@@ -87,20 +87,11 @@ fn boxes(d: Option<&Detections>) -> Vec<LabelledBox> {
 }
 
 /// Declares a rule operator: its `OpSpec` from the inputs, the params struct and a doc file
-/// beside this one (`docs/<name>.md`).
+/// beside this one (`docs/<name>.md`); `tunable: &[..]` names the parameters that may change while
+/// running (the operator implements `set_params`).
 macro_rules! rule_op {
     ($spec:ident, $name:literal, $inputs:expr, $config:ident, $build:expr) => {
-        #[doc = concat!("The `", $name, "` operator (its doc: `dynaflow ops ", $name, "`).")]
-        pub const $spec: OpSpec = OpSpec::transform(
-            $name,
-            "culling",
-            doc_line(include_str!(concat!("docs/", $name, ".md"))),
-            |p: &Params| Ok(Instance::Transform(Box::new(($build)($config::from_params(p)?)))),
-        )
-        .inputs($inputs)
-        .outputs(RULE_OUTPUTS)
-        .params($config::PARAMS)
-        .cpu_heavy();
+        rule_op!($spec, $name, $inputs, $config, $build, tunable: &[]);
     };
     ($spec:ident, $name:literal, $inputs:expr, $config:ident, $build:expr, tunable: $tunable:expr) => {
         #[doc = concat!("The `", $name, "` operator (its doc: `dynaflow ops ", $name, "`).")]
