@@ -111,9 +111,35 @@ fn mg_slam_split_over_two_processes_matches_one_process_and_merges() {
     let frames = ["--frames", "40"];
     let server = machine(&graph, "server", &dir.path().join("server"), &frames);
     let robot = machine(&graph, "robot", &dir.path().join("robot"), &frames);
+    // `top` on both machines' folders while they run.
+    let top = common::bin()
+        .args(["top", "--json", "--follow", "--interval", "0.3", "--wait", "60"])
+        .arg(dir.path().join("robot"))
+        .arg(dir.path().join("server"))
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
     let (robot, server) = (robot.wait_with_output().unwrap(), server.wait_with_output().unwrap());
     assert_eq!(robot.status.code(), Some(0), "robot: {}", text(&robot));
     assert_eq!(server.status.code(), Some(0), "server: {}", text(&server));
+    let top = top.wait_with_output().unwrap();
+    assert_eq!(top.status.code(), Some(0), "top: {}", text(&top));
+    let looks: Vec<serde_json::Value> =
+        String::from_utf8_lossy(&top.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    for m in ["robot", "server"] {
+        let last = looks.iter().rev().find(|l| l["machine"] == m).unwrap_or_else(|| panic!("`top` never showed `{m}`"));
+        assert_eq!(last["state"], "completed", "{m}");
+        let summary = common::summary(&dir.path().join(format!("{m}/mg_slam.{m}.summary.json")));
+        let shown: Vec<(&str, u64)> = last["nodes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|n| (n["node"].as_str().unwrap(), n["frames"].as_u64().unwrap()))
+            .collect();
+        let want: Vec<(&str, u64)> = summary.run.nodes.iter().map(|n| (n.node.as_str(), n.frames)).collect();
+        assert_eq!(shown, want, "`top` on `{m}`");
+    }
     // The whole graph in one process, as written.
     let want = one_process_digests("mg_slam", "40", &dir.path().join("one"));
     let r = digests(&dir.path().join("robot/mg_slam.robot.summary.json"));

@@ -198,6 +198,17 @@ pub trait Sink: Send {
     fn record_shared(&mut self, node: &str, port: &str, msg: &Arc<Message>) -> Result<(), SinkError> {
         self.record(node, port, msg)
     }
+    /// A parameter of `node` changed while running (`run --set-at`, `dynaflow set`), from frame
+    /// `change.frame` on, at sensor time `stamp`: a marker on the recording's timeline. Ignored
+    /// by default.
+    fn parameter_change(
+        &mut self,
+        _node: &str,
+        _change: &crate::runtime::ParameterChange,
+        _stamp: f64,
+    ) -> Result<(), SinkError> {
+        Ok(())
+    }
     /// Called once at the end, also after an interrupt or an operator failure. Must leave a
     /// complete, valid file.
     fn close(&mut self) -> Result<(), SinkError>;

@@ -253,7 +253,16 @@ impl Message {
             Body::Tracks(m) => json!({"count": m.tracks.len()}),
             Body::Detections(m) => json!({"count": m.detections.len()}),
             Body::Mask(m) => json!({"width": m.width, "height": m.height, "classes": m.class_names.len()}),
-            Body::PointLabels(m) => json!({"count": m.labels.len(), "dynamic": m.dynamic_count()}),
+            Body::PointLabels(m) => {
+                // Dynamic points by the rule that decided.
+                let mut reasons = serde_json::Map::new();
+                for l in m.labels.iter().filter(|l| l.dynamic) {
+                    let name = serde_json::to_value(l.reason).ok().and_then(|v| v.as_str().map(str::to_owned));
+                    let n = reasons.entry(name.unwrap_or_default()).or_insert(json!(0));
+                    *n = json!(n.as_u64().unwrap_or(0) + 1);
+                }
+                json!({"count": m.labels.len(), "dynamic": m.dynamic_count(), "reasons": reasons})
+            }
             Body::Pose(m) => {
                 let t = m.world_from_cam.translation.vector;
                 let q = m.world_from_cam.rotation.coords;

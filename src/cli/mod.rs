@@ -13,6 +13,7 @@ macro_rules! say {
 }
 
 pub(crate) mod commands;
+mod control;
 mod plot;
 
 pub use commands::eval::read_ground_truth;
@@ -66,6 +67,16 @@ struct Cli {
 enum Command {
     /// Run a graph: prints per-node timings and writes `<out>/<name>.summary.json` and recordings.
     Run(RunArgs),
+    /// Watch a running graph: per node frames, rate, latency, busy share, queues, drops and
+    /// lag, busiest first (`--json` for scripts).
+    Top(commands::top::TopArgs),
+    /// Change a parameter of a running graph from the node's next frame (recorded, so
+    /// `run --set-at` replays it).
+    Set(commands::top::SetArgs),
+    /// Print a running graph's messages on one port, summarised (sizes, counts, a pose).
+    Echo(commands::top::EchoArgs),
+    /// Print the rate of one port of a running graph.
+    Hz(commands::top::EchoArgs),
     /// Check graph files (and all their variants) without running them.
     Validate {
         /// Graph files.
@@ -287,6 +298,10 @@ where
     init_logging(cli.verbose, cli.quiet);
     match cli.command {
         Command::Run(args) => commands::run::run(&args),
+        Command::Top(args) => commands::top::top(&args),
+        Command::Set(args) => commands::top::set(&args),
+        Command::Echo(args) => commands::top::echo(&args),
+        Command::Hz(args) => commands::top::hz(&args),
         Command::Validate { graphs, json } => commands::validate::validate(&graphs, json),
         Command::Ops { format, json, markdown } => {
             let format = if json {

@@ -107,6 +107,10 @@ impl EdgeProbe {
     pub fn stats(&self) -> EdgeStats {
         self.0.lock().stats
     }
+    /// Messages queued now (watermarks not counted).
+    pub fn depth(&self) -> usize {
+        self.0.lock().messages
+    }
 }
 
 /// Producer end.

@@ -1,6 +1,6 @@
 //! Per-node and per-edge measurements, and the end-of-run report.
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use super::edge::EdgeStats;
 
@@ -18,6 +18,30 @@ pub(crate) struct NodeMetrics {
     pub report: Option<serde_json::Value>,
     /// Parameters changed while running, in order.
     pub parameter_changes: Vec<ParameterChange>,
+    /// The newest frame handled (processed or skipped).
+    pub last_seq: Option<u64>,
+    /// When the first and the newest frame were handled.
+    pub first_at: Option<Instant>,
+    pub last_at: Option<Instant>,
+}
+
+impl NodeMetrics {
+    /// Frame `seq` handled (processed or skipped) now.
+    pub fn handled(&mut self, seq: u64) {
+        let now = Instant::now();
+        self.first_at.get_or_insert(now);
+        self.last_at = Some(now);
+        self.last_seq = Some(self.last_seq.map_or(seq, |s| s.max(seq)));
+    }
+
+    /// Frames handled per second between the first and the newest (0 before two).
+    pub fn rate_hz(&self) -> f64 {
+        let n = self.frames + self.skipped;
+        match (self.first_at, self.last_at) {
+            (Some(a), Some(b)) if n >= 2 && b > a => (n - 1) as f64 / (b - a).as_secs_f64(),
+            _ => 0.0,
+        }
+    }
 }
 
 /// A parameter changed while the graph ran (`run --set-at`): from frame `frame` on.
@@ -139,6 +163,10 @@ pub struct NodeReport {
     pub frames: u64,
     /// Frames skipped because a required input was absent (or the node is disabled).
     pub skipped: u64,
+    /// Frames handled (processed or skipped) per second, from the first to the last: the
+    /// rate `dynaflow top` shows.
+    #[serde(default)]
+    pub rate_hz: f64,
     /// Processing latency per frame.
     pub latency: LatencyStats,
     /// Time since the source emitted the frame, when this node finished it.

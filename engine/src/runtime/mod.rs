@@ -19,7 +19,9 @@
 
 mod edge;
 mod metrics;
+mod monitor;
 mod node;
+mod recorders;
 pub mod remote;
 
 use std::path::PathBuf;
@@ -32,12 +34,13 @@ use tokio::sync::Notify;
 
 pub use edge::EdgeStats;
 pub use metrics::{EdgeReport, Failure, LatencyStats, NodeReport, ParameterChange, RunReport, RunStatus};
+pub use monitor::{AppliedSet, Echo, EchoListener, LiveSet, LiveState, Monitor, NodeSnapshot, Snapshot};
 pub use node::ScheduledSet;
 
-use crate::msg::Message;
 use crate::op::{Context, Instance, OpError};
-use crate::sink::{RunInfo, Sink, SinkError, SinkReport};
+use crate::sink::{RunInfo, Sink, SinkError};
 use crate::spec::{RecordPolicy, ResolvedGraph};
+use recorders::sink_threads;
 
 /// Options of one run.
 #[derive(Clone, Debug, Default)]
@@ -62,6 +65,8 @@ pub struct RunOptions {
     pub placement: Option<remote::Placement>,
     /// Parameter changes from a frame on (`run --set-at`), validated against the graph.
     pub schedule: Vec<ScheduledSet>,
+    /// The live view (`dynaflow top`, `set`, `echo`): the run registers its nodes with it.
+    pub monitor: Monitor,
 }
 
 /// How long a stopped run waits for in-flight frames before cancelling the nodes.
@@ -131,13 +136,6 @@ pub fn node_seed(graph_seed: u64, node: &str) -> u64 {
 /// A local port read by other machines: the edge the wire drains, its counters, and the
 /// machines that consume it.
 type Outgoing = (edge::EdgeRx, edge::EdgeProbe, Vec<Arc<str>>);
-
-/// A recorded message on its way to the sink thread.
-pub(crate) struct Tap {
-    node: Arc<str>,
-    port: &'static str,
-    msg: Arc<Message>,
-}
 
 /// Run `graph` to completion (or stop/failure). Sinks are opened first and always closed.
 pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn Sink>>) -> Result<RunReport, RunError> {
@@ -260,6 +258,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     }
 
     let stem: Arc<str> = crate::files::RunFiles::stem_of(&graph.name, graph.variant.as_deref()).into();
+    let mut hooks = options.monitor.attach(graph, &local, &probes, &options);
     let mut tasks = Vec::new();
     for (i, (node, inst)) in graph.nodes.iter().zip(instances).enumerate() {
         if !local[i] {
@@ -287,8 +286,12 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
         let mut schedule: Vec<ScheduledSet> =
             options.schedule.iter().filter(|s| *s.node == *node.id).cloned().collect();
         schedule.sort_by_key(|s| s.frame);
+        let hook = hooks.get_mut(i).and_then(Option::take);
         let task = node::NodeTask {
             schedule,
+            live: hook.as_ref().map_or_else(Arc::default, |h| h.metrics.clone()),
+            echo: hook.as_ref().map(|h| h.echo.clone()),
+            sets: hook.and_then(|h| h.sets),
             node: node.clone(),
             ctx,
             outputs,
@@ -387,6 +390,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
                 latency: m.latency.stats(),
                 age: m.age.stats(),
                 busy_s: m.busy.as_secs_f64(),
+                rate_hz: m.rate_hz(),
                 max_queue,
                 dropped,
                 parameter_changes: m.parameter_changes,
@@ -401,6 +405,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
     } else {
         RunStatus::Completed
     };
+    options.monitor.finish(status);
     Ok(RunReport {
         graph: graph.name.clone(),
         variant: graph.variant.clone(),
@@ -417,80 +422,6 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
         recorders,
         failures,
     })
-}
-
-/// Capacity of each recorder's queue; producers wait when it is full, so recording applies
-/// backpressure instead of losing messages.
-const TAP_CAPACITY: usize = 256;
-
-/// What a recorder thread hands back: its failures, messages it never saw after failing,
-/// and its report.
-struct SinkDone {
-    name: String,
-    failures: Vec<Failure>,
-    lost: u64,
-    report: SinkReport,
-}
-
-type SinkJoin = std::thread::JoinHandle<SinkDone>;
-
-/// Open every sink, then give each its own thread and queue, so a slow recorder (image
-/// encoding) never holds up a fast one.
-fn sink_threads(
-    mut sinks: Vec<Box<dyn Sink>>,
-    info: &RunInfo,
-) -> Result<(Vec<tokio::sync::mpsc::Sender<Tap>>, Vec<SinkJoin>), SinkError> {
-    for i in 0..sinks.len() {
-        if let Some(Err(e)) = sinks.get_mut(i).map(|s| s.open(info)) {
-            // Close the ones already open so their files are valid.
-            for s in sinks.iter_mut().take(i) {
-                let _ = s.close();
-            }
-            return Err(e);
-        }
-    }
-    let mut senders = Vec::new();
-    let mut handles = Vec::new();
-    for mut sink in sinks {
-        let (tx, mut rx) = tokio::sync::mpsc::channel::<Tap>(TAP_CAPACITY);
-        let name = format!("dynaflow-sink-{}", sink.name());
-        let handle = std::thread::Builder::new()
-            .name(name)
-            .spawn(move || {
-                let mut failures = Vec::new();
-                let mut lost = 0u64;
-                let mut live = true;
-                while let Some(tap) = rx.blocking_recv() {
-                    if !live {
-                        lost += 1;
-                        continue;
-                    }
-                    if let Err(e) = sink.record_shared(&tap.node, tap.port, &tap.msg) {
-                        tracing::error!("recording stopped: {e}");
-                        failures.push(Failure { node: format!("sink:{}", sink.name()), error: e.to_string() });
-                        let _ = sink.close();
-                        live = false;
-                    }
-                }
-                if live && let Err(e) = sink.close() {
-                    failures.push(Failure { node: format!("sink:{}", sink.name()), error: e.to_string() });
-                }
-                SinkDone { name: sink.name().to_owned(), failures, lost, report: sink.report() }
-            })
-            .map_err(|e| SinkError::new("sinks", format!("cannot start a recorder thread: {e}")))?;
-        senders.push(tx);
-        handles.push(handle);
-    }
-    Ok((senders, handles))
-}
-
-/// Whether a message of frame `seq` is recorded under `policy`.
-pub(crate) fn records(policy: RecordPolicy, seq: u64) -> bool {
-    match policy {
-        RecordPolicy::All => true,
-        RecordPolicy::None => false,
-        RecordPolicy::Every(n) => seq.is_multiple_of(n.max(1)),
-    }
 }
 
 /// Install SIGINT/SIGTERM handlers: the first signal requests a graceful stop, a second one

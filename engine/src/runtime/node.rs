@@ -5,11 +5,13 @@ use std::panic::AssertUnwindSafe;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
+use super::RunOptions;
 use super::edge::{EdgeRx, EdgeTx, Envelope, TryRecv};
 use super::metrics::{Failure, NodeMetrics, ParameterChange};
-use super::{RunOptions, Tap, records};
+use super::monitor::{AppliedSet, EchoTap, LiveSet, lock};
+use super::recorders::{Tap, records};
 use crate::msg::{Message, PortType};
-use crate::op::{Context, Inputs, Instance, OpError, Operator, Outputs as OpOutputs, Source};
+use crate::op::{Context, Inputs, Instance, OpError, Operator, Outputs as OpOutputs, Params, Source};
 use crate::spec::{Join, RecordPolicy, ResolvedNode};
 
 pub(super) struct Outputs {
@@ -43,6 +45,12 @@ pub(super) struct NodeTask {
     pub options: RunOptions,
     /// This node's scheduled parameter changes (`run --set-at`), by frame.
     pub schedule: Vec<ScheduledSet>,
+    /// The counters, where the monitor reads them while the node runs.
+    pub live: Arc<Mutex<NodeMetrics>>,
+    /// Parameter changes sent while running (`dynaflow set`), if the node takes any.
+    pub sets: Option<tokio::sync::mpsc::UnboundedReceiver<LiveSet>>,
+    /// Ports someone listens to (`dynaflow echo`).
+    pub echo: Option<EchoTap>,
 }
 
 struct Slot {
@@ -82,16 +90,39 @@ impl NodeTask {
     }
 
     pub async fn run(mut self, inst: Option<Instance>) -> NodeMetrics {
-        let mut metrics = NodeMetrics::default();
         match inst {
-            Some(Instance::Source(src)) => self.run_source(src, &mut metrics).await,
-            Some(Instance::Transform(op)) => self.run_transform(Some(op), &mut metrics).await,
-            None if self.node.inputs.iter().any(|i| i.edge.is_some()) => self.run_transform(None, &mut metrics).await,
+            Some(Instance::Source(src)) => self.run_source(src).await,
+            Some(Instance::Transform(op)) => self.run_transform(Some(op)).await,
+            None if self.node.inputs.iter().any(|i| i.edge.is_some()) => self.run_transform(None).await,
             // A disabled source produces no frames.
             None => {}
         }
+        let mut metrics = lock(&self.live);
         metrics.report = self.ctx.report.take();
-        metrics
+        metrics.clone()
+    }
+
+    /// Change `param` to `value` before frame `k`: the operator takes it (or the change is
+    /// refused and the run fails, as an operator error would), `params` follows.
+    fn change(
+        &mut self,
+        o: &mut Box<dyn Operator>,
+        params: &mut Params,
+        k: u64,
+        param: String,
+        value: serde_json::Value,
+    ) -> Result<ParameterChange, String> {
+        let (next, old) = params.with(&param, value.clone());
+        let taken = caught(std::panic::catch_unwind(AssertUnwindSafe(|| o.set_params(&mut self.ctx, &next))));
+        if let Err(e) = taken {
+            return Err(format!("setting `{param}` at frame {k}: {e}"));
+        }
+        let old = old.unwrap_or_default();
+        tracing::info!(node = %self.node.id, "frame {k}: `{param}` {old} -> {value}");
+        let change = ParameterChange { frame: k, param, old, new: value };
+        lock(&self.live).parameter_changes.push(change.clone());
+        *params = next;
+        Ok(change)
     }
 
     async fn call_source(
@@ -135,7 +166,7 @@ impl NodeTask {
         }
     }
 
-    async fn run_source(&mut self, mut src: Box<dyn Source>, metrics: &mut NodeMetrics) {
+    async fn run_source(&mut self, mut src: Box<dyn Source>) {
         if let Err(e) = src.start(&mut self.ctx) {
             self.fail(format!("start: {e}"));
             return;
@@ -174,15 +205,19 @@ impl NodeTask {
                 self.fail(e.to_string());
                 break;
             }
-            // A source frame without any output is a skipped frame (e.g. an unreadable file).
-            if out_was_empty {
-                metrics.skipped += 1;
-            } else {
-                metrics.frames += 1;
+            {
+                let mut metrics = lock(&self.live);
+                // A source frame without any output is a skipped frame (e.g. an unreadable file).
+                if out_was_empty {
+                    metrics.skipped += 1;
+                } else {
+                    metrics.frames += 1;
+                }
+                metrics.busy += busy;
+                metrics.latency.record(busy);
+                metrics.age.record(Duration::ZERO);
+                metrics.handled(seq);
             }
-            metrics.busy += busy;
-            metrics.latency.record(busy);
-            metrics.age.record(Duration::ZERO);
             self.options.progress.fetch_max(seq + 1, std::sync::atomic::Ordering::Relaxed);
             seq += 1;
         }
@@ -191,7 +226,7 @@ impl NodeTask {
         }
     }
 
-    async fn run_transform(&mut self, mut op: Option<Box<dyn Operator>>, metrics: &mut NodeMetrics) {
+    async fn run_transform(&mut self, mut op: Option<Box<dyn Operator>>) {
         if let Some(o) = op.as_mut()
             && let Err(e) = o.start(&mut self.ctx)
         {
@@ -281,23 +316,39 @@ impl NodeTask {
             let born = born.unwrap_or_else(Instant::now);
             // 5. Parameters scheduled for this frame (or one this node never ran) change now,
             // between frames, so every run with the same schedule computes the same.
-            while let Some(change) = schedule.next_if(|c| c.frame <= k) {
-                let Some(o) = op.as_mut() else { continue };
-                let (next, old) = params.with(&change.param, change.value.clone());
-                let taken = caught(std::panic::catch_unwind(AssertUnwindSafe(|| o.set_params(&mut self.ctx, &next))));
-                if let Err(e) = taken {
-                    self.fail(format!("setting `{}` at frame {k}: {e}", change.param));
-                    completed = false;
+            // Then the changes sent while running (`dynaflow set`), in the order they came: at
+            // this frame, which the change records, so `--set-at` replays it exactly.
+            let mut live: Vec<LiveSet> = Vec::new();
+            while let Some(set) = self.sets.as_mut().and_then(|rx| rx.try_recv().ok()) {
+                live.push(set);
+            }
+            let scheduled = std::iter::from_fn(|| schedule.next_if(|c| c.frame <= k)).map(|c| (c.param, c.value, None));
+            let live = live.into_iter().map(|s| (s.param, s.value, Some(s.applied)));
+            let stamp = ports.iter().find_map(|(_, m)| m.as_ref().map(|m| m.header.stamp)).unwrap_or(0.0);
+            for (param, value, reply) in scheduled.collect::<Vec<_>>().into_iter().chain(live) {
+                let Some(mut o) = op.take() else { continue };
+                let r = self.change(&mut o, &mut params, k, param, value);
+                op = Some(o);
+                match &r {
+                    // On the recorders' timelines too (a marker in the `.rrd`, a log message in
+                    // the MCAP).
+                    Ok(change) => {
+                        for tap in &self.outputs.tap {
+                            let change = change.clone();
+                            let _ = tap.send(Tap::Change { node: self.node.id.clone(), change, stamp }).await;
+                        }
+                    }
+                    Err(e) => {
+                        self.fail(e.clone());
+                        completed = false;
+                    }
+                }
+                if let Some(reply) = reply {
+                    let _ = reply.send(r.map(|c| AppliedSet { frame: c.frame, old: c.old, new: c.new }));
+                }
+                if !completed {
                     break;
                 }
-                tracing::info!(node = %self.node.id, "frame {k}: `{}` {} -> {}", change.param, old.clone().unwrap_or_default(), change.value);
-                metrics.parameter_changes.push(ParameterChange {
-                    frame: k,
-                    param: change.param,
-                    old: old.unwrap_or_default(),
-                    new: change.value,
-                });
-                params = next;
             }
             if !completed {
                 break;
@@ -319,7 +370,7 @@ impl NodeTask {
                     }
                 }
                 _ => {
-                    metrics.skipped += 1;
+                    lock(&self.live).skipped += 1;
                     OpOutputs::new()
                 }
             };
@@ -331,12 +382,14 @@ impl NodeTask {
                 break;
             }
             last_frame = Some(k);
+            let mut metrics = lock(&self.live);
             if fired {
                 metrics.frames += 1;
                 metrics.busy += busy;
                 metrics.latency.record(t0.elapsed());
                 metrics.age.record(born.elapsed());
             }
+            metrics.handled(k);
         }
         // Closing our inputs lets producers stop waiting on us. After a clean end, what is
         // left belongs to frames after our last one (a delay's tail) and is not lost.
@@ -390,15 +443,28 @@ impl NodeTask {
             msg.touch();
             *slot = Some(Arc::new(msg));
         }
-        for ((port, _, record), (senders, msg)) in
-            self.outputs.ports.iter().zip(self.outputs.senders.iter().zip(per_port))
+        for (j, ((port, _, record), (senders, msg))) in
+            self.outputs.ports.iter().zip(self.outputs.senders.iter().zip(per_port)).enumerate()
         {
+            if let (Some(m), Some(echo)) = (&msg, &self.echo)
+                && echo.watched(j)
+            {
+                // Nobody listening is the usual case: no receiver, nothing to do.
+                let _ = echo.tx.send(super::monitor::Echo {
+                    node: self.node.id.to_string(),
+                    port: (*port).to_owned(),
+                    seq,
+                    stamp: m.header.stamp,
+                    at_s: echo.started.elapsed().as_secs_f64(),
+                    summary: m.summary(),
+                });
+            }
             if let Some(m) = &msg
                 && records(*record, seq)
             {
                 for tap in &self.outputs.tap {
                     // A closed recorder queue only happens at teardown; nothing to record then.
-                    let _ = tap.send(Tap { node: self.node.id.clone(), port, msg: m.clone() }).await;
+                    let _ = tap.send(Tap::Message { node: self.node.id.clone(), port, msg: m.clone() }).await;
                 }
             }
             for tx in senders {

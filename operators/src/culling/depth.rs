@@ -20,7 +20,7 @@ rule_op!(CULL_DEPTH, "cull_depth", &[TRACKS.spec, DEPTH.spec, CAMERA_INFO.spec, 
     config: c,
     last: None,
     anchors: rules::DepthAnchors::new()
-});
+}, tunable: &["depth_threshold"]);
 
 struct DepthOp {
     config: DepthConfig,
@@ -60,5 +60,10 @@ impl Operator for DepthOp {
         };
         self.last = depth.cloned().zip(pose);
         Ok(labelled(msg, t, &decisions, &[("threshold", f64::from(threshold))]))
+    }
+
+    fn set_params(&mut self, _ctx: &mut Context, params: &Params) -> Result<(), OpError> {
+        self.config.depth_threshold = DepthConfig::from_params(params)?.depth_threshold;
+        Ok(())
     }
 }

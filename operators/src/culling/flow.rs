@@ -20,7 +20,7 @@ params! {
     }
 }
 
-rule_op!(CULL_FLOW, "cull_flow", &[TRACKS.spec], FlowConfig, FlowOp);
+rule_op!(CULL_FLOW, "cull_flow", &[TRACKS.spec], FlowConfig, FlowOp, tunable: &["flow_threshold"]);
 
 struct FlowOp(FlowConfig);
 
@@ -45,5 +45,11 @@ impl Operator for FlowOp {
             None => all_static(prev.len(), 0.0),
         };
         Ok(labelled(msg, t, &decisions, &[("threshold", f64::from(threshold))]))
+    }
+
+    fn set_params(&mut self, _ctx: &mut Context, params: &Params) -> Result<(), OpError> {
+        // Nothing carries over between frames but the parameters themselves.
+        self.0.flow_threshold = FlowConfig::from_params(params)?.flow_threshold;
+        Ok(())
     }
 }

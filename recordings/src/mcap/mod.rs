@@ -217,6 +217,42 @@ impl Sink for McapSink {
         Ok(())
     }
 
+    /// A `foxglove.Log` message on `/parameters` (the node, the parameter, old and new value,
+    /// and the frame in `dynaflow`), at the frame's sensor time.
+    fn parameter_change(
+        &mut self,
+        node: &str,
+        change: &dynaflow_engine::runtime::ParameterChange,
+        stamp: f64,
+    ) -> Result<(), SinkError> {
+        let err = |e: mcap::McapError| writer_error("mcap", &self.path, &e);
+        let key = (String::new(), "parameters".to_owned());
+        let channel_id = match self.channels.get(&key) {
+            Some(id) => *id,
+            None => {
+                let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
+                let schema = writer
+                    .add_schema("foxglove.Log", "jsonschema", schemas::schema_text("foxglove.Log").as_bytes())
+                    .map_err(err)?;
+                let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
+                let id = writer.add_channel(schema, "/parameters", "json", &BTreeMap::new()).map_err(err)?;
+                self.channels.insert(key, id);
+                self.bytes.insert(id, (0, 0));
+                id
+            }
+        };
+        let ns = (stamp.max(0.0) * 1e9) as u64;
+        let data = schemas::parameter_log(node, change, ns).into_bytes();
+        if let Some((n, b)) = self.bytes.get_mut(&channel_id) {
+            *n += 1;
+            *b += data.len() as u64;
+        }
+        let header =
+            mcap::records::MessageHeader { channel_id, sequence: change.frame as u32, log_time: ns, publish_time: ns };
+        let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
+        writer.write_to_known_channel(&header, &data).map_err(err)
+    }
+
     fn close(&mut self) -> Result<(), SinkError> {
         let Some(mut writer) = self.writer.take() else { return Ok(()) };
         writer.finish().map_err(|e| writer_error("mcap", &self.path, &e))?;

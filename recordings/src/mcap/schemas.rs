@@ -48,6 +48,21 @@ const QUAT: &str = r#"{"type":"object","properties":{"x":{"type":"number"},"y":{
 const COLOR: &str = r#"{"type":"object","properties":{"r":{"type":"number"},"g":{"type":"number"},"b":{"type":"number"},"a":{"type":"number"}}}"#;
 const DYNAFLOW: &str = r#"{"type":"object","description":"dynaflow header, content digest and numeric payload (see docs/recordings.md)","properties":{"seq":{"type":"integer"},"stamp":{"type":"number"},"frame_id":{"type":"string"},"type":{"type":"string"},"digest":{"type":"string"},"data":{}}}"#;
 
+/// A parameter changed while running, as a `foxglove.Log` (level INFO, `name` the node) with
+/// the change itself under `dynaflow`: `{"node", "frame", "param", "old", "new"}`.
+pub fn parameter_log(node: &str, change: &dynaflow_engine::runtime::ParameterChange, ns: u64) -> String {
+    serde_json::json!({
+        "timestamp": {"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000},
+        "level": 2,
+        "message": format!("frame {}: {node}.{} {} -> {}", change.frame, change.param, change.old, change.new),
+        "name": node,
+        "file": "",
+        "line": 0,
+        "dynaflow": {"node": node, "frame": change.frame, "param": change.param, "old": change.old, "new": change.new},
+    })
+    .to_string()
+}
+
 /// The JSON Schema text of a schema name.
 pub fn schema_text(name: &str) -> String {
     let pose = format!(r#"{{"type":"object","properties":{{"position":{VEC3},"orientation":{QUAT}}}}}"#);
@@ -69,6 +84,9 @@ pub fn schema_text(name: &str) -> String {
             r#""deletions":{{"type":"array"}},"entities":{{"type":"array","items":{{"type":"object","properties":{{"timestamp":{TIME},"frame_id":{{"type":"string"}},"id":{{"type":"string"}},"lifetime":{TIME},"frame_locked":{{"type":"boolean"}},"cubes":{{"type":"array","items":{{"type":"object","properties":{{"pose":{pose},"size":{VEC3},"color":{COLOR}}}}}}}}}}}}}"#
         ),
         "dynaflow.PointLabels" => r#""timestamp":{"type":"object"},"index":{"type":"array","items":{"type":"integer"}},"dynamic":{"type":"array","items":{"type":"boolean"}},"reason":{"type":"array","items":{"type":"string","enum":["static","epipolar","semantic","flow","depth"]}},"score":{"type":"array","items":{"type":"number"}},"at":{"type":"array","items":{"type":"array","items":{"type":"number"}}}"#.replace(r#"{"type":"object"}"#, TIME),
+        "foxglove.Log" => format!(
+            r#""timestamp":{TIME},"level":{{"type":"integer","description":"1 DEBUG, 2 INFO, 3 WARNING, 4 ERROR, 5 FATAL"}},"message":{{"type":"string"}},"name":{{"type":"string"}},"file":{{"type":"string"}},"line":{{"type":"integer"}}"#
+        ),
         "dynaflow.StereoRig" => format!(
             r#""timestamp":{TIME},"baseline_m":{{"type":"number","description":"distance between the optical centres, metres"}}"#
         ),

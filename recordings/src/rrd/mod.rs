@@ -416,6 +416,20 @@ impl Sink for RrdSink {
         Ok(())
     }
 
+    /// A `TextLog` at `parameters/<node>` on the frame the change took effect.
+    fn parameter_change(
+        &mut self,
+        node: &str,
+        change: &dynaflow_engine::runtime::ParameterChange,
+        _stamp: f64,
+    ) -> Result<(), SinkError> {
+        let Some(rec) = self.rec.clone() else { return Err(self.err("not open")) };
+        rec.set_time_sequence("frame", change.frame as i64);
+        let text = format!("{}: {} -> {}", change.param, change.old, change.new);
+        rec.log(format!("parameters/{node}"), &rerun::TextLog::new(text).with_level(rerun::TextLogLevel::INFO))
+            .map_err(|e| self.err(e))
+    }
+
     fn record(&mut self, node: &str, port: &str, msg: &Message) -> Result<(), SinkError> {
         let Some(rec) = self.rec.clone() else { return Err(self.err("not open")) };
         if let Some(e) = self.file.as_ref().and_then(|f| f.failed()) {

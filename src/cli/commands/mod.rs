@@ -13,6 +13,7 @@ pub mod ops;
 pub mod run;
 pub mod segment;
 pub mod synth;
+pub mod top;
 pub mod validate;
 pub mod view;
 pub mod vocab;

@@ -39,8 +39,11 @@ pub fn ops(format: &Format) -> u8 {
                     );
                 }
                 for p in op.params {
-                    let tunable =
-                        if op.tunable.contains(&p.name) { "  (tunable while running: run --set-at)" } else { "" };
+                    let tunable = if op.tunable.contains(&p.name) {
+                        "  (tunable while running: dynaflow set, run --set-at)"
+                    } else {
+                        ""
+                    };
                     say!("  param {:<12} {} = {}{tunable}", p.name, p.ty.describe(), default(p));
                 }
                 say!();
@@ -130,7 +133,7 @@ fn markdown(ops: &[&OpSpec]) -> String {
             if !op.tunable.is_empty() {
                 let names: Vec<String> = op.tunable.iter().map(|t| format!("`{t}`")).collect();
                 out.push_str(&format!(
-                    "Tunable while running (`dynaflow run --set-at FRAME:node.param=value`): {}.\n\n",
+                    "Tunable while running (`dynaflow set OUT node.param=value`, replayed by `dynaflow run --set-at FRAME:node.param=value`): {}.\n\n",
                     names.join(", ")
                 ));
             }

@@ -49,7 +49,7 @@ pub fn run(args: &RunArgs) -> u8 {
     let Some(graph) = loaded.graph.take() else {
         return EXIT_BAD_INPUT;
     };
-    let schedule = match schedule(args, &req, &graph) {
+    let schedule = match schedule(args, &req) {
         Ok(s) => s,
         Err(e) => return bad_input(&e),
     };
@@ -64,7 +64,8 @@ pub fn run(args: &RunArgs) -> u8 {
         Ok(r) => r,
         Err(e) => return bad_input(&e),
     };
-    let report = match execute(&graph, args, sinks, schedule) {
+    let control = Control { socket: files.run_file("sock"), req: req.clone() };
+    let report = match execute(&graph, args, sinks, schedule, control) {
         Ok(r) => r,
         Err(Failed::Start(e)) => {
             eprintln!("error: {e}");
@@ -112,11 +113,9 @@ fn bad_input(e: &str) -> u8 {
     EXIT_BAD_INPUT
 }
 
-/// `--set-at FRAME:node.param=value`, each checked before the run starts: the node exists, its
-/// operator declares the parameter tunable, and the value passes the same validation as
-/// `--set` (the graph is loaded with it as an override, so an error names the flag and the
-/// parameter's declaration).
-fn schedule(args: &RunArgs, req: &LoadRequest, graph: &ResolvedGraph) -> Result<Vec<runtime::ScheduledSet>, String> {
+/// `--set-at FRAME:node.param=value`, each checked before the run starts as [`assignment`]
+/// checks a change.
+fn schedule(args: &RunArgs, req: &LoadRequest) -> Result<Vec<runtime::ScheduledSet>, String> {
     let mut out = Vec::new();
     for raw in &args.set_at {
         let flag = format!("--set-at {raw}");
@@ -124,51 +123,75 @@ fn schedule(args: &RunArgs, req: &LoadRequest, graph: &ResolvedGraph) -> Result<
             raw.split_once(':').ok_or_else(|| format!("`{flag}`: expected `FRAME:node.param=value`"))?;
         let frame: u64 =
             frame.trim().parse().map_err(|_| format!("`{flag}`: `{frame}` is not a frame number (0, 1, ...)"))?;
-        let mut o = Override::parse(rest).map_err(|e| e.replace(&format!("--set {rest}"), &flag))?;
-        o.text.clone_from(&flag);
-        let Some(node) = graph.nodes.iter().find(|n| *n.id == o.node) else {
-            let names: Vec<&str> = graph.nodes.iter().map(|n| &*n.id).collect();
-            return Err(format!("`{flag}`: the graph has no node `{}` (its nodes: {})", o.node, names.join(", ")));
-        };
-        let op = node.op;
-        if op.param(&o.param).is_none() {
-            let names: Vec<&str> = op.params.iter().map(|p| p.name).collect();
-            return Err(format!(
-                "`{flag}`: `{}` (op `{}`) has no parameter `{}` (its parameters: {})",
-                o.node,
-                op.name,
-                o.param,
-                names.join(", ")
-            ));
-        }
-        if !op.tunable.contains(&o.param.as_str()) {
-            let tunable = if op.tunable.is_empty() {
-                "none of its parameters".to_owned()
-            } else {
-                op.tunable.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", ")
-            };
-            return Err(format!(
-                "`{flag}`: `{}.{}` cannot change while running: op `{}` declares {tunable} tunable (`dynaflow ops {}`)",
-                o.node, o.param, op.name, op.name
-            ));
-        }
-        let mut with = req.clone();
-        with.overrides.push(o.clone());
-        let registry = crate::registry();
-        let loaded = dynaflow_engine::load(&args.graph, &registry, &with)
-            .map_err(|e| format!("cannot read graph file {}: {e}", args.graph.display()))?;
-        let Some(value) = loaded
-            .graph
-            .as_ref()
-            .and_then(|g| g.nodes.iter().find(|n| *n.id == o.node))
-            .and_then(|n| n.params.get(&o.param).cloned())
-        else {
-            super::print_diagnostics(&loaded);
-            return Err(format!("`{flag}`: the value is refused (above)"));
-        };
-        out.push(runtime::ScheduledSet { frame, node: o.node, param: o.param, value });
+        let (node, param, value) = assignment(&flag, rest, &args.graph, req)?;
+        out.push(runtime::ScheduledSet { frame, node, param, value });
     }
     Ok(out)
+}
+
+/// A change of a parameter while running, `node.param=value`, as `flag` gave it (`--set-at ...`
+/// or `dynaflow set ...`): the node exists, its operator declares the parameter tunable, and
+/// the value passes the same validation as `--set` (the graph is loaded with it as an
+/// override, so an error names the flag and the parameter's declaration). The node, the
+/// parameter and the value as validation resolved it.
+pub(crate) fn assignment(
+    flag: &str,
+    text: &str,
+    graph_file: &std::path::Path,
+    req: &LoadRequest,
+) -> Result<(String, String, serde_json::Value), String> {
+    let mut o = Override::parse(text).map_err(|e| e.replace(&format!("--set {text}"), flag))?;
+    o.text = flag.to_owned();
+    let registry = crate::registry();
+    let load = |req: &LoadRequest| {
+        dynaflow_engine::load(graph_file, &registry, req)
+            .map_err(|e| format!("cannot read graph file {}: {e}", graph_file.display()))
+    };
+    let problems = |loaded: &dynaflow_engine::Loaded| {
+        loaded.diagnostics.iter().map(|d| loaded.source.plain(d)).collect::<Vec<_>>().join("\n")
+    };
+    let base = load(req)?;
+    let Some(graph) = base.graph.as_ref() else {
+        return Err(format!("`{flag}`: the graph does not load any more:\n{}", problems(&base)));
+    };
+    let Some(node) = graph.nodes.iter().find(|n| *n.id == o.node) else {
+        let names: Vec<&str> = graph.nodes.iter().map(|n| &*n.id).collect();
+        return Err(format!("`{flag}`: the graph has no node `{}` (its nodes: {})", o.node, names.join(", ")));
+    };
+    let op = node.op;
+    if op.param(&o.param).is_none() {
+        let names: Vec<&str> = op.params.iter().map(|p| p.name).collect();
+        return Err(format!(
+            "`{flag}`: `{}` (op `{}`) has no parameter `{}` (its parameters: {})",
+            o.node,
+            op.name,
+            o.param,
+            names.join(", ")
+        ));
+    }
+    if !op.tunable.contains(&o.param.as_str()) {
+        let tunable = if op.tunable.is_empty() {
+            "none of its parameters".to_owned()
+        } else {
+            op.tunable.iter().map(|t| format!("`{t}`")).collect::<Vec<_>>().join(", ")
+        };
+        return Err(format!(
+            "`{flag}`: `{}.{}` cannot change while running: op `{}` declares {tunable} tunable (`dynaflow ops {}`)",
+            o.node, o.param, op.name, op.name
+        ));
+    }
+    let mut with = req.clone();
+    with.overrides.push(o.clone());
+    let loaded = load(&with)?;
+    match loaded
+        .graph
+        .as_ref()
+        .and_then(|g| g.nodes.iter().find(|n| *n.id == o.node))
+        .and_then(|n| n.params.get(&o.param).cloned())
+    {
+        Some(value) => Ok((o.node, o.param, value)),
+        None => Err(format!("`{flag}`: the value is refused:\n{}", problems(&loaded))),
+    }
 }
 
 /// What the flags ask of the graph's load: `--set`, `--input`, `--variant`, `--seed` and the
@@ -306,13 +329,30 @@ enum Failed {
     Run(runtime::RunError),
 }
 
+/// Where the run's control endpoint listens, and what checks a change sent to it.
+struct Control {
+    socket: std::path::PathBuf,
+    req: LoadRequest,
+}
+
+impl Control {
+    /// Open the endpoint (inside the runtime); changes are checked as `--set-at` checks them.
+    fn open(self, args: &RunArgs, monitor: &runtime::Monitor) -> Result<Option<crate::cli::control::Endpoint>, String> {
+        let (graph, req) = (args.graph.clone(), self.req);
+        let validate: std::sync::Arc<crate::cli::control::Validate> =
+            std::sync::Arc::new(move |text: &str| assignment(&format!("dynaflow set {text}"), text, &graph, &req));
+        crate::cli::control::open(&self.socket, monitor.clone(), validate)
+    }
+}
+
 /// Runs the graph on a tokio runtime: signals stop it (a second aborts), a progress bar on a
-/// terminal, this machine joined to the others with `--machine`.
+/// terminal, this machine joined to the others with `--machine`, the control endpoint open.
 fn execute(
     graph: &ResolvedGraph,
     args: &RunArgs,
     sinks: Vec<Box<dyn Sink>>,
     schedule: Vec<runtime::ScheduledSet>,
+    control: Control,
 ) -> Result<runtime::RunReport, Failed> {
     let options = RunOptions {
         realtime: args.realtime,
@@ -321,6 +361,7 @@ fn execute(
         schedule,
         ..RunOptions::default()
     };
+    let monitor = options.monitor.clone();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
         .build()
@@ -332,14 +373,27 @@ fn execute(
         if crate::cli::handles_signals() {
             runtime::stop_on_signals(options.stop.clone(), || std::process::exit(i32::from(EXIT_INTERRUPTED)));
         }
+        let endpoint = control.open(args, &monitor).map_err(runtime::RunError::Remote)?;
         let progress = show_progress.then(|| spawn_progress(&options));
         let mut options = options.clone();
         let wire = match join_machines(graph, args).await {
             Ok(w) => w,
-            Err(e) => return Err(runtime::RunError::Remote(e)),
+            Err(e) => {
+                monitor.finish(RunStatus::Failed);
+                if let Some(endpoint) = endpoint {
+                    endpoint.close().await;
+                }
+                return Err(runtime::RunError::Remote(e));
+            }
         };
         options.placement = wire.as_ref().map(|(p, _)| p.clone());
         let result = runtime::run(graph, options, sinks).await;
+        if result.is_err() {
+            monitor.finish(RunStatus::Failed);
+        }
+        if let Some(endpoint) = endpoint {
+            endpoint.close().await;
+        }
         if let Some((_, finish)) = wire {
             finish.await;
         }
