@@ -16,8 +16,9 @@ req="tests/peers/requirements.txt"
 case ",${DYNAFLOW_SKIP_PEERS:-}," in *,all,*) echo "peers: none installed (DYNAFLOW_SKIP_PEERS=all)"; exit 0 ;; esac
 
 # openssl: the certificates of the split-run-over-TLS test (tests/distributed.rs); python3-dev:
-# the libpython and headers PyO3 builds the `python` feature against.
-debs="liboctomap-dev octomap-tools g++ mesa-vulkan-drivers libvulkan1 chromium openssl python3-dev"
+# the libpython and headers PyO3 builds the `python` feature against; tmux: the terminal
+# `dynaflow top` is checked in (tests/cli.rs).
+debs="liboctomap-dev octomap-tools g++ mesa-vulkan-drivers libvulkan1 chromium openssl python3-dev tmux"
 need=""
 for p in $debs; do dpkg -s "$p" >/dev/null 2>&1 || need="$need $p"; done
 if [ -n "$need" ]; then

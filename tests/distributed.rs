@@ -120,6 +120,23 @@ fn mg_slam_split_over_two_processes_matches_one_process_and_merges() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
+    // `top` on the robot's folder alone: the server's view comes over zenoh.
+    let t = Instant::now();
+    let machines = loop {
+        let o = common::bin().args(["top", "--json", "--wait", "60"]).arg(dir.path().join("robot")).output().unwrap();
+        let v: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap_or_default();
+        let machines: Vec<String> = v["runs"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .filter_map(|r| r["machine"].as_str().map(str::to_owned))
+            .collect();
+        if machines.len() == 2 || !o.status.success() || t.elapsed() > Duration::from_secs(120) {
+            break machines;
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    };
+    assert_eq!(machines, ["robot", "server"], "`top` on the robot's folder during the run");
     let (robot, server) = (robot.wait_with_output().unwrap(), server.wait_with_output().unwrap());
     assert_eq!(robot.status.code(), Some(0), "robot: {}", text(&robot));
     assert_eq!(server.status.code(), Some(0), "server: {}", text(&server));

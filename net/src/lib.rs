@@ -26,6 +26,7 @@ use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 
 use dynaflow_engine::runtime::remote::{Wire, WireRx, WireTx};
+use dynaflow_engine::runtime::{Monitor, Snapshot};
 use dynaflow_engine::spec::ResolvedGraph;
 use futures::FutureExt;
 use futures::future::BoxFuture;
@@ -275,6 +276,55 @@ impl ZenohWire {
             }
             let _ = tokio::time::timeout(left.min(Duration::from_millis(200)), notified).await;
         }
+    }
+
+    /// Share this machine's live view (`dynaflow top`) with the others and keep theirs: every
+    /// `period` its snapshot goes to `<graph>/top/<machine>` as JSON, and the others' are
+    /// handed to `monitor` as they come. The task ends after sending the final snapshot once
+    /// the run has ended; await it before [`ZenohWire::finish`], so the others get it.
+    pub async fn share_status(
+        &self,
+        monitor: Monitor,
+        period: Duration,
+    ) -> Result<tokio::task::JoinHandle<()>, String> {
+        let prefix = format!("{}/top/", self.ns);
+        let own = format!("{prefix}{}", self.machine);
+        let (m, me, p) = (monitor.clone(), self.machine.clone(), prefix.clone());
+        let subscriber = self
+            .session
+            .declare_subscriber(format!("{prefix}*"))
+            .callback(move |sample| {
+                let from = sample.key_expr().as_str().strip_prefix(&p).unwrap_or_default();
+                if from == me {
+                    return;
+                }
+                match serde_json::from_slice::<Snapshot>(&sample.payload().to_bytes()) {
+                    Ok(snapshot) if snapshot.machine.as_deref() == Some(from) => m.set_peer(snapshot),
+                    Ok(_) => tracing::warn!("a status on `{from}`'s key names another machine; ignored"),
+                    Err(e) => tracing::warn!("machine `{from}` sent a status that does not read: {e}"),
+                }
+            })
+            .await
+            .map_err(|e| format!("zenoh status subscription: {e}"))?;
+        let session = self.session.clone();
+        Ok(tokio::spawn(async move {
+            // The subscription lives as long as the sharing does.
+            let _subscriber = subscriber;
+            loop {
+                let ended = tokio::select! {
+                    _ = monitor.ended() => true,
+                    () = tokio::time::sleep(period) => false,
+                };
+                if let Some(json) = monitor.snapshot().and_then(|s| serde_json::to_vec(&s).ok())
+                    && let Err(e) = session.put(&own, json).await
+                {
+                    tracing::debug!("status not shared: {e}");
+                }
+                if ended {
+                    return;
+                }
+            }
+        }))
     }
 
     /// After the run: say so, and wait (at most the timeout) until every peer has said so or

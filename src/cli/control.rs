@@ -11,8 +11,9 @@
 //!
 //! # Protocol
 //! One JSON request per connection, one line; answers are JSON lines:
-//! - `{"op":"snapshot"}` -> `{"ok":true,"snapshot":{..}|null}` (`null` while the operators
-//!   are being built).
+//! - `{"op":"snapshot"}` -> `{"ok":true,"snapshot":{..}|null,"peers":[..]}` (`null` while the
+//!   operators are being built; `peers`: the other machines' latest snapshots in a split run,
+//!   shared over zenoh).
 //! - `{"op":"follow","interval_s":1.0}` -> a snapshot line every interval, the last one when
 //!   the run has ended (its counts are the summary's).
 //! - `{"op":"set","assignment":"node.param=value"}` -> once the node has taken it,
@@ -133,7 +134,9 @@ async fn serve(stream: UnixStream, owner: u32, monitor: Monitor, validate: &Vali
         Err(e) => return send(&mut write, &json!({"ok": false, "error": format!("not a JSON request: {e}")})).await,
     };
     match request["op"].as_str().unwrap_or("") {
-        "snapshot" => send(&mut write, &json!({"ok": true, "snapshot": monitor.snapshot()})).await,
+        "snapshot" => {
+            send(&mut write, &json!({"ok": true, "snapshot": monitor.snapshot(), "peers": monitor.peers()})).await
+        }
         "follow" => {
             let interval = Duration::from_secs_f64(request["interval_s"].as_f64().unwrap_or(1.0).clamp(0.05, 60.0));
             loop {
@@ -141,7 +144,8 @@ async fn serve(stream: UnixStream, owner: u32, monitor: Monitor, validate: &Vali
                     _ = monitor.ended() => true,
                     () = tokio::time::sleep(interval) => false,
                 };
-                send(&mut write, &json!({"ok": true, "snapshot": monitor.snapshot()})).await?;
+                send(&mut write, &json!({"ok": true, "snapshot": monitor.snapshot(), "peers": monitor.peers()}))
+                    .await?;
                 if ended {
                     return Ok(());
                 }

@@ -72,6 +72,8 @@ pub struct Monitor(Arc<Inner>);
 #[derive(Debug, Default)]
 struct Inner {
     live: Mutex<Option<Live>>,
+    /// The other machines' latest snapshots in a split run, by machine (shared over the wire).
+    peers: Mutex<std::collections::BTreeMap<String, Snapshot>>,
     /// `Some(status)` once the run has ended.
     ended: Mutex<Option<watch::Sender<Option<RunStatus>>>>,
 }
@@ -342,6 +344,18 @@ impl Monitor {
             rss_bytes: resident_bytes(),
             nodes,
         })
+    }
+
+    /// Keep another machine's latest snapshot (a split run shares them over the wire), so a
+    /// viewer attached here sees every machine.
+    pub fn set_peer(&self, snapshot: Snapshot) {
+        let Some(machine) = snapshot.machine.clone() else { return };
+        lock(&self.0.peers).insert(machine, snapshot);
+    }
+
+    /// The other machines' latest snapshots, by machine name.
+    pub fn peers(&self) -> Vec<Snapshot> {
+        lock(&self.0.peers).values().cloned().collect()
     }
 
     /// Hand a validated change of `node.param` to the node; it answers with the frame it took

@@ -376,7 +376,7 @@ fn execute(
         let endpoint = control.open(args, &monitor).map_err(runtime::RunError::Remote)?;
         let progress = show_progress.then(|| spawn_progress(&options));
         let mut options = options.clone();
-        let wire = match join_machines(graph, args).await {
+        let wire = match join_machines(graph, args, &monitor).await {
             Ok(w) => w,
             Err(e) => {
                 monitor.finish(RunStatus::Failed);
@@ -444,15 +444,32 @@ fn print_trajectory_errors(summary: &Summary, oracle: &str) {
 /// uses and what to await once the run is over (the session's orderly end).
 type Joined = (runtime::remote::Placement, std::pin::Pin<Box<dyn std::future::Future<Output = ()> + Send>>);
 
-/// `--machine NAME`: open this machine's zenoh session (`None` without `--machine`).
+/// How often a machine of a split run shares its live view with the others (`dynaflow top`).
 #[cfg(feature = "zenoh")]
-async fn join_machines(graph: &ResolvedGraph, args: &RunArgs) -> Result<Option<Joined>, String> {
+const STATUS_PERIOD: Duration = Duration::from_secs(1);
+
+/// `--machine NAME`: open this machine's zenoh session (`None` without `--machine`), sharing
+/// the live view with the other machines (each one's `top` shows them all).
+#[cfg(feature = "zenoh")]
+async fn join_machines(
+    graph: &ResolvedGraph,
+    args: &RunArgs,
+    monitor: &runtime::Monitor,
+) -> Result<Option<Joined>, String> {
     let Some(m) = &args.machine else { return Ok(None) };
     let timeout = Duration::from_secs_f64(args.peer_timeout);
     let tls = args.tls.as_ref().map(|dir| dynaflow_net::Tls { dir: dir.clone() });
     let wire = std::sync::Arc::new(dynaflow_net::ZenohWire::open(graph, m, timeout, tls.as_ref()).await?);
+    let status = wire.share_status(monitor.clone(), STATUS_PERIOD).await?;
     let placement = runtime::remote::Placement { machine: m.as_str().into(), wire: wire.clone() };
-    Ok(Some((placement, Box::pin(async move { wire.finish().await }))))
+    Ok(Some((
+        placement,
+        Box::pin(async move {
+            // The final snapshot goes out before the session closes.
+            let _ = tokio::time::timeout(timeout, status).await;
+            wire.finish().await;
+        }),
+    )))
 }
 
 /// Without the `zenoh` feature `--machine` is refused, saying how to get it.
@@ -460,6 +477,7 @@ async fn join_machines(graph: &ResolvedGraph, args: &RunArgs) -> Result<Option<J
 async fn join_machines(
     _graph: &dynaflow_engine::spec::ResolvedGraph,
     args: &RunArgs,
+    _monitor: &runtime::Monitor,
 ) -> Result<Option<Joined>, String> {
     match &args.machine {
         None => Ok(None),

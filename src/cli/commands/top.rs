@@ -142,10 +142,30 @@ fn snapshot_of(v: &serde_json::Value) -> Option<Snapshot> {
     serde_json::from_value(v["snapshot"].clone()).ok()
 }
 
-/// One snapshot of a socket (`None` while its operators are being built).
-fn snapshot(socket: &Path) -> Result<Option<Snapshot>, String> {
+/// The other machines' snapshots an answer carries (a split run shares them over zenoh).
+fn peers_of(v: &serde_json::Value) -> Vec<Snapshot> {
+    serde_json::from_value(v["peers"].clone()).unwrap_or_default()
+}
+
+/// One snapshot of a socket (`None` while its operators are being built), and the other
+/// machines' latest that its run holds.
+fn snapshot(socket: &Path) -> Result<(Option<Snapshot>, Vec<Snapshot>), String> {
     let mut lines = request(socket, &json!({"op": "snapshot"}))?;
-    Ok(answer(&mut lines, socket)?.as_ref().and_then(snapshot_of))
+    let v = answer(&mut lines, socket)?.unwrap_or_default();
+    Ok((snapshot_of(&v), peers_of(&v)))
+}
+
+/// The other machines' snapshots not among `own`, one per machine.
+fn others(own: &[Option<Snapshot>], peers: Vec<Snapshot>) -> Vec<Snapshot> {
+    let mut seen: Vec<Option<String>> = own.iter().flatten().map(|s| s.machine.clone()).collect();
+    let mut out = Vec::new();
+    for p in peers {
+        if !seen.contains(&p.machine) {
+            seen.push(p.machine.clone());
+            out.push(p);
+        }
+    }
+    out
 }
 
 fn fail(e: &str) -> u8 {
@@ -167,21 +187,31 @@ pub fn top(args: &TopArgs) -> u8 {
         return follow(&socks, interval);
     }
     if args.json {
-        let mut runs = Vec::new();
+        let (mut own, mut peers) = (Vec::new(), Vec::new());
         for s in &socks {
             match snapshot(s) {
-                Ok(snap) => runs.push(json!(snap)),
+                Ok((snap, p)) => {
+                    own.push(snap);
+                    peers.extend(p);
+                }
                 Err(e) => return fail(&e),
             }
         }
-        say!("{}", json!({ "runs": runs }));
+        // This process's runs, then the machines only known through them (over zenoh).
+        let peers = others(&own, peers);
+        say!(
+            "{}",
+            json!({ "runs": own.iter().map(|s| json!(s)).chain(peers.iter().map(|s| json!(s))).collect::<Vec<_>>() })
+        );
         return EXIT_OK;
     }
     watch(&socks, interval)
 }
 
-/// `--json --follow`: every socket's snapshot lines, as they come, until each run has ended.
+/// `--json --follow`: every socket's snapshot lines, as they come, until each run has ended;
+/// following one socket of a split run, the other machines' latest (shared over zenoh) too.
 fn follow(socks: &[PathBuf], interval: Duration) -> u8 {
+    let with_peers = socks.len() == 1;
     let threads: Vec<_> = socks
         .iter()
         .cloned()
@@ -190,6 +220,9 @@ fn follow(socks: &[PathBuf], interval: Duration) -> u8 {
                 let mut lines = request(&s, &json!({"op": "follow", "interval_s": interval.as_secs_f64()}))?;
                 while let Some(v) = answer(&mut lines, &s)? {
                     say!("{}", v["snapshot"]);
+                    for p in peers_of(&v).iter().filter(|_| with_peers) {
+                        say!("{}", json!(p));
+                    }
                 }
                 Ok(())
             })
@@ -215,25 +248,28 @@ const RATE_WINDOW_S: f64 = 5.0;
 fn watch(socks: &[PathBuf], interval: Duration) -> u8 {
     // Per socket, the looks of the last RATE_WINDOW_S seconds, oldest first.
     let mut looks: Vec<std::collections::VecDeque<Snapshot>> = vec![Default::default(); socks.len()];
+    let mut peers = std::collections::BTreeMap::new();
     loop {
         let mut all_over = true;
         for (i, s) in socks.iter().enumerate() {
-            match snapshot(s) {
-                Ok(Some(snap)) => {
-                    all_over &= snap.state != LiveState::Running;
-                    if let Some(window) = looks.get_mut(i) {
-                        while window.front().is_some_and(|f| f.elapsed_s < snap.elapsed_s - RATE_WINDOW_S) {
-                            window.pop_front();
-                        }
-                        window.push_back(snap);
-                    }
+            // An error: the run ended between two looks; its last view stays.
+            let Ok((snap, shared)) = snapshot(s) else { continue };
+            peers.extend(shared.into_iter().map(|p| (p.machine.clone(), p)));
+            let Some(snap) = snap else {
+                all_over = false;
+                continue;
+            };
+            all_over &= snap.state != LiveState::Running;
+            if let Some(window) = looks.get_mut(i) {
+                while window.front().is_some_and(|f| f.elapsed_s < snap.elapsed_s - RATE_WINDOW_S) {
+                    window.pop_front();
                 }
-                Ok(None) => all_over = false,
-                // Gone: the run ended between two looks; its last view stays.
-                Err(_) => {}
+                window.push_back(snap);
             }
         }
-        let screen = render(socks, &looks);
+        let own: Vec<Option<Snapshot>> = looks.iter().map(|w| w.back().cloned()).collect();
+        let shared = others(&own, peers.values().cloned().collect());
+        let screen = render(socks, &looks, &shared);
         // Home and clear, then the table: a terminal shows the latest; a pipe gets one per look.
         let mut out = std::io::stdout().lock();
         let _ = write!(out, "\x1b[H\x1b[2J{screen}");
@@ -245,8 +281,9 @@ fn watch(socks: &[PathBuf], interval: Duration) -> u8 {
     }
 }
 
-/// One screen: per run (machine), a header and its nodes, busiest first.
-fn render(socks: &[PathBuf], looks: &[std::collections::VecDeque<Snapshot>]) -> String {
+/// One screen: per run (machine), a header and its nodes, busiest first; then the machines of
+/// a split run only known through the others (shared over zenoh).
+fn render(socks: &[PathBuf], looks: &[std::collections::VecDeque<Snapshot>], shared: &[Snapshot]) -> String {
     let mut s = String::new();
     for (i, sock) in socks.iter().enumerate() {
         let Some(snap) = looks.get(i).and_then(|w| w.back()) else {
@@ -254,12 +291,25 @@ fn render(socks: &[PathBuf], looks: &[std::collections::VecDeque<Snapshot>]) -> 
             continue;
         };
         let prev = looks.get(i).and_then(|w| w.front()).filter(|p| p.elapsed_s < snap.elapsed_s);
+        s.push_str(&block(snap, prev, ""));
+    }
+    for snap in shared {
+        s.push_str(&block(snap, None, " (shared over zenoh)"));
+    }
+    s
+}
+
+/// One machine's view: a header and its nodes, busiest first; the rate over the looks since
+/// `prev` where there is one.
+fn block(snap: &Snapshot, prev: Option<&Snapshot>, note: &str) -> String {
+    let mut s = String::new();
+    {
         let machine = snap.machine.as_deref().map_or(String::new(), |m| format!(" on `{m}`"));
         let total = snap.total_frames.map_or(String::new(), |t| format!("/{t}"));
         let rss = snap.rss_bytes.map_or(String::new(), |b| format!(", {:.0} MiB resident", b as f64 / 1048576.0));
         let variant = snap.variant.as_deref().map_or(String::new(), |v| format!(" ({v})"));
         s.push_str(&format!(
-            "{}{variant}{machine}: {:?}, frame {}{total}, {:.1} s{rss}\n",
+            "{}{variant}{machine}{note}: {:?}, frame {}{total}, {:.1} s{rss}\n",
             snap.graph, snap.state, snap.frames, snap.elapsed_s
         ));
         s.push_str(&format!(
