@@ -656,6 +656,25 @@ fn a_running_graph_is_watched_and_steered_and_the_change_replays_exactly() {
     assert_eq!(code, Some(0), "{err}");
     let k: u64 = said.trim().rsplit(' ').next().unwrap().parse().unwrap_or_else(|e| panic!("{said}: {e}"));
     assert!(said.starts_with("geometric.threshold: 0.4 -> 0.8 from frame "), "{said}");
+    // What a port carries, frame after frame, and its rate, while the run goes on.
+    let (code, said, err) = dynaflow(&["echo", a_s, "geometric.labels", "-n", "3"], &[]);
+    assert_eq!(code, Some(0), "{err}");
+    let seqs: Vec<u64> = said
+        .lines()
+        .map(|l| {
+            assert!(l.contains("\"dynamic\":") && l.contains("\"count\":"), "{l}");
+            l.split_whitespace().nth(1).and_then(|n| n.parse().ok()).unwrap_or_else(|| panic!("{l}"))
+        })
+        .collect();
+    assert!(seqs.len() == 3 && seqs.windows(2).all(|w| w[1] == w[0] + 1), "{said}");
+    let (code, said, err) = dynaflow(&["hz", a_s, "camera.rgb", "-n", "10"], &[]);
+    assert_eq!(code, Some(0), "{err}");
+    let last = said.lines().last().unwrap_or_default();
+    let hz: f64 = last.split_whitespace().nth(1).and_then(|r| r.parse().ok()).unwrap_or_else(|| panic!("{said}"));
+    assert!(last.contains("Hz over 10 messages") && hz > 0.0 && hz.is_finite(), "{said}");
+    let (code, _, err) = dynaflow(&["echo", a_s, "geometric.nosuch"], &[]);
+    assert_eq!(code, Some(2), "{err}");
+    assert!(err.contains("no output port `nosuch` (its ports: labels"), "{err}");
     let out = run.wait_with_output().unwrap();
     assert_eq!(out.status.code(), Some(0), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(k < 100, "{k}");
@@ -720,7 +739,8 @@ fn a_running_graph_is_watched_and_steered_and_the_change_replays_exactly() {
 
 #[test]
 fn top_shows_every_node_at_the_summarys_rates_and_only_to_the_user_who_started_the_run() {
-    // The default graph paced at 5 Hz (40 frames): `top` in a terminal (tmux) shows every
+    // The default graph paced at 2 Hz (24 frames; a rate a 2-core machine keeps
+    // while the other tests run): `top` in a terminal (tmux) shows every
     // node; `top --json` half-way agrees with the summary's rates within 5 %. A socket a killed
     // run left in the folder does not stop the run; another user is refused.
     let dir = common::TempDir::new("top");
@@ -729,21 +749,21 @@ fn top_shows_every_node_at_the_summarys_rates_and_only_to_the_user_who_started_t
     let socket = out.join("default.sock");
     drop(std::os::unix::net::UnixListener::bind(&socket).unwrap());
     assert!(socket.exists(), "no stale socket to start from");
-    let run = background_run(&out, &["--realtime", "--frames", "40", "--record", "none", "--set", "camera.rate_hz=5"]);
+    let run = background_run(&out, &["--realtime", "--frames", "24", "--record", "none", "--set", "camera.rate_hz=2"]);
     let out_s = out.to_str().unwrap();
     let session = format!("dynaflow-top-{}", std::process::id());
     let tmux = |args: &[&str]| std::process::Command::new("tmux").args(args).output().unwrap();
     let top_cmd = format!("{} top {out_s} --wait 60 --interval 0.3", env!("CARGO_BIN_EXE_dynaflow"));
     let started = tmux(&["new-session", "-d", "-s", &session, "-x", "160", "-y", "40", &top_cmd]);
     assert!(started.status.success(), "tmux: {}", String::from_utf8_lossy(&started.stderr));
-    // Half-way (20 of 40 frames at the source), one snapshot for scripts.
+    // Half-way (12 of 24 frames at the source), one snapshot for scripts.
     let t = Instant::now();
     let half = loop {
         assert!(t.elapsed() < Duration::from_secs(120), "the run never got half-way");
         let (code, said, _) = dynaflow(&["top", out_s, "--json", "--wait", "60"], &[]);
         if code == Some(0) {
             let v: serde_json::Value = serde_json::from_str(&said).unwrap();
-            if v["runs"][0]["frames"].as_u64().is_some_and(|f| f >= 20) {
+            if v["runs"][0]["frames"].as_u64().is_some_and(|f| f >= 12) {
                 break v["runs"][0].clone();
             }
         }
@@ -762,6 +782,36 @@ fn top_shows_every_node_at_the_summarys_rates_and_only_to_the_user_who_started_t
         let err = String::from_utf8_lossy(&other.stderr);
         assert_eq!(other.status.code(), Some(2), "another user attached: {err}");
         assert!(err.contains("refused") || err.contains("ermission denied"), "{err}");
+        // Where the file mode does not stop a process (root), the peer credentials do: a run
+        // another user started refuses root's `top`.
+        let theirs = dir.path().join("theirs");
+        std::fs::create_dir_all(&theirs).unwrap();
+        std::fs::set_permissions(&theirs, std::os::unix::fs::PermissionsExt::from_mode(0o777)).unwrap();
+        std::fs::set_permissions(dir.path(), std::os::unix::fs::PermissionsExt::from_mode(0o755)).unwrap();
+        let mut run = common::process::Reaped::spawn(
+            std::process::Command::new("setpriv")
+                .args(["--reuid=65534", "--regid=65534", "--clear-groups"])
+                .arg(env!("CARGO_BIN_EXE_dynaflow"))
+                .args(["run", "--no-progress", "--realtime", "--frames", "300", "--record", "none", "--out"])
+                .arg(&theirs)
+                .arg(common::repo().join("graphs/engine_smoke.yaml"))
+                .stdout(std::process::Stdio::null())
+                .stderr(std::process::Stdio::piped()),
+        )
+        .unwrap();
+        let t = Instant::now();
+        while !theirs.join("engine_smoke.sock").exists() {
+            if let Ok(Some(status)) = run.0.try_wait() {
+                let mut err = String::new();
+                let _ = std::io::Read::read_to_string(run.0.stderr.as_mut().unwrap(), &mut err);
+                panic!("the other user's run ended ({status}) before its socket appeared: {err}");
+            }
+            assert!(t.elapsed() < Duration::from_secs(120), "the other user's run never opened its socket");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let (code, _, err) = dynaflow(&["top", theirs.to_str().unwrap(), "--json"], &[]);
+        assert_eq!(code, Some(2), "root attached to another user's run: {err}");
+        assert!(err.contains("refused: this run belongs to another user"), "{err}");
     } else {
         eprintln!("note: not root: the other-user refusal is not checked here");
     }
