@@ -606,11 +606,16 @@ fn wait_for(path: &std::path::Path) {
 
 /// `dynaflow run graphs/default.yaml` in the background, `--out out` and `extra`.
 fn background_run(out: &std::path::Path, extra: &[&str]) -> std::process::Child {
+    background_run_of(&common::repo().join("graphs/default.yaml"), out, extra)
+}
+
+/// `dynaflow run GRAPH` in the background, `--out out` and `extra`.
+fn background_run_of(graph: &std::path::Path, out: &std::path::Path, extra: &[&str]) -> std::process::Child {
     common::bin()
         .args(["run", "--no-progress", "--out"])
         .arg(out)
         .args(extra)
-        .arg(common::repo().join("graphs/default.yaml"))
+        .arg(graph)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()
@@ -628,9 +633,14 @@ fn a_running_graph_is_watched_and_steered_and_the_change_replays_exactly() {
     let dir = common::TempDir::new("watch");
     let a = dir.path().join("a");
     let frames = ["--frames", "100", "--digest"];
-    let run = background_run(&a, &[&frames[..], &["--record", "mcap,rrd"]].concat());
+    // A copy of the graph file, spoilt once the run has started: changes are checked against
+    // the text the run loaded.
+    let graph = dir.path().join("default.yaml");
+    std::fs::copy(common::repo().join("graphs/default.yaml"), &graph).unwrap();
+    let run = background_run_of(&graph, &a, &[&frames[..], &["--record", "mcap,rrd"]].concat());
     let socket = a.join("default.sock");
     wait_for(&socket);
+    std::fs::write(&graph, "nodes: {").unwrap();
     let follow = common::bin()
         .args(["top", "--json", "--follow", "--interval", "0.2"])
         .arg(&a)

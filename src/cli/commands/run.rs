@@ -49,7 +49,14 @@ pub fn run(args: &RunArgs) -> u8 {
     let Some(graph) = loaded.graph.take() else {
         return EXIT_BAD_INPUT;
     };
-    let schedule = match schedule(args, &req) {
+    // Changes while running are checked against the text this run loaded, not the file as it
+    // may have been edited since.
+    let text = GraphText {
+        name: loaded.source.name.clone(),
+        text: loaded.source.text.clone(),
+        base: args.graph.parent().map(std::path::Path::to_path_buf),
+    };
+    let schedule = match schedule(args, &text, &req) {
         Ok(s) => s,
         Err(e) => return bad_input(&e),
     };
@@ -64,7 +71,7 @@ pub fn run(args: &RunArgs) -> u8 {
         Ok(r) => r,
         Err(e) => return bad_input(&e),
     };
-    let control = Control { socket: files.run_file("sock"), req: req.clone() };
+    let control = Control { socket: files.run_file("sock"), graph: text, req: req.clone() };
     let report = match execute(&graph, args, sinks, schedule, control) {
         Ok(r) => r,
         Err(Failed::Start(e)) => {
@@ -115,7 +122,7 @@ fn bad_input(e: &str) -> u8 {
 
 /// `--set-at FRAME:node.param=value`, each checked before the run starts as [`assignment`]
 /// checks a change.
-fn schedule(args: &RunArgs, req: &LoadRequest) -> Result<Vec<runtime::ScheduledSet>, String> {
+fn schedule(args: &RunArgs, graph: &GraphText, req: &LoadRequest) -> Result<Vec<runtime::ScheduledSet>, String> {
     let mut out = Vec::new();
     for raw in &args.set_at {
         let flag = format!("--set-at {raw}");
@@ -123,7 +130,7 @@ fn schedule(args: &RunArgs, req: &LoadRequest) -> Result<Vec<runtime::ScheduledS
             raw.split_once(':').ok_or_else(|| format!("`{flag}`: expected `FRAME:node.param=value`"))?;
         let frame: u64 =
             frame.trim().parse().map_err(|_| format!("`{flag}`: `{frame}` is not a frame number (0, 1, ...)"))?;
-        let (node, param, value) = assignment(&flag, rest, &args.graph, req)?;
+        let (node, param, value) = assignment(&flag, rest, graph, req)?;
         out.push(runtime::ScheduledSet { frame, node, param, value });
     }
     Ok(out)
@@ -137,15 +144,14 @@ fn schedule(args: &RunArgs, req: &LoadRequest) -> Result<Vec<runtime::ScheduledS
 pub(crate) fn assignment(
     flag: &str,
     text: &str,
-    graph_file: &std::path::Path,
+    graph_file: &GraphText,
     req: &LoadRequest,
 ) -> Result<(String, String, serde_json::Value), String> {
     let mut o = Override::parse(text).map_err(|e| e.replace(&format!("--set {text}"), flag))?;
     o.text = flag.to_owned();
     let registry = crate::registry();
-    let load = |req: &LoadRequest| {
-        dynaflow_engine::load(graph_file, &registry, req)
-            .map_err(|e| format!("cannot read graph file {}: {e}", graph_file.display()))
+    let load = |req: &LoadRequest| -> Result<dynaflow_engine::Loaded, String> {
+        Ok(dynaflow_engine::load_str(&graph_file.name, &graph_file.text, graph_file.base.clone(), &registry, req))
     };
     let problems = |loaded: &dynaflow_engine::Loaded| {
         loaded.diagnostics.iter().map(|d| loaded.source.plain(d)).collect::<Vec<_>>().join("\n")
@@ -329,16 +335,25 @@ enum Failed {
     Run(runtime::RunError),
 }
 
+/// The graph text a run loaded (its name and folder, for diagnostics and relative paths).
+#[derive(Clone)]
+pub(crate) struct GraphText {
+    name: String,
+    text: std::sync::Arc<str>,
+    base: Option<std::path::PathBuf>,
+}
+
 /// Where the run's control endpoint listens, and what checks a change sent to it.
 struct Control {
     socket: std::path::PathBuf,
+    graph: GraphText,
     req: LoadRequest,
 }
 
 impl Control {
     /// Open the endpoint (inside the runtime); changes are checked as `--set-at` checks them.
-    fn open(self, args: &RunArgs, monitor: &runtime::Monitor) -> Result<Option<crate::cli::control::Endpoint>, String> {
-        let (graph, req) = (args.graph.clone(), self.req);
+    fn open(self, monitor: &runtime::Monitor) -> Result<Option<crate::cli::control::Endpoint>, String> {
+        let (graph, req) = (self.graph, self.req);
         let validate: std::sync::Arc<crate::cli::control::Validate> =
             std::sync::Arc::new(move |text: &str| assignment(&format!("dynaflow set {text}"), text, &graph, &req));
         crate::cli::control::open(&self.socket, monitor.clone(), validate)
@@ -373,7 +388,7 @@ fn execute(
         if crate::cli::handles_signals() {
             runtime::stop_on_signals(options.stop.clone(), || std::process::exit(i32::from(EXIT_INTERRUPTED)));
         }
-        let endpoint = control.open(args, &monitor).map_err(runtime::RunError::Remote)?;
+        let endpoint = control.open(&monitor).map_err(runtime::RunError::Remote)?;
         let progress = show_progress.then(|| spawn_progress(&options));
         let mut options = options.clone();
         let wire = match join_machines(graph, args, &monitor).await {
