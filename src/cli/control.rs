@@ -177,7 +177,7 @@ async fn send(write: &mut tokio::net::unix::OwnedWriteHalf, v: &serde_json::Valu
 async fn set(monitor: &Monitor, validate: &Validate, text: &str) -> Result<serde_json::Value, String> {
     let (node, param, value) = validate(text)?;
     // A change sent while the operators are still being built waits for them.
-    while monitor.snapshot().is_none() {
+    while !monitor.attached() {
         tokio::select! {
             s = monitor.ended() => return Err(format!("the run ended ({s:?}) before its nodes started")),
             () = tokio::time::sleep(Duration::from_millis(20)) => {}
@@ -197,7 +197,7 @@ async fn echo(write: &mut tokio::net::unix::OwnedWriteHalf, monitor: &Monitor, p
     let Some((node, port)) = port.split_once('.') else {
         return send(write, &json!({"ok": false, "error": format!("`{port}`: expected `node.port`")})).await;
     };
-    while monitor.snapshot().is_none() {
+    while !monitor.attached() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     let mut listener = match monitor.echo(node, port) {

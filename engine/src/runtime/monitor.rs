@@ -296,6 +296,11 @@ impl Monitor {
         }
     }
 
+    /// Whether the run has registered its nodes (its operators are built).
+    pub fn attached(&self) -> bool {
+        lock(&self.0.live).is_some()
+    }
+
     /// What the run looks like now.
     pub fn snapshot(&self) -> Option<Snapshot> {
         let guard = lock(&self.0.live);
@@ -374,14 +379,13 @@ impl Monitor {
             Some((None, None)) => Some(format!("node `{node}` does not run on this machine")),
             Some((None, Some(n))) => match &n.sets {
                 None => Some(format!("node `{node}` takes no parameter changes while running (disabled, or a source)")),
-                Some(s) => s
-                    .send(LiveSet { param: param.to_owned(), value, applied: tx })
-                    .err()
-                    .map(|e| {
+                Some(s) => {
+                    // A node that has finished dropped its end: answer through the change itself.
+                    if let Err(e) = s.send(LiveSet { param: param.to_owned(), value, applied: tx }) {
                         let _ = e.0.applied.send(Err(format!("node `{node}` has finished its frames")));
-                        String::new()
-                    })
-                    .filter(|s| !s.is_empty()),
+                    }
+                    None
+                }
             },
         };
         drop(guard);

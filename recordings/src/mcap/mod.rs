@@ -128,6 +128,28 @@ impl McapSink {
     }
 }
 
+impl McapSink {
+    /// Write `data` on `channel_id` as frame `seq` at sensor time `stamp`: counted for the
+    /// report, and the chunk flushed when it has been open for the flush interval.
+    fn write(&mut self, channel_id: u16, seq: u64, stamp: f64, data: &[u8]) -> Result<(), SinkError> {
+        if let Some((n, b)) = self.bytes.get_mut(&channel_id) {
+            *n += 1;
+            *b += data.len() as u64;
+        }
+        let ns = (stamp.max(0.0) * 1e9) as u64;
+        let header = mcap::records::MessageHeader { channel_id, sequence: seq as u32, log_time: ns, publish_time: ns };
+        let flush_due = self.last_flush.elapsed() >= self.flush_interval;
+        let err = |e: mcap::McapError| writer_error("mcap", &self.path, &e);
+        let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
+        writer.write_to_known_channel(&header, data).map_err(err)?;
+        if flush_due {
+            writer.flush().map_err(err)?;
+            self.last_flush = Instant::now();
+        }
+        Ok(())
+    }
+}
+
 /// A new MCAP file at `path` for recorder `sink` (never over an existing file), in `profile`
 /// (`""`, or `ros2` for a rosbag2 bag): zstd chunks of `chunk_size`, the run's provenance as a
 /// metadata record.
@@ -195,26 +217,7 @@ impl Sink for McapSink {
             None => schemas::to_json(msg),
         }
         .map_err(|e| self.err(format!("encoding {node}/{port}: {e}")))?;
-        if let Some((n, b)) = self.bytes.get_mut(&channel_id) {
-            *n += 1;
-            *b += data.len() as u64;
-        }
-        let ns = (msg.header.stamp.max(0.0) * 1e9) as u64;
-        let header = mcap::records::MessageHeader {
-            channel_id,
-            sequence: msg.header.seq as u32,
-            log_time: ns,
-            publish_time: ns,
-        };
-        let flush_due = self.last_flush.elapsed() >= self.flush_interval;
-        let err = |e: mcap::McapError| writer_error("mcap", &self.path, &e);
-        let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
-        writer.write_to_known_channel(&header, &data).map_err(err)?;
-        if flush_due {
-            writer.flush().map_err(err)?;
-            self.last_flush = Instant::now();
-        }
-        Ok(())
+        self.write(channel_id, msg.header.seq, msg.header.stamp, &data)
     }
 
     /// A `foxglove.Log` message on `/parameters` (the node, the parameter, old and new value,
@@ -234,7 +237,6 @@ impl Sink for McapSink {
                 let schema = writer
                     .add_schema("foxglove.Log", "jsonschema", schemas::schema_text("foxglove.Log").as_bytes())
                     .map_err(err)?;
-                let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
                 let id = writer.add_channel(schema, "/parameters", "json", &BTreeMap::new()).map_err(err)?;
                 self.channels.insert(key, id);
                 self.bytes.insert(id, (0, 0));
@@ -243,14 +245,7 @@ impl Sink for McapSink {
         };
         let ns = (stamp.max(0.0) * 1e9) as u64;
         let data = schemas::parameter_log(node, change, ns).into_bytes();
-        if let Some((n, b)) = self.bytes.get_mut(&channel_id) {
-            *n += 1;
-            *b += data.len() as u64;
-        }
-        let header =
-            mcap::records::MessageHeader { channel_id, sequence: change.frame as u32, log_time: ns, publish_time: ns };
-        let writer = self.writer.as_mut().ok_or_else(|| SinkError::new("mcap", "not open"))?;
-        writer.write_to_known_channel(&header, &data).map_err(err)
+        self.write(channel_id, change.frame, stamp, &data)
     }
 
     fn close(&mut self) -> Result<(), SinkError> {

@@ -55,6 +55,7 @@ pub fn run(args: &RunArgs) -> u8 {
         name: loaded.source.name.clone(),
         text: loaded.source.text.clone(),
         base: args.graph.parent().map(std::path::Path::to_path_buf),
+        nodes: graph.nodes.iter().map(|n| (n.id.to_string(), n.op)).collect(),
     };
     let schedule = match schedule(args, &text, &req) {
         Ok(s) => s,
@@ -150,21 +151,11 @@ pub(crate) fn assignment(
     let mut o = Override::parse(text).map_err(|e| e.replace(&format!("--set {text}"), flag))?;
     o.text = flag.to_owned();
     let registry = crate::registry();
-    let load = |req: &LoadRequest| -> Result<dynaflow_engine::Loaded, String> {
-        Ok(dynaflow_engine::load_str(&graph_file.name, &graph_file.text, graph_file.base.clone(), &registry, req))
-    };
-    let problems = |loaded: &dynaflow_engine::Loaded| {
-        loaded.diagnostics.iter().map(|d| loaded.source.plain(d)).collect::<Vec<_>>().join("\n")
-    };
-    let base = load(req)?;
-    let Some(graph) = base.graph.as_ref() else {
-        return Err(format!("`{flag}`: the graph does not load any more:\n{}", problems(&base)));
-    };
-    let Some(node) = graph.nodes.iter().find(|n| *n.id == o.node) else {
-        let names: Vec<&str> = graph.nodes.iter().map(|n| &*n.id).collect();
+    // The run's own graph says which nodes there are and what they run.
+    let Some((_, op)) = graph_file.nodes.iter().find(|(id, _)| *id == o.node) else {
+        let names: Vec<&str> = graph_file.nodes.iter().map(|(id, _)| id.as_str()).collect();
         return Err(format!("`{flag}`: the graph has no node `{}` (its nodes: {})", o.node, names.join(", ")));
     };
-    let op = node.op;
     if op.param(&o.param).is_none() {
         let names: Vec<&str> = op.params.iter().map(|p| p.name).collect();
         return Err(format!(
@@ -188,7 +179,8 @@ pub(crate) fn assignment(
     }
     let mut with = req.clone();
     with.overrides.push(o.clone());
-    let loaded = load(&with)?;
+    let loaded =
+        dynaflow_engine::load_str(&graph_file.name, &graph_file.text, graph_file.base.clone(), &registry, &with);
     match loaded
         .graph
         .as_ref()
@@ -196,7 +188,10 @@ pub(crate) fn assignment(
         .and_then(|n| n.params.get(&o.param).cloned())
     {
         Some(value) => Ok((o.node, o.param, value)),
-        None => Err(format!("`{flag}`: the value is refused:\n{}", problems(&loaded))),
+        None => {
+            let problems: Vec<String> = loaded.diagnostics.iter().map(|d| loaded.source.plain(d)).collect();
+            Err(format!("`{flag}`: the value is refused:\n{}", problems.join("\n")))
+        }
     }
 }
 
@@ -335,12 +330,14 @@ enum Failed {
     Run(runtime::RunError),
 }
 
-/// The graph text a run loaded (its name and folder, for diagnostics and relative paths).
+/// The graph text a run loaded (its name and folder, for diagnostics and relative paths), and
+/// its resolved nodes' operators.
 #[derive(Clone)]
 pub(crate) struct GraphText {
     name: String,
     text: std::sync::Arc<str>,
     base: Option<std::path::PathBuf>,
+    nodes: Vec<(String, dynaflow_engine::op::OpSpec)>,
 }
 
 /// Where the run's control endpoint listens, and what checks a change sent to it.
