@@ -28,7 +28,7 @@ use std::time::Duration;
 
 use dynaflow_engine::runtime::Monitor;
 use serde_json::json;
-use tokio::io::{AsyncBufReadExt, AsyncWriteExt, BufReader};
+use tokio::io::{AsyncBufReadExt, AsyncReadExt, AsyncWriteExt, BufReader};
 use tokio::net::{UnixListener, UnixStream};
 
 /// Checks `node.param=value` as `--set` does and says what it resolves to: node, parameter,
@@ -123,12 +123,15 @@ impl Endpoint {
 async fn serve(stream: UnixStream, owner: u32, monitor: Monitor, validate: &Validate) -> std::io::Result<()> {
     let (read, mut write) = stream.into_split();
     let peer = write.as_ref().peer_cred()?.uid();
+    // The request line is read (at most 64 KiB) before anything is answered, a refusal included:
+    // answering and closing first could break the client's pipe while it still sends, and it would
+    // report that instead of the refusal.
+    let mut line = String::new();
+    BufReader::new(read.take(64 * 1024)).read_line(&mut line).await?;
     if peer != owner {
         tracing::warn!("control socket: refused a process of user {peer} (the run belongs to user {owner})");
         return send(&mut write, &json!({"ok": false, "error": "refused: this run belongs to another user"})).await;
     }
-    let mut line = String::new();
-    BufReader::new(read).read_line(&mut line).await?;
     let request: serde_json::Value = match serde_json::from_str(line.trim()) {
         Ok(v) => v,
         Err(e) => return send(&mut write, &json!({"ok": false, "error": format!("not a JSON request: {e}")})).await,

@@ -115,7 +115,14 @@ fn request(socket: &Path, req: &serde_json::Value) -> Result<std::io::Lines<BufR
         }
         _ => format!("cannot connect to {}: {e}", socket.display()),
     })?;
-    stream.write_all(format!("{req}\n").as_bytes()).map_err(|e| format!("cannot send to {}: {e}", socket.display()))?;
+    if let Err(e) = stream.write_all(format!("{req}\n").as_bytes()) {
+        // A run that refuses the connection may have answered already: its answer says why.
+        let mut lines = BufReader::new(stream).lines();
+        return match answer(&mut lines, socket) {
+            Err(refusal) => Err(refusal),
+            Ok(_) => Err(format!("cannot send to {}: {e}", socket.display())),
+        };
+    }
     Ok(BufReader::new(stream).lines())
 }
 
