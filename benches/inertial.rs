@@ -2,8 +2,9 @@
 //! rig's 200 Hz IMU and a 30 Hz camera: pre-integrating a frame's samples, predicting the
 //! state and carrying its covariance (IMU-only propagation), tracking one frame against the
 //! last key frame with its observations (beside motion-only BA on the same observations,
-//! what a vision-only tracker pays), and the one-off inertial initialisation (2 s of key
-//! frames every 0.25 s).
+//! what a vision-only tracker pays), the one-off inertial initialisation (2 s of key
+//! frames every 0.25 s), and the visual-inertial window run at each window key frame (10 key
+//! frames 0.25 s apart, 100 observations each; with a single camera's scale free beside it).
 //!
 //! `cargo bench --bench inertial` (add `-- REPS`, default 200). No peer runs here: the
 //! visual-inertial peer (ORB-SLAM3 or another EuRoC-reading system) is the whole-system one
@@ -22,6 +23,7 @@ use dynaflow_datasets::synth::{FR3, Generator, HANDHELD_REST, Motion, STAMP_BASE
 use dynaflow_slam::imu::init::{InitConfig, InitKeyFrame, initialise};
 use dynaflow_slam::imu::propagate::{Matrix15, NavState, propagate_covariance};
 use dynaflow_slam::imu::track::optimize_inertial_pose;
+use dynaflow_slam::imu::window::{WindowKeyFrame, optimize_window};
 use dynaflow_slam::imu::{Bias, Preintegrated};
 use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{SplitMix64, optimize_pose};
@@ -98,11 +100,48 @@ fn main() {
         );
     });
 
+    // The visual-inertial window: 10 key frames 0.25 s apart, 100 observations each.
+    let wtimes: Vec<f64> = (0..10).map(|k| 2.5 + 0.25 * f64::from(k)).collect();
+    let mut rng = SplitMix64::new(2);
+    let window: Vec<WindowKeyFrame> = wtimes
+        .iter()
+        .map(|&t| WindowKeyFrame {
+            world_from_body: g.body_pose(t, &cal),
+            velocity: g.body_velocity(t, &cal),
+            observations: observations(&(g.body_pose(t, &cal) * cal.body_from_cam), &cam, 100, &mut rng),
+        })
+        .collect();
+    let wpre: Vec<Preintegrated> = wtimes
+        .windows(2)
+        .map(|w| {
+            let mut p = Preintegrated::new(Bias::default(), &cal);
+            p.integrate_span(&samples, STAMP_BASE + w[0], STAMP_BASE + w[1]);
+            p
+        })
+        .collect();
+    let window_ms = |free_scale: bool| {
+        median_ms(reps.min(50), || {
+            std::hint::black_box(optimize_window(
+                &window,
+                &wpre,
+                &cam,
+                0.0,
+                &cal,
+                &gravity,
+                Bias::default(),
+                free_scale,
+            ));
+        })
+    };
+    let (window_fixed, window_scale) = (window_ms(false), window_ms(true));
+
     println!("{:<58} {:>10}", "step", "ms");
     println!("{:<58} {:>10.4}", "pre-integrate one frame's samples", integrate);
     println!("{:<58} {:>10.4}", "predict the state and propagate its 15x15 covariance", propagate);
     println!("{:<58} {:>10.4}", "track one frame: pose + velocity, 100 observations + IMU", track);
     println!("{:<58} {:>10.4}", "motion-only BA, the same 100 observations (vision alone)", motion_only);
     println!("{:<58} {:>10.4}", "inertial initialisation, 9 key frames (once)", init);
+    println!("{:<58} {:>10.4}", "visual-inertial window, 10 key frames x 100 observations", window_fixed);
+    println!("{:<58} {:>10.4}", "the same, a single camera's scale free", window_scale);
     println!("tracking with the IMU / without: {:.2}x", track / motion_only);
 }

@@ -2,12 +2,12 @@
 //! `dynaflow synth --format euroc --motion handheld` (a hand-held camera that rests for 1 s,
 //! then moves along and about every axis; a 200 Hz IMU with EuRoC's ADIS16448 noise and bias
 //! walks), read back through `--input`. Seeds 5 and 7: never run while the tracker was built.
-//! The bounds are the issue's: on a static scene the stereo-inertial ATE within 1 cm, the IMU
-//! initialised within 2 s of the motion's start (its other bound, no worse than stereo alone,
-//! holds on seeds 0-3 but not on this one, so it is printed: the pose is vision's, see
-//! `dynaflow_slam::tracker`'s inertial module), the
-//! mono-inertial ATE within 3 cm with no scale fitted (its scale error and initialisation
-//! time are printed, not bounded: neither meets the bound on every seed); with walking
+//! The bounds are the issue's: on a static scene the stereo-inertial ATE within 1 cm and no
+//! worse than stereo alone (this holds on seeds 1-3 and 5 but not on seed 0, docs/benchmarks.md),
+//! the IMU initialised within 2 s of the motion's start, the mono-inertial ATE within 3 cm with
+//! no scale fitted and its scale error within 2 % (seed 2 misses it at 2.5 %; its
+//! initialisation time is printed, not bounded: ORB-SLAM3's rule takes longer than the issue's
+//! 2 s); with walking
 //! people YSAG's culling on the stereo-inertial tracker cuts the no-culling row's ATE by 80 %,
 //! and through a 30-frame blackout the inertial tracker keeps one map (no relocalisation)
 //! and stays within 2 cm, where the visual tracker loses the frames and relocalises.
@@ -66,6 +66,8 @@ fn stereo_and_mono_inertial_meet_the_bounds_on_a_static_scene() {
     );
     assert_eq!(i.pairs, 300, "every frame has a pose");
     assert!(i.rmse <= 0.01, "stereo-inertial ATE {} m over 1 cm", i.rmse);
+    assert!(i.rmse <= s.rmse, "stereo-inertial ATE {} m worse than stereo alone {} m", i.rmse, s.rmse);
+    assert!(imu.windows > 0, "no visual-inertial window was optimised: {imu:?}");
     assert!(after <= HANDHELD_REST + 2.0, "initialised {after} s after the first frame: over 2 s of motion");
 
     // Monocular-inertial on the same folder: the IMU makes the map metric, so the final
@@ -88,11 +90,11 @@ fn stereo_and_mono_inertial_meet_the_bounds_on_a_static_scene() {
         imu.init_keyframes.unwrap()
     );
     assert!(ate.rmse <= 0.03, "mono-inertial ATE {} m over 3 cm", ate.rmse);
-    // Not bounded, printed: the scale error (the 2 % holds on this seed, 1.9 %, but
-    // not on others: 0.9, 9.7, 5.1, 2.7 % on seeds 0-3, docs/benchmarks.md; the scale is the first
-    // initialisation's, with no visual-inertial BA to refine it), and the initialisation
-    // time (ORB-SLAM3's rule, 10 key frames 0.25 s apart over 2 s after the visual map
-    // starts, takes longer than the 2 s of motion).
+    // The scale follows the visual-inertial windows (refined at each, in the summary).
+    assert!(scale_error <= 0.02, "mono-inertial scale error {:.2} % over 2 %", 100.0 * scale_error);
+    assert!(!imu.scale_refinements.is_empty(), "the scale was never refined: {imu:?}");
+    // Not bounded, printed: the initialisation time (ORB-SLAM3's rule, 10 key frames 0.25 s
+    // apart over 2 s after the visual map starts, takes longer than the 2 s of motion).
     assert_eq!(imu.init_method.as_deref(), Some("map"));
 }
 

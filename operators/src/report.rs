@@ -367,6 +367,22 @@ pub struct InertialReport {
     /// Why the last MAP initialisation failed (when it never succeeded).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init_failure: Option<String>,
+    /// Visual-inertial windows optimised (key-frame velocities, poses and biases).
+    #[serde(default)]
+    pub windows: u64,
+    /// A single camera's scale refinements: seconds from the first frame, and the factor the
+    /// map was scaled by.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub scale_refinements: Vec<ScaleRefinement>,
+}
+
+/// One refinement of a single camera's map scale by the IMU.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct ScaleRefinement {
+    /// Seconds from the first frame.
+    pub after_s: f64,
+    /// The factor applied to the map.
+    pub scale: f64,
 }
 
 /// Absolute trajectory error, metres.

@@ -319,6 +319,7 @@ impl Preintegrated {
 pub mod init;
 pub mod propagate;
 pub mod track;
+pub mod window;
 
 #[cfg(test)]
 mod tests;

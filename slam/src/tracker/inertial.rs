@@ -13,36 +13,38 @@
 //! map (key frames, points, frame poses, the whole map kept for relocalisation) is scaled
 //! about the world's origin, and handed whole to local mapping under a new map id, from which
 //! local mapping restarts (its own copy is in the old scale; the summary counts it as the same
-//! map). ORB-SLAM3 refines the scale 5 s and 15 s later, after its visual-inertial BA; here,
-//! without that BA, the same refinement over the window moved the scale error by several
-//! percent either way on the synthetic seeds (0.9, 9.7, 5.1 % without, 5.2, 3.0, 12.0 % with,
-//! seeds 0-2), so it is left out: the scale is the first initialisation's.
+//! map).
 //!
-//! Initialised, the IMU predicts each frame's pose for the projection search (in place of the
+//! Initialised, at each key frame at least 0.25 s after the previous window key frame, the
+//! newest 10 such key frames (ORB-SLAM3's inertial window) are optimised visual-inertially
+//! ([`optimize_window`]: poses, velocities and biases from the key frames' observations of the
+//! map and the IMU between them, the points held as local mapping refined them). Each frame
+//! vision tracks is then tracked against the newest window key frame's state as ORB-SLAM3 does
+//! ([`optimize_inertial_pose`]: pose and velocity from the frame's observations and the IMU
+//! since that key frame). With a single camera the window's scale is free as well, and the map
+//! follows it at every window (the same re-handing to local mapping) while ORB-SLAM3 still
+//! refines scale ([`SCALE_REFINEMENT_UNTIL`], [`SCALE_REFINEMENT_MAX_KEYFRAMES`]): ORB-SLAM3's
+//! local inertial BA moves the scale through its free points, which this window holds.
+//!
+//! The IMU predicts each frame's pose for the projection search (in place of the
 //! constant-velocity model). A frame vision cannot track is propagated by the IMU alone, with
 //! its covariance ([`propagate_covariance`]), for up to 5 s (ORB-SLAM3's `timeRecentlyLost`):
 //! its pose is the propagated one ([`TrackState::Inertial`]), and the next frame vision sees
 //! is searched from it, in the same map. Key frames also come at least every 0.5 s
 //! (ORB-SLAM3's temporal condition).
 //!
-//! Departures from ORB-SLAM3, both for want of a visual-inertial local bundle adjustment:
+//! Departures from ORB-SLAM3:
 //!
-//! - The frame's pose is vision's (motion-only BA); its velocity is the newest window key
-//!   frame's carried by the IMU. ORB-SLAM3 optimises pose and velocity with the inertial
-//!   residual to the last key frame ([`crate::imu::track::optimize_inertial_pose`] is that
-//!   optimisation), trusting key-frame velocities its visual-inertial BA estimated. Holding
-//!   key-frame velocities from the inertial-only refinement below instead (poses held, so
-//!   their noise becomes velocity error the pre-integration's tight covariance then trusts)
-//!   fed back and diverged: ATE 4.5 cm against 6.5 mm for stereo alone (synthetic hand-held
-//!   scene, seed 0). So, on a static scene, the IMU changes the ATE only through its
-//!   prediction and key-frame timing (stereo against stereo-inertial, seeds 0-3 and 5: 6.5/5.9,
-//!   8.2/6.7, 8.5/7.4, 7.0/6.2, 5.5/7.2 mm); it carries the tracker through blackouts.
-//! - At each key frame at least 0.25 s after the previous window key frame, the velocities
-//!   and biases of the newest 10 such key frames (ORB-SLAM3's inertial window) are refined by
-//!   the inertial-only optimisation with the key-frame poses held as local mapping refined
-//!   them and gravity held (ORB-SLAM3's `InertialOptimization`, its bias priors centred on
-//!   zero). The accelerometer bias is held near zero (ORB-SLAM3's prior of 1e5 for stereo),
-//!   left to a future visual-inertial BA.
+//! - The window holds the points (local mapping owns them, and refines them with the key-frame
+//!   poses by visual BA alone); its poses are the anchors of visual-inertial tracking, not
+//!   written into the map. An earlier form tracked against key-frame velocities from the
+//!   inertial-only refinement (poses held, so their noise became velocity error the
+//!   pre-integration's tight covariance then trusted) and diverged: ATE 4.5 cm against 6.5 mm
+//!   for stereo alone (synthetic hand-held scene, seed 0).
+//! - Without the whole map (no vocabulary) the key frames' observations are not kept: the
+//!   window's velocities and biases are then refined inertial-only with the key-frame poses
+//!   held and gravity held (ORB-SLAM3's `InertialOptimization`, its bias priors centred on
+//!   zero), and each frame keeps vision's pose.
 
 use dynaflow_msg::{ImuCalibration, ImuSample};
 use nalgebra::{UnitQuaternion, Vector3};
@@ -50,6 +52,8 @@ use nalgebra::{UnitQuaternion, Vector3};
 use super::*;
 use crate::imu::init::{InitConfig, InitKeyFrame, REST_MIN_SAMPLES, initialise, static_initialise};
 use crate::imu::propagate::{Matrix15, NavState, propagate_covariance};
+use crate::imu::track::optimize_inertial_pose;
+use crate::imu::window::{WindowKeyFrame, optimize_window};
 use crate::imu::{Bias, Preintegrated};
 
 /// ORB-SLAM3's `NeedNewKeyFrame` before the IMU is initialised: a key frame every 0.25 s.
@@ -65,6 +69,12 @@ pub const INIT_MIN_SPAN: f64 = 1.0;
 pub const IMU_ONLY_LIMIT: f64 = 5.0;
 /// ORB-SLAM3's inertial window (`LocalInertialBA`'s 10 key frames).
 pub const INERTIAL_WINDOW: usize = 10;
+/// Seconds after the IMU's initialisation during which a single camera's map scale is refined
+/// (ORB-SLAM3's `LocalMapping::Run`: `ScaleRefinement` while `mTinit < 100`).
+pub const SCALE_REFINEMENT_UNTIL: f64 = 100.0;
+/// Key frames in the map up to which a single camera's scale is refined (ORB-SLAM3's
+/// `LocalMapping::Run`: `KeyFramesInMap() <= 200`).
+pub const SCALE_REFINEMENT_MAX_KEYFRAMES: usize = 200;
 
 /// How the IMU was initialised.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -134,6 +144,10 @@ pub(super) struct Inertial {
     pending_scale: Option<f64>,
     /// Times a monocular map was made metric (each restarts local mapping as a new map id).
     rescales: u32,
+    /// Scale refinements done: the key frame's time and the factor.
+    scale_refinements: Vec<(f64, f64)>,
+    /// Visual-inertial windows optimised.
+    windows: u64,
 }
 
 /// The initialised inertial state.
@@ -144,6 +158,10 @@ struct Nav {
     bias: Bias,
     /// Velocities of the window's key frames, world, m/s.
     kf_velocity: BTreeMap<u64, Vector3<f64>>,
+    /// Body poses of the window's key frames as the visual-inertial window estimated them
+    /// (the anchors of visual-inertial tracking; none until the first window after
+    /// initialisation).
+    kf_pose: BTreeMap<u64, Isometry3<f64>>,
     /// The last frame's state, and its covariance since vision last tracked.
     frame: NavState,
     covariance: Matrix15,
@@ -169,6 +187,8 @@ impl Inertial {
             last_keyframe: None,
             pending_scale: None,
             rescales: 0,
+            scale_refinements: Vec::new(),
+            windows: 0,
         }
     }
 
@@ -232,6 +252,7 @@ impl Inertial {
             gravity_w: world_from_gravity * Vector3::new(0.0, 0.0, -self.calibration.gravity),
             bias: frame.bias,
             kf_velocity,
+            kf_pose: BTreeMap::new(),
             frame,
             covariance: Matrix15::zeros(),
             last_visual: stamp,
@@ -287,6 +308,16 @@ impl Tracker {
         self.imu.as_ref().and_then(|i| i.init)
     }
 
+    /// Visual-inertial windows optimised ([`crate::imu::window`]).
+    pub fn inertial_windows(&self) -> u64 {
+        self.imu.as_ref().map_or(0, |i| i.windows)
+    }
+
+    /// A single camera's scale refinements: each key frame's time and the factor applied.
+    pub fn scale_refinements(&self) -> &[(f64, f64)] {
+        self.imu.as_ref().map_or(&[], |i| &i.scale_refinements)
+    }
+
     /// Why the last inertial MAP initialisation failed.
     pub fn inertial_init_failure(&self) -> Option<&str> {
         self.imu.as_ref().and_then(|i| i.init_failure.as_deref())
@@ -332,25 +363,84 @@ impl Tracker {
         })
     }
 
-    /// After vision tracked a frame (initialised only): the frame's state is its visual pose
-    /// with the velocity the IMU carries from the newest window key frame, whose velocity
-    /// the window refinement estimated.
-    pub(super) fn inertial_follow(&mut self, fit: &Fit, stamp: f64) {
+    /// After vision tracked a frame (initialised only). Where the newest window key frame has
+    /// the visual-inertial window's state, ORB-SLAM3's tracking against it: the frame's pose
+    /// and velocity from its observations and the IMU since that key frame
+    /// ([`optimize_inertial_pose`]), which replaces vision's pose in `fit`. Otherwise the
+    /// frame keeps its visual pose, with the velocity the IMU carries from the key frame.
+    pub(super) fn inertial_follow(&mut self, fit: &mut Fit, features: &[Feature], stamp: f64) {
+        let obs = self.fit_observations(features, &fit.matched);
         let Some(imu) = self.imu.as_mut() else { return };
         let body_from_cam = imu.calibration.body_from_cam;
         let (Some(nav), Some((kf, pre))) = (imu.nav.as_mut(), imu.from_kf.as_ref()) else { return };
         let world_from_body = fit.world_from_cam * body_from_cam.inverse();
-        let velocity = match (self.keyframe_poses.get(kf), nav.kf_velocity.get(kf)) {
-            (Some(kf_pose), Some(v)) => {
-                let anchor =
-                    NavState { world_from_body: kf_pose * body_from_cam.inverse(), velocity: *v, bias: nav.bias };
-                anchor.predict(pre, &nav.gravity_w).velocity
+        let anchor =
+            |pose: &Isometry3<f64>, v: &Vector3<f64>| NavState { world_from_body: *pose, velocity: *v, bias: nav.bias };
+        match (nav.kf_pose.get(kf), self.keyframe_poses.get(kf), nav.kf_velocity.get(kf)) {
+            (Some(pose), _, Some(v)) => {
+                let anchor = anchor(pose, v);
+                let predicted = anchor.predict(pre, &nav.gravity_w);
+                let initial = NavState { world_from_body, ..predicted };
+                let r = optimize_inertial_pose(
+                    &obs,
+                    &self.cam,
+                    self.config.bf,
+                    &body_from_cam,
+                    &anchor,
+                    pre,
+                    &nav.gravity_w,
+                    &initial,
+                    None,
+                );
+                nav.frame = r.state;
+                fit.world_from_cam = renormalised(&(r.state.world_from_body * body_from_cam));
             }
-            _ => nav.frame.velocity,
-        };
-        nav.frame = NavState { world_from_body, velocity, bias: nav.bias };
+            (None, Some(kf_pose), Some(v)) => {
+                let velocity = anchor(&(kf_pose * body_from_cam.inverse()), v).predict(pre, &nav.gravity_w).velocity;
+                nav.frame = NavState { world_from_body, velocity, bias: nav.bias };
+            }
+            _ => nav.frame = NavState { world_from_body, velocity: nav.frame.velocity, bias: nav.bias },
+        }
         nav.covariance = Matrix15::zeros();
         nav.last_visual = stamp;
+    }
+
+    /// The observations of a tracked frame's matched map points, as motion-only BA used them.
+    fn fit_observations(&self, features: &[Feature], matched: &[Option<u64>]) -> Vec<PoseObservation> {
+        matched
+            .iter()
+            .zip(features)
+            .filter_map(|(m, f)| {
+                let p = self.points.get(&(*m)?)?;
+                Some(PoseObservation {
+                    point: p.position,
+                    uv: f.uv,
+                    sigma: sigma(self.config.scale_factor, f.octave),
+                    depth: f.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth),
+                })
+            })
+            .collect()
+    }
+
+    /// A window key frame's observations of the map's points (the whole map's record of it,
+    /// which local mapping's refinements keep current); `None` without the whole map.
+    fn keyframe_observations(&self, id: u64) -> Option<Vec<PoseObservation>> {
+        let places = self.places.as_ref()?;
+        let kf = places.kfs.get(&id)?;
+        Some(
+            kf.keypoints
+                .iter()
+                .filter_map(|k| {
+                    let p = places.points.get(&k.point?)?;
+                    Some(PoseObservation {
+                        point: p.position,
+                        uv: k.uv,
+                        sigma: sigma(self.config.scale_factor, k.octave),
+                        depth: k.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth),
+                    })
+                })
+                .collect(),
+        )
     }
 
     /// A frame vision could not track: the IMU's propagation, while it may still be trusted
@@ -407,10 +497,65 @@ impl Tracker {
             return;
         }
         let span = stamp - imu.window[0].1;
+        // Once initialised: the visual-inertial window where the key frames' observations are
+        // known (the whole map kept), else the inertial-only refinement below.
+        let (initialised, ids): (bool, Vec<u64>) = (imu.nav.is_some(), imu.window.iter().map(|w| w.0).collect());
+        let observations: Option<Vec<Vec<PoseObservation>>> = match initialised {
+            true => ids.iter().map(|k| self.keyframe_observations(*k)).collect(),
+            false => None,
+        };
+        let Some(imu) = self.imu.as_mut() else { return };
         match imu.nav.as_mut() {
             Some(nav) => {
                 nav.kf_velocity.insert(id, nav.frame.velocity);
                 if kfs.len() < 3 {
+                    return;
+                }
+                // A single camera's map follows the scale every window finds (ORB-SLAM3's local
+                // inertial BA moves it through its free points), while ORB-SLAM3 still refines
+                // scale: within SCALE_REFINEMENT_UNTIL of the initialisation and up to
+                // SCALE_REFINEMENT_MAX_KEYFRAMES key frames (re-handing the map to local
+                // mapping costs in proportion to its size).
+                let since_init = imu.init.map_or(0.0, |i| stamp - i.stamp);
+                let refine_scale = self.config.sensor == Sensor::Monocular
+                    && since_init < SCALE_REFINEMENT_UNTIL
+                    && self.keyframe_poses.len() <= SCALE_REFINEMENT_MAX_KEYFRAMES;
+                if let Some(observations) = observations {
+                    let body_from_cam_inv = calibration.body_from_cam.inverse();
+                    let window: Vec<WindowKeyFrame> = imu
+                        .window
+                        .iter()
+                        .zip(&kfs)
+                        .zip(observations)
+                        .map(|(((k, _), kf), observations)| WindowKeyFrame {
+                            world_from_body: kf.world_from_cam * body_from_cam_inv,
+                            velocity: nav.kf_velocity.get(k).copied().unwrap_or(nav.frame.velocity),
+                            observations,
+                        })
+                        .collect();
+                    let fit = optimize_window(
+                        &window,
+                        &imu.between,
+                        &self.cam,
+                        self.config.bf,
+                        &calibration,
+                        &nav.gravity_w,
+                        nav.bias,
+                        refine_scale,
+                    );
+                    imu.windows += 1;
+                    let ids = imu.window.iter().map(|w| w.0);
+                    nav.kf_velocity = ids.clone().zip(fit.states.iter().map(|s| s.velocity)).collect();
+                    nav.kf_pose = ids.zip(fit.states.iter().map(|s| s.world_from_body)).collect();
+                    nav.frame = fit.states[fit.states.len() - 1];
+                    if refine_scale {
+                        // The map follows the window's scale as the key frame is handed on
+                        // (`imu_rescale`, which scales the frame's position with the map's).
+                        imu.scale_refinements.push((stamp, fit.scale));
+                        imu.pending_scale = Some(fit.scale);
+                        nav.frame.world_from_body = window[window.len() - 1].world_from_body;
+                    }
+                    imu.set_bias(fit.bias);
                     return;
                 }
                 // The bias priors centred on zero, as ORB-SLAM3's `InertialOptimization` sets

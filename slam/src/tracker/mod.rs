@@ -49,7 +49,8 @@ use crate::map::{Feature, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, 
 
 pub use inertial::{
     IMU_ONLY_LIMIT, INERTIAL_KEYFRAME_INTERVAL, INERTIAL_WINDOW, INIT_KEYFRAME_INTERVAL, INIT_MIN_KEYFRAMES,
-    INIT_MIN_SPAN, InertialEstimate, InertialInitInfo, InitMethod,
+    INIT_MIN_SPAN, InertialEstimate, InertialInitInfo, InitMethod, SCALE_REFINEMENT_MAX_KEYFRAMES,
+    SCALE_REFINEMENT_UNTIL,
 };
 
 /// Inliers a relocalised pose needs, and every pose in the second after it (ORB-SLAM2:

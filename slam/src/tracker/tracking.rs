@@ -71,11 +71,11 @@ impl Tracker {
         };
         let needed = if state == TrackState::Relocalised { self.relocalisation_min() } else { tracked_min };
         match fit.filter(|f| f.inliers >= needed && finite(f)) {
-            Some(f) => {
+            Some(mut f) => {
                 if state == TrackState::Relocalised {
                     self.relocalised_at = Some(stamp);
                 }
-                self.inertial_follow(&f, stamp);
+                self.inertial_follow(&mut f, features, stamp);
                 self.lost_run = 0;
                 // After a relocalisation the motion since the last frame is unknown (ORB-SLAM
                 // tracks the next frame against the reference key frame, without velocity).

@@ -53,6 +53,12 @@ impl Track {
             gyro_bias: estimate.map(|e| e.bias.gyro.into()),
             accel_bias: estimate.map(|e| e.bias.accel.into()),
             init_failure: if init.is_none() { tracker.inertial_init_failure().map(str::to_owned) } else { None },
+            windows: tracker.inertial_windows(),
+            scale_refinements: tracker
+                .scale_refinements()
+                .iter()
+                .map(|&(t, scale)| crate::report::ScaleRefinement { after_s: t - self.first_stamp.unwrap_or(t), scale })
+                .collect(),
         }
     }
 }
