@@ -370,6 +370,10 @@ pub struct InertialReport {
     /// Visual-inertial windows optimised (key-frame velocities, poses and biases).
     #[serde(default)]
     pub windows: u64,
+    /// Frames whose visual-inertial fit failed the chi-square test against the IMU (vision's
+    /// pose kept).
+    #[serde(default)]
+    pub inconsistent: u64,
     /// A single camera's scale refinements: seconds from the first frame, and the factor the
     /// map was scaled by.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]

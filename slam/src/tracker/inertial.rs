@@ -21,7 +21,9 @@
 //! map and the IMU between them, the points held as local mapping refined them). Each frame
 //! vision tracks is then tracked against the newest window key frame's state as ORB-SLAM3 does
 //! ([`optimize_inertial_pose`]: pose and velocity from the frame's observations and the IMU
-//! since that key frame). With a single camera the window's scale is free as well, and the map
+//! since that key frame), unless its inertial residual fails the chi-square 99 % test
+//! ([`INERTIAL_CHI2_9DOF_99`]: the IMU and the observations disagree), when vision's pose is
+//! kept and the frame counted. With a single camera the window's scale is free as well, and the map
 //! follows it at every window (the same re-handing to local mapping) while ORB-SLAM3 still
 //! refines scale ([`SCALE_REFINEMENT_UNTIL`], [`SCALE_REFINEMENT_MAX_KEYFRAMES`]): ORB-SLAM3's
 //! local inertial BA moves the scale through its free points, which this window holds.
@@ -67,6 +69,9 @@ pub const INIT_MIN_KEYFRAMES: usize = 10;
 pub const INIT_MIN_SPAN: f64 = 1.0;
 /// ORB-SLAM3's `timeRecentlyLost`: seconds of IMU-only propagation before the frame is lost.
 pub const IMU_ONLY_LIMIT: f64 = 5.0;
+/// The chi-square 99 % bound of a 9-degree-of-freedom residual: an inertial residual beyond
+/// it after visual-inertial tracking means the IMU and the frame's observations disagree.
+pub const INERTIAL_CHI2_9DOF_99: f64 = 21.666;
 /// ORB-SLAM3's inertial window (`LocalInertialBA`'s 10 key frames).
 pub const INERTIAL_WINDOW: usize = 10;
 /// Seconds after the IMU's initialisation during which a single camera's map scale is refined
@@ -167,6 +172,8 @@ struct Nav {
     covariance: Matrix15,
     /// The last frame vision tracked.
     last_visual: f64,
+    /// Frames whose visual-inertial fit failed the consistency test (vision's pose kept).
+    inconsistent: u64,
 }
 
 impl Inertial {
@@ -256,6 +263,7 @@ impl Inertial {
             frame,
             covariance: Matrix15::zeros(),
             last_visual: stamp,
+            inconsistent: 0,
         });
         self.rest = None;
         self.set_bias(frame.bias);
@@ -311,6 +319,12 @@ impl Tracker {
     /// Visual-inertial windows optimised ([`crate::imu::window`]).
     pub fn inertial_windows(&self) -> u64 {
         self.imu.as_ref().map_or(0, |i| i.windows)
+    }
+
+    /// Frames whose visual-inertial fit failed the consistency test
+    /// ([`INERTIAL_CHI2_9DOF_99`]) and kept vision's pose.
+    pub fn inertial_inconsistent(&self) -> u64 {
+        self.imu.as_ref().and_then(|i| i.nav.as_ref()).map_or(0, |n| n.inconsistent)
     }
 
     /// A single camera's scale refinements: each key frame's time and the factor applied.
@@ -392,8 +406,14 @@ impl Tracker {
                     &initial,
                     None,
                 );
-                nav.frame = r.state;
-                fit.world_from_cam = renormalised(&(r.state.world_from_body * body_from_cam));
+                if r.inertial_chi2 <= INERTIAL_CHI2_9DOF_99 {
+                    nav.frame = r.state;
+                    fit.world_from_cam = renormalised(&(r.state.world_from_body * body_from_cam));
+                } else {
+                    // The IMU since the anchor and the frame's observations disagree: vision's pose.
+                    nav.inconsistent += 1;
+                    nav.frame = NavState { world_from_body, velocity: r.state.velocity, bias: nav.bias };
+                }
             }
             (None, Some(kf_pose), Some(v)) => {
                 let velocity = anchor(&(kf_pose * body_from_cam.inverse()), v).predict(pre, &nav.gravity_w).velocity;
@@ -591,6 +611,28 @@ impl Tracker {
                 }
             }
             None => {}
+        }
+    }
+
+    /// Loop closing moved key frames by `delta` (each `new · old⁻¹`, cameras in the world;
+    /// `newest` the reference key frame's): the window's anchor states and velocities move
+    /// with their key frames, the frame's state with the newest (ORB-SLAM3 corrects velocities
+    /// with the key frames' rotations the same way).
+    pub(super) fn imu_correct(&mut self, delta: &BTreeMap<u64, Isometry3<f64>>, newest: Option<Isometry3<f64>>) {
+        let Some(nav) = self.imu.as_mut().and_then(|i| i.nav.as_mut()) else { return };
+        for (id, pose) in &mut nav.kf_pose {
+            if let Some(d) = delta.get(id) {
+                *pose = renormalised(&(d * *pose));
+            }
+        }
+        for (id, v) in &mut nav.kf_velocity {
+            if let Some(d) = delta.get(id) {
+                *v = d.rotation * *v;
+            }
+        }
+        if let Some(d) = newest {
+            nav.frame.world_from_body = renormalised(&(d * nav.frame.world_from_body));
+            nav.frame.velocity = d.rotation * nav.frame.velocity;
         }
     }
 

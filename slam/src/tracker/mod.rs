@@ -48,8 +48,8 @@ use crate::keyframe_map::KeyFrameMap;
 use crate::map::{Feature, MapFeature, MapKeyFrame, MapKeypoint, MapObservation, MapPoint, SparseMap, sigma};
 
 pub use inertial::{
-    IMU_ONLY_LIMIT, INERTIAL_KEYFRAME_INTERVAL, INERTIAL_WINDOW, INIT_KEYFRAME_INTERVAL, INIT_MIN_KEYFRAMES,
-    INIT_MIN_SPAN, InertialEstimate, InertialInitInfo, InitMethod, SCALE_REFINEMENT_MAX_KEYFRAMES,
+    IMU_ONLY_LIMIT, INERTIAL_CHI2_9DOF_99, INERTIAL_KEYFRAME_INTERVAL, INERTIAL_WINDOW, INIT_KEYFRAME_INTERVAL,
+    INIT_MIN_KEYFRAMES, INIT_MIN_SPAN, InertialEstimate, InertialInitInfo, InitMethod, SCALE_REFINEMENT_MAX_KEYFRAMES,
     SCALE_REFINEMENT_UNTIL,
 };
 
@@ -406,6 +406,7 @@ impl Tracker {
         if let (Some(d), Some(last)) = (newest, self.last) {
             self.last = Some(renormalised(&(d * last)));
         }
+        self.imu_correct(&delta, newest);
         let corrected: BTreeMap<u64, Point3<f64>> = correction.points.iter().map(|p| (p.id, p.position)).collect();
         for (id, p) in &mut self.points {
             if let Some(c) = corrected.get(id) {

@@ -54,6 +54,7 @@ impl Track {
             accel_bias: estimate.map(|e| e.bias.accel.into()),
             init_failure: if init.is_none() { tracker.inertial_init_failure().map(str::to_owned) } else { None },
             windows: tracker.inertial_windows(),
+            inconsistent: tracker.inertial_inconsistent(),
             scale_refinements: tracker
                 .scale_refinements()
                 .iter()
