@@ -433,12 +433,7 @@ impl Tracker {
             .zip(features)
             .filter_map(|(m, f)| {
                 let p = self.points.get(&(*m)?)?;
-                Some(PoseObservation {
-                    point: p.position,
-                    uv: f.uv,
-                    sigma: sigma(self.config.scale_factor, f.octave),
-                    depth: f.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth),
-                })
+                Some(self.observation(p.position, f.uv, f.octave, f.depth))
             })
             .collect()
     }

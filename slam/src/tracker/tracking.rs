@@ -182,12 +182,7 @@ impl Tracker {
             .filter_map(|&(i, id)| {
                 let f = &features[i];
                 let p = self.points.get(&id)?;
-                Some(PoseObservation {
-                    point: p.position,
-                    uv: f.uv,
-                    sigma: sigma(self.config.scale_factor, f.octave),
-                    depth: f.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth),
-                })
+                Some(self.observation(p.position, f.uv, f.octave, f.depth))
             })
             .collect();
         let fit = optimize_pose(&obs, &self.cam, self.config.bf, cam_from_world, mask);
@@ -200,6 +195,23 @@ impl Tracker {
             }
         }
         Fit { world_from_cam: renormalised(&fit.cam_from_world.inverse()), matches: pairs.len(), inliers, matched }
+    }
+
+    /// A keypoint's observation of a map point at `point`: its sigma by pyramid level, its
+    /// measured depth where the sensor's range allows (`max_depth`).
+    pub(super) fn observation(
+        &self,
+        point: Point3<f64>,
+        uv: [f64; 2],
+        octave: u8,
+        depth: Option<f64>,
+    ) -> PoseObservation {
+        PoseObservation {
+            point,
+            uv,
+            sigma: sigma(self.config.scale_factor, octave),
+            depth: depth.filter(|&d| d > 0.0 && d <= self.config.max_depth),
+        }
     }
 
     /// The result of a frame that was not tracked.

@@ -16,12 +16,7 @@ impl Tracker {
                 .iter()
                 .filter_map(|k| {
                     let p = places.points.get(&k.point?)?;
-                    Some(PoseObservation {
-                        point: p.position,
-                        uv: k.uv,
-                        sigma: sigma(self.config.scale_factor, k.octave),
-                        depth: k.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth),
-                    })
+                    Some(self.observation(p.position, k.uv, k.octave, k.depth))
                 })
                 .collect(),
         )
