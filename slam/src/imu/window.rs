@@ -118,6 +118,11 @@ pub fn optimize_window(
         let (pi, pj) = (s.poses[k].translation.vector, s.poses[k + 1].translation.vector);
         pre.residual((&ri, &pi, &s.velocities[k]), (&rj, &pj, &s.velocities[k + 1]), gravity_w).0
     };
+    // Its squared Mahalanobis norm.
+    let whitened = |s: &State, k: usize, pre: &Preintegrated| -> f64 {
+        let r = inertial(s, k, pre);
+        (r.transpose() * infos[k] * r)[(0, 0)]
+    };
     let with_bias = |s: &State| -> Vec<Preintegrated> {
         between
             .iter()
@@ -142,10 +147,7 @@ pub fn optimize_window(
                 }
             }
         }
-        for (k, pre) in pres.iter().enumerate() {
-            let r = inertial(s, k, pre);
-            cost += (r.transpose() * infos[k] * r)[(0, 0)];
-        }
+        cost += pres.iter().enumerate().map(|(k, pre)| whitened(s, k, pre)).sum::<f64>();
         let d = bias_delta(s);
         cost + prior_g * d.fixed_rows::<3>(0).norm_squared() + prior_a * d.fixed_rows::<3>(3).norm_squared()
     };
@@ -282,11 +284,7 @@ pub fn optimize_window(
         }
     }
     let pres = with_bias(&state);
-    let inertial_chi2 = pres
-        .iter()
-        .enumerate()
-        .map(|(k, pre)| (inertial(&state, k, pre).transpose() * infos[k] * inertial(&state, k, pre))[(0, 0)])
-        .sum();
+    let inertial_chi2 = pres.iter().enumerate().map(|(k, pre)| whitened(&state, k, pre)).sum();
     WindowFit {
         states: (0..n)
             .map(|k| NavState { world_from_body: state.poses[k], velocity: state.velocities[k], bias: state.bias })

@@ -384,44 +384,51 @@ impl Tracker {
     /// ([`optimize_inertial_pose`]), which replaces vision's pose in `fit`. Otherwise the
     /// frame keeps its visual pose, with the velocity the IMU carries from the key frame.
     pub(super) fn inertial_follow(&mut self, fit: &mut Fit, features: &[Feature], stamp: f64) {
-        let obs = self.fit_observations(features, &fit.matched);
-        let Some(imu) = self.imu.as_mut() else { return };
+        let Some(imu) = self.imu.as_ref() else { return };
         let body_from_cam = imu.calibration.body_from_cam;
-        let (Some(nav), Some((kf, pre))) = (imu.nav.as_mut(), imu.from_kf.as_ref()) else { return };
+        let (Some(nav), Some((kf, pre))) = (imu.nav.as_ref(), imu.from_kf.as_ref()) else { return };
         let world_from_body = fit.world_from_cam * body_from_cam.inverse();
         let anchor =
-            |pose: &Isometry3<f64>, v: &Vector3<f64>| NavState { world_from_body: *pose, velocity: *v, bias: nav.bias };
-        match (nav.kf_pose.get(kf), self.keyframe_poses.get(kf), nav.kf_velocity.get(kf)) {
-            (Some(pose), _, Some(v)) => {
-                let anchor = anchor(pose, v);
-                let predicted = anchor.predict(pre, &nav.gravity_w);
-                let initial = NavState { world_from_body, ..predicted };
-                let r = optimize_inertial_pose(
-                    &obs,
-                    &self.cam,
-                    self.config.bf,
-                    &body_from_cam,
-                    &anchor,
-                    pre,
-                    &nav.gravity_w,
-                    &initial,
-                    None,
-                );
-                if r.inertial_chi2 <= INERTIAL_CHI2_9DOF_99 {
-                    nav.frame = r.state;
-                    fit.world_from_cam = renormalised(&(r.state.world_from_body * body_from_cam));
-                } else {
-                    // The IMU since the anchor and the frame's observations disagree: vision's pose.
-                    nav.inconsistent += 1;
-                    nav.frame = NavState { world_from_body, velocity: r.state.velocity, bias: nav.bias };
+            |pose: Isometry3<f64>, velocity: Vector3<f64>| NavState { world_from_body: pose, velocity, bias: nav.bias };
+        let visual = |velocity: Vector3<f64>| NavState { world_from_body, velocity, bias: nav.bias };
+        // The frame's state; whether it replaces vision's pose; whether the test failed.
+        let (state, replace, inconsistent) =
+            match (nav.kf_pose.get(kf), self.keyframe_poses.get(kf), nav.kf_velocity.get(kf)) {
+                (Some(pose), _, Some(v)) => {
+                    let anchor = anchor(*pose, *v);
+                    let initial = NavState { world_from_body, ..anchor.predict(pre, &nav.gravity_w) };
+                    let r = optimize_inertial_pose(
+                        &self.fit_observations(features, &fit.matched),
+                        &self.cam,
+                        self.config.bf,
+                        &body_from_cam,
+                        &anchor,
+                        pre,
+                        &nav.gravity_w,
+                        &initial,
+                        None,
+                    );
+                    if r.inertial_chi2 <= INERTIAL_CHI2_9DOF_99 {
+                        (r.state, true, false)
+                    } else {
+                        // The IMU since the anchor and the frame's observations disagree:
+                        // vision's pose.
+                        (visual(r.state.velocity), false, true)
+                    }
                 }
-            }
-            (None, Some(kf_pose), Some(v)) => {
-                let velocity = anchor(&(kf_pose * body_from_cam.inverse()), v).predict(pre, &nav.gravity_w).velocity;
-                nav.frame = NavState { world_from_body, velocity, bias: nav.bias };
-            }
-            _ => nav.frame = NavState { world_from_body, velocity: nav.frame.velocity, bias: nav.bias },
+                (None, Some(kf_pose), Some(v)) => (
+                    visual(anchor(kf_pose * body_from_cam.inverse(), *v).predict(pre, &nav.gravity_w).velocity),
+                    false,
+                    false,
+                ),
+                _ => (visual(nav.frame.velocity), false, false),
+            };
+        if replace {
+            fit.world_from_cam = renormalised(&(state.world_from_body * body_from_cam));
         }
+        let Some(nav) = self.imu.as_mut().and_then(|i| i.nav.as_mut()) else { return };
+        nav.inconsistent += u64::from(inconsistent);
+        nav.frame = state;
         nav.covariance = Matrix15::zeros();
         nav.last_visual = stamp;
     }

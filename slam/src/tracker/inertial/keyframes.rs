@@ -59,10 +59,11 @@ impl Tracker {
             return;
         }
         let span = stamp - imu.window[0].1;
-        // Once initialised: the visual-inertial window where the key frames' observations are
-        // known (the whole map kept), else the inertial-only refinement below.
-        let (initialised, ids): (bool, Vec<u64>) = (imu.nav.is_some(), imu.window.iter().map(|w| w.0).collect());
-        let observations: Option<Vec<Vec<PoseObservation>>> = match initialised {
+        // Once initialised (and three key frames in the window): the visual-inertial window
+        // where the key frames' observations are known (the whole map kept), else the
+        // inertial-only refinement below.
+        let ids: Vec<u64> = imu.window.iter().map(|w| w.0).collect();
+        let observations: Option<Vec<Vec<PoseObservation>>> = match imu.nav.is_some() && ids.len() >= 3 {
             true => ids.iter().map(|k| self.keyframe_observations(*k)).collect(),
             false => None,
         };
