@@ -349,7 +349,8 @@ pub struct FrameStates {
 /// A visual-inertial tracker's part of its report.
 #[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct InertialReport {
-    /// `static` or `map`; absent: the IMU was never initialised.
+    /// `static`, `map`, or `map_gravity_at_rest` (a single camera that rested first: gravity
+    /// from the rest); absent: the IMU was never initialised.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init_method: Option<String>,
     /// Seconds from the first frame to the initialisation.

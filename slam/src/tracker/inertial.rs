@@ -8,8 +8,13 @@
 //! starts at rest (gravity and the gyroscope bias from the first quarter second's means,
 //! [`static_initialise`]), otherwise ORB-SLAM3's inertial-only MAP initialisation
 //! ([`initialise`]) once the map's key frames number 10 and span 1 s (its `InitializeIMU` for
-//! stereo and RGB-D; a single camera: 2 s, and no static initialisation, its map waiting for
-//! motion anyway). A single camera's initialisation also finds the map's scale: the tracker's
+//! stereo and RGB-D; a single camera: 2 s). A single camera's map waits for motion, so a rest at
+//! the start gives it gravity instead: the rest's attitude to gravity is carried by the
+//! gyroscope to the map's first key frame (the initialisation's reference frame), and the MAP
+//! initialisation runs with gravity held once 5 key frames are in
+//! ([`INIT_MIN_KEYFRAMES_AT_REST`]). The IMU is pre-integrated from the reference frame, so the
+//! map's first two key frames join the inertial window, as ORB-SLAM3's do. A single camera's
+//! initialisation also finds the map's scale: the tracker's
 //! map (key frames, points, frame poses, the whole map kept for relocalisation) is scaled
 //! about the world's origin, and handed whole to local mapping under a new map id, from which
 //! local mapping restarts (its own copy is in the old scale; the summary counts it as the same
@@ -68,6 +73,11 @@ pub const INIT_MIN_KEYFRAMES: usize = 10;
 /// ORB-SLAM3's `InitializeIMU`: seconds the key frames must span with depth (1 s; a single
 /// camera's 2 s).
 pub const INIT_MIN_SPAN: f64 = 1.0;
+/// Key frames a single camera's initialisation needs when its attitude to gravity is known
+/// from a rest at the start: gravity is then held, and scale, velocities and biases remain,
+/// which ORB-SLAM3 finds with depth from 1 s of key frames; 1 s at its 0.25 s spacing
+/// ([`INIT_KEYFRAME_INTERVAL`]) is 5 key frames.
+pub const INIT_MIN_KEYFRAMES_AT_REST: usize = 5;
 /// ORB-SLAM3's `timeRecentlyLost`: seconds of IMU-only propagation before the frame is lost.
 pub const IMU_ONLY_LIMIT: f64 = 5.0;
 /// The chi-square 99 % bound of a 9-degree-of-freedom residual: an inertial residual beyond
@@ -90,6 +100,9 @@ pub enum InitMethod {
     Static,
     /// ORB-SLAM3's inertial-only MAP initialisation over the first key frames.
     Map,
+    /// A single camera: the MAP initialisation with gravity held where a rest at the start gave
+    /// it (carried to the map's first key frame by the gyroscope).
+    MapGravityAtRest,
 }
 
 /// When and how the IMU was initialised.
@@ -154,6 +167,25 @@ pub(super) struct Inertial {
     scale_refinements: Vec<(f64, f64)>,
     /// Visual-inertial windows optimised.
     windows: u64,
+    /// A single camera (its initialisation differs).
+    monocular: bool,
+    /// A single camera before initialisation, after a rest at the start: the body's attitude
+    /// to gravity (`R_gb`) at the last frame, carried by the gyroscope with the rest's bias.
+    attitude: Option<(UnitQuaternion<f64>, Vector3<f64>)>,
+    /// A single camera's initialisation reference frame (before its map starts).
+    reference: Option<Reference>,
+    /// `R_wg` of a single camera's map whose first key frame's attitude was known.
+    map_gravity: Option<UnitQuaternion<f64>>,
+}
+
+/// A single camera's initialisation reference frame: the IMU is pre-integrated from it, so
+/// that the map's first two key frames join the inertial window as ORB-SLAM3's do.
+#[derive(Debug)]
+struct Reference {
+    stamp: f64,
+    /// `R_gb` at the frame, where known.
+    gravity_from_body: Option<UnitQuaternion<f64>>,
+    from: Preintegrated,
 }
 
 /// The initialised inertial state.
@@ -178,7 +210,7 @@ struct Nav {
 }
 
 impl Inertial {
-    pub(super) fn new(calibration: ImuCalibration) -> Self {
+    pub(super) fn new(calibration: ImuCalibration, monocular: bool) -> Self {
         Self {
             calibration,
             pending: Vec::new(),
@@ -197,6 +229,10 @@ impl Inertial {
             rescales: 0,
             scale_refinements: Vec::new(),
             windows: 0,
+            monocular,
+            attitude: None,
+            reference: None,
+            map_gravity: None,
         }
     }
 
@@ -230,12 +266,32 @@ impl Inertial {
             if let Some((_, k)) = &mut self.from_kf {
                 k.integrate_span(&span, from, stamp);
             }
+            if let Some(r) = &mut self.reference {
+                r.from.integrate_span(&span, from, stamp);
+            }
+            if let Some((attitude, gyro)) = &mut self.attitude {
+                let mut a = Preintegrated::new(Bias { gyro: *gyro, accel: Vector3::zeros() }, &self.calibration);
+                a.integrate_span(&span, from, stamp);
+                *attitude *= a.delta_rotation();
+            }
             self.from_frame = Some(p);
         }
         if let Some(last) = fresh.last() {
             self.carry = Some(*last);
         }
         self.last_stamp = Some(stamp);
+        // A single camera: whether it started at rest, once (its map waits for motion, so the
+        // rest's gravity is carried to the map's first key frame).
+        if self.monocular && self.nav.is_none() && self.rest.as_ref().is_some_and(|r| r.len() >= REST_MIN_SAMPLES) {
+            let samples = self.rest.take().unwrap_or_default();
+            if let Ok(s) = static_initialise(&samples, &self.calibration) {
+                self.attitude = Some((s.gravity_from_body, s.gyro_bias));
+                // A reference frame taken so far was taken during the rest.
+                if let Some(r) = &mut self.reference {
+                    r.gravity_from_body = r.gravity_from_body.or(Some(s.gravity_from_body));
+                }
+            }
+        }
     }
 
     /// The newest window key frame's time.
@@ -267,6 +323,7 @@ impl Inertial {
             inconsistent: 0,
         });
         self.rest = None;
+        self.attitude = None;
         self.set_bias(frame.bias);
         self.init = Some(InertialInitInfo {
             stamp,
@@ -296,7 +353,7 @@ impl Tracker {
     /// Track with this IMU (mounted as `calibration.body_from_cam` says): give each frame's
     /// samples with [`Tracker::add_imu`] before [`Tracker::track`]. See [`inertial`](self).
     pub fn with_imu(mut self, calibration: ImuCalibration) -> Self {
-        self.imu = Some(Box::new(Inertial::new(calibration)));
+        self.imu = Some(Box::new(Inertial::new(calibration, self.config.sensor == Sensor::Monocular)));
         self
     }
 
@@ -460,6 +517,44 @@ impl Tracker {
         self.last = Some(pose);
         self.velocity = Isometry3::identity();
         Some(self.untracked(Some(pose), TrackState::Inertial, features))
+    }
+
+    /// After each frame, a single camera before its map: the initialisation's reference frame
+    /// (ORB-SLAM3 pre-integrates from it), followed as the tracker replaces it.
+    pub(super) fn imu_reference(&mut self, stamp: f64) {
+        let reference = self.init_ref.as_ref().map(|r| r.0);
+        let Some(imu) = self.imu.as_mut().filter(|i| i.monocular) else { return };
+        match reference {
+            Some(t) if imu.reference.as_ref().is_some_and(|r| r.stamp == t) => {}
+            Some(t) if t == stamp => {
+                imu.reference = Some(Reference {
+                    stamp,
+                    gravity_from_body: imu.attitude.map(|a| a.0),
+                    from: Preintegrated::new(imu.bias(), &imu.calibration),
+                });
+            }
+            _ => imu.reference = None,
+        }
+    }
+
+    /// A single camera's map started from the reference frame (`k0` at `t0`) and this one
+    /// (`k1`): both join the inertial window, with the IMU pre-integrated between them, and
+    /// the map's gravity is known where the reference frame's attitude was.
+    pub(super) fn imu_monocular_map(&mut self, (k0, t0): (u64, f64), (k1, t1): (u64, f64)) {
+        let Some(imu) = self.imu.as_mut() else { return };
+        let Some(reference) = imu.reference.take().filter(|r| r.stamp == t0) else { return };
+        let body_from_cam = imu.calibration.body_from_cam;
+        imu.map_gravity = match (reference.gravity_from_body, self.keyframe_poses.get(&k0)) {
+            (Some(gravity_from_body), Some(world_from_cam)) => {
+                Some((world_from_cam * body_from_cam.inverse()).rotation * gravity_from_body.inverse())
+            }
+            _ => None,
+        };
+        self.imu_keyframe(k0, t0);
+        if let Some(imu) = self.imu.as_mut() {
+            imu.from_kf = Some((k0, reference.from));
+        }
+        self.imu_keyframe(k1, t1);
     }
 
     /// After a frame vision tracked: a static initialisation, once, when the samples from

@@ -28,6 +28,23 @@ impl Tracker {
         (fewer || need_close) && fit.inliers > 15
     }
 
+    /// A key frame's static keypoints as the whole map keeps them, each with its point.
+    pub(super) fn map_keypoints(&self, id: u64, features: &[Feature], point_of: &[Option<u64>]) -> Vec<MapKeypoint> {
+        features
+            .iter()
+            .zip(point_of)
+            .filter(|(f, _)| !f.dynamic)
+            .map(|(f, p)| MapKeypoint {
+                keyframe: id,
+                uv: f.uv,
+                octave: f.octave,
+                depth: f.depth.filter(|&d| d > 0.0 && d <= self.config.max_depth),
+                descriptor: f.descriptor,
+                point: *p,
+            })
+            .collect()
+    }
+
     /// A key frame: observations of the matched points, new points from depth.
     pub(super) fn make_keyframe(&mut self, stamp: f64, features: &[Feature], fit: &Fit) -> SparseMap {
         let id = self.next_keyframe;
@@ -82,19 +99,7 @@ impl Tracker {
             });
             point_of[i] = Some(pid);
         }
-        let keypoints = features
-            .iter()
-            .zip(&point_of)
-            .filter(|(f, _)| !f.dynamic)
-            .map(|(f, p)| MapKeypoint {
-                keyframe: id,
-                uv: f.uv,
-                octave: f.octave,
-                depth: depth_of(f),
-                descriptor: f.descriptor,
-                point: *p,
-            })
-            .collect();
+        let keypoints = self.map_keypoints(id, features, &point_of);
         // The reference for the next decision: points of this key frame seen twice (ORB-SLAM2's
         // `TrackedMapPoints(nMinObs)`), all of them while the map has at most two key frames.
         self.ref_tracked = fit.inliers + if id <= self.first_keyframe + 1 { points.len() } else { 0 };

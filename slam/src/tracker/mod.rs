@@ -500,6 +500,7 @@ impl Tracker {
         if matches!(r.state, TrackState::Tracked | TrackState::Relocalised | TrackState::NewMap) {
             self.imu_try_static(stamp);
         }
+        self.imu_reference(stamp);
         // Lost frames (a dead-reckoned guess) stay out of the trajectory, as in ORB-SLAM2.
         if let (Some(pose), Some(k), false) = (r.world_from_cam, self.reference, r.state == TrackState::Lost)
             && let Some(kp) = self.keyframe_poses.get(&k)

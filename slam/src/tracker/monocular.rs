@@ -160,6 +160,20 @@ impl Tracker {
             keypoints: Vec::new(),
             culled: Vec::new(),
         };
+        // The whole map keeps both key frames (relocalisation, the inertial window), as
+        // ORB-SLAM2's key-frame database does.
+        let keypoints = [self.map_keypoints(k0, &reference, &matched0), self.map_keypoints(k1, features, &matched1)];
+        if let Some(places) = &mut self.places {
+            places.switch_map(self.map_id);
+            places.apply_refinements(&batch);
+            for keypoints in keypoints {
+                if let Some((kf, bow)) = places.add_keyframe(&SparseMap { keypoints, ..batch.clone() }) {
+                    places.db.add(kf, bow);
+                }
+            }
+        }
+        // (Two key frames are too few for the IMU's initialisation: no rescaling here.)
+        self.imu_monocular_map((k0, ref_stamp), (k1, stamp));
         TrackingResult {
             world_from_cam: Some(world_from_c2),
             state: TrackState::NewMap,

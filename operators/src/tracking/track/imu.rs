@@ -45,6 +45,7 @@ impl Track {
                 match i.method {
                     dynaflow_slam::InitMethod::Static => "static",
                     dynaflow_slam::InitMethod::Map => "map",
+                    dynaflow_slam::InitMethod::MapGravityAtRest => "map_gravity_at_rest",
                 }
                 .to_owned()
             }),

@@ -49,7 +49,6 @@ impl Tracker {
             imu.between.remove(0);
         }
         imu.from_kf = Some((id, Preintegrated::new(bias, &calibration)));
-        let min_span = if self.config.sensor == Sensor::Monocular { 2.0 * INIT_MIN_SPAN } else { INIT_MIN_SPAN };
         let kfs: Vec<InitKeyFrame> = imu
             .window
             .iter()
@@ -134,9 +133,24 @@ impl Tracker {
                 nav.frame.velocity = r.velocities[r.velocities.len() - 1];
                 imu.set_bias(r.bias);
             }
-            None if kfs.len() >= INIT_MIN_KEYFRAMES && span >= min_span => {
+            None => {
+                // ORB-SLAM3's rule (10 key frames over 1 s; a single camera's over 2 s), but a
+                // single camera whose map's gravity a rest gave: gravity held, and the span
+                // with depth ([`INIT_MIN_KEYFRAMES_AT_REST`]).
                 let mono = self.config.sensor == Sensor::Monocular;
-                let config = if mono { InitConfig::monocular() } else { InitConfig::with_depth() };
+                let (min_keyframes, min_span, config, method) = match (mono, imu.map_gravity) {
+                    (true, Some(g)) => (
+                        INIT_MIN_KEYFRAMES_AT_REST,
+                        INIT_MIN_SPAN,
+                        InitConfig { gravity: Some(g), ..InitConfig::monocular() },
+                        InitMethod::MapGravityAtRest,
+                    ),
+                    (true, None) => (INIT_MIN_KEYFRAMES, 2.0 * INIT_MIN_SPAN, InitConfig::monocular(), InitMethod::Map),
+                    (false, _) => (INIT_MIN_KEYFRAMES, INIT_MIN_SPAN, InitConfig::with_depth(), InitMethod::Map),
+                };
+                if kfs.len() < min_keyframes || span < min_span {
+                    return;
+                }
                 match initialise(&kfs, &imu.between, &calibration.body_from_cam, calibration.gravity, &config) {
                     Ok(r) => {
                         if mono {
@@ -148,12 +162,11 @@ impl Tracker {
                             bias: r.bias,
                         };
                         let velocities = imu.window.iter().map(|w| w.0).zip(r.velocities.iter().copied()).collect();
-                        imu.begin(r.world_from_gravity, frame, velocities, stamp, InitMethod::Map, kfs.len());
+                        imu.begin(r.world_from_gravity, frame, velocities, stamp, method, kfs.len());
                     }
                     Err(e) => imu.init_failure = Some(e.to_string()),
                 }
             }
-            None => {}
         }
     }
 
