@@ -15,7 +15,7 @@
 //! position) whitened by the pre-integration's covariance.
 
 use dynaflow_vision::camera::Pinhole;
-use dynaflow_vision::geometry::{CHI2_2DOF_95, CHI2_3DOF_95, PoseObservation, huber, observation_jacobian};
+use dynaflow_vision::geometry::{CHI2_2DOF_95, CHI2_3DOF_95, LmDamping, PoseObservation, huber, observation_jacobian};
 use nalgebra::{Isometry3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 
 use super::propagate::NavState;
@@ -104,7 +104,7 @@ pub fn optimize_inertial_pose(
 
     let mut state = NavState { bias: last.bias, ..*initial };
     for _round in 0..4 {
-        let mut lambda = 1e-3;
+        let mut lm = LmDamping::default();
         let mut cost = cost_of(&state, &inlier);
         for _ in 0..10 {
             let (r, j) = inertial(&state);
@@ -124,25 +124,16 @@ pub fn optimize_inertial_pose(
                 h += (w * w_info) * (jb.transpose() * jb);
                 g += (w * w_info) * (jb.transpose() * res);
             }
-            let mut damped = h;
-            for k in 0..9 {
-                damped[(k, k)] += lambda * h[(k, k)].max(1e-9);
-            }
-            let Some(step) = damped.cholesky().map(|c| c.solve(&(-g))) else { break };
+            let Some(step) = lm.damped(&h).cholesky().map(|c| c.solve(&(-g))) else { break };
             let candidate = apply(&state, &step);
             let new_cost = cost_of(&candidate, &inlier);
-            if new_cost < cost {
+            let accepted = new_cost < cost;
+            if accepted {
                 state = candidate;
                 cost = new_cost;
-                lambda = (lambda * 0.3).max(1e-9);
-                if step.norm() < 1e-12 {
-                    break;
-                }
-            } else {
-                lambda *= 10.0;
-                if lambda > 1e8 {
-                    break;
-                }
+            }
+            if !lm.next(accepted, step.norm(), 1e-12) {
+                break;
             }
         }
         for (flag, o) in inlier.iter_mut().zip(obs) {

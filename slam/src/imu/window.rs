@@ -23,7 +23,7 @@
 
 use dynaflow_msg::ImuCalibration;
 use dynaflow_vision::camera::Pinhole;
-use dynaflow_vision::geometry::{CHI2_2DOF_95, CHI2_3DOF_95, PoseObservation, huber, observation_jacobian};
+use dynaflow_vision::geometry::{CHI2_2DOF_95, CHI2_3DOF_95, LmDamping, PoseObservation, huber, observation_jacobian};
 use nalgebra::{DMatrix, DVector, Isometry3, SMatrix, SVector, Translation3, UnitQuaternion, Vector3};
 
 use super::propagate::NavState;
@@ -179,7 +179,7 @@ pub fn optimize_window(
     };
     let mut inlier: Vec<Vec<bool>> = kfs.iter().map(|k| vec![true; k.observations.len()]).collect();
     for _round in 0..ROUNDS {
-        let mut lambda = 1e-3;
+        let mut lm = LmDamping::default();
         let mut cost = cost_of(&state, &inlier);
         for _ in 0..ITERATIONS {
             let mut h = DMatrix::<f64>::zeros(dim, dim);
@@ -256,25 +256,16 @@ pub fn optimize_window(
                 h[(9 * n + a, 9 * n + a)] += w;
                 g[9 * n + a] += w * d[a];
             }
-            let mut damped = h.clone();
-            for k in 0..dim {
-                damped[(k, k)] += lambda * h[(k, k)].max(1e-9);
-            }
-            let Some(step) = damped.cholesky().map(|c| c.solve(&(-&g))) else { break };
+            let Some(step) = lm.damped(&h).cholesky().map(|c| c.solve(&(-&g))) else { break };
             let candidate = apply(&state, &step);
             let new_cost = cost_of(&candidate, &inlier);
-            if new_cost < cost {
+            let accepted = new_cost < cost;
+            if accepted {
                 state = candidate;
                 cost = new_cost;
-                lambda = (lambda * 0.3).max(1e-9);
-                if step.norm() < 1e-12 {
-                    break;
-                }
-            } else {
-                lambda *= 10.0;
-                if lambda > 1e8 {
-                    break;
-                }
+            }
+            if !lm.next(accepted, step.norm(), 1e-12) {
+                break;
             }
         }
         for (k, kf) in kfs.iter().enumerate() {

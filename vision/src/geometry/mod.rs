@@ -31,8 +31,8 @@ pub use model_selection::{
 };
 pub use p3p::p3p;
 pub use pose::{
-    CHI2_2DOF_95, CHI2_3DOF_95, PoseFit, PoseObservation, bearing, compose, exp_se3, huber, observation_jacobian,
-    optimize_pose, p3p_ransac, pnp_dlt, pnp_ransac, refine_pose, renormalised,
+    CHI2_2DOF_95, CHI2_3DOF_95, LmDamping, PoseFit, PoseObservation, bearing, compose, exp_se3, huber,
+    observation_jacobian, optimize_pose, p3p_ransac, pnp_dlt, pnp_ransac, refine_pose, renormalised,
 };
 pub use ransac::{Consensus, Estimator, Prosac, RansacConfig, Sampler, SplitMix64, needed, ransac};
 pub use two_view::{

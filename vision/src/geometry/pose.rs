@@ -12,6 +12,50 @@ use super::p3p::p3p;
 use super::ransac::{Estimator, RansacConfig, Sampler, SplitMix64, ransac};
 use crate::camera::Pinhole;
 
+/// Levenberg-Marquardt's damping as the pose optimisers here use it (Marquardt's: `λ` times
+/// the normal matrix's diagonal, floored at 1e-9): `λ` starts at 1e-3, falls by 0.3 after an
+/// accepted step and rises tenfold after a rejected one; the iteration ends when an accepted
+/// step is shorter than the caller's tolerance or `λ` passes 1e8.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LmDamping {
+    lambda: f64,
+}
+
+impl Default for LmDamping {
+    fn default() -> Self {
+        Self { lambda: 1e-3 }
+    }
+}
+
+impl LmDamping {
+    /// `h` with `λ · max(h_kk, 1e-9)` added to each diagonal element.
+    pub fn damped<D: nalgebra::Dim, S: nalgebra::Storage<f64, D, D>>(
+        &self,
+        h: &nalgebra::Matrix<f64, D, D, S>,
+    ) -> nalgebra::OMatrix<f64, D, D>
+    where
+        nalgebra::DefaultAllocator: nalgebra::allocator::Allocator<D, D>,
+    {
+        let mut damped = h.clone_owned();
+        for k in 0..h.nrows() {
+            damped[(k, k)] += self.lambda * h[(k, k)].max(1e-9);
+        }
+        damped
+    }
+
+    /// After a trial step of length `step_norm`, accepted (its cost fell) or not: whether to
+    /// go on iterating.
+    pub fn next(&mut self, accepted: bool, step_norm: f64, tolerance: f64) -> bool {
+        if accepted {
+            self.lambda = (self.lambda * 0.3).max(1e-9);
+            step_norm >= tolerance
+        } else {
+            self.lambda *= 10.0;
+            self.lambda <= 1e8
+        }
+    }
+}
+
 /// Chi-square 95 % quantile for 2 degrees of freedom: ORB-SLAM's inlier test on squared
 /// reprojection errors in units of the measurement's sigma.
 pub const CHI2_2DOF_95: f64 = 5.991;
@@ -214,7 +258,7 @@ pub fn optimize_pose(
         (0..n).filter(|&i| mask[i]).map(|i| chi2(pose, i).map_or(0.0, |c| huber(c, bound(&obs[i]).sqrt()).0)).sum()
     };
     for _round in 0..4 {
-        let mut lambda = 1e-3;
+        let mut lm = LmDamping::default();
         let mut cost = cost_of(&pose, &inlier);
         for _ in 0..10 {
             let mut h = Matrix6::<f64>::zeros();
@@ -228,25 +272,16 @@ pub fn optimize_pose(
                 h += (w * info) * (jt * j);
                 g += (w * info) * (jt * r);
             }
-            let mut damped = h;
-            for k in 0..6 {
-                damped[(k, k)] += lambda * h[(k, k)].max(1e-9);
-            }
-            let Some(step) = damped.cholesky().map(|c| c.solve(&(-g))) else { break };
+            let Some(step) = lm.damped(&h).cholesky().map(|c| c.solve(&(-g))) else { break };
             let candidate = compose(&step, &pose);
             let new_cost = cost_of(&candidate, &inlier);
-            if new_cost < cost {
+            let accepted = new_cost < cost;
+            if accepted {
                 pose = candidate;
                 cost = new_cost;
-                lambda = (lambda * 0.3).max(1e-9);
-                if step.norm() < 1e-10 {
-                    break;
-                }
-            } else {
-                lambda *= 10.0;
-                if lambda > 1e8 {
-                    break;
-                }
+            }
+            if !lm.next(accepted, step.norm(), 1e-10) {
+                break;
             }
         }
         for (i, flag) in inlier.iter_mut().enumerate() {
