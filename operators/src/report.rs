@@ -365,6 +365,10 @@ pub struct InertialReport {
     /// See `gyro_bias`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub accel_bias: Option<[f64; 3]>,
+    /// Gravity in the map's world (the first key frame's camera frame), m/s², as the
+    /// initialisation found it: with the final trajectory it gives each camera's roll and pitch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gravity: Option<[f64; 3]>,
     /// Why the last MAP initialisation failed (when it never succeeded).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub init_failure: Option<String>,

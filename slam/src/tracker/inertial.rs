@@ -6,12 +6,15 @@
 //! visual one, with ORB-SLAM3's inertial key-frame rule (one key frame every 0.25 s, so that
 //! the initialisation sees motion between them). Initialisation is static when the device
 //! starts at rest (gravity and the gyroscope bias from the first quarter second's means,
-//! [`static_initialise`]), otherwise ORB-SLAM3's inertial-only MAP initialisation
+//! [`static_initialise`], when vision agrees that the camera stood still:
+//! [`REST_MAX_DISPARITY_PX`]; a turn at a constant rate looks like a rest to the IMU alone),
+//! otherwise ORB-SLAM3's inertial-only MAP initialisation
 //! ([`initialise`]) once the map's key frames number 10 and span 1 s (its `InitializeIMU` for
 //! stereo and RGB-D; a single camera: 2 s). A single camera's map waits for motion, so a rest at
 //! the start gives it gravity instead: the rest's attitude to gravity is carried by the
 //! gyroscope to the map's first key frame (the initialisation's reference frame), and the MAP
-//! initialisation runs with gravity held once 5 key frames are in
+//! initialisation runs with gravity held once 5 key frames are in (when the gyroscope, less the
+//! rest's bias, turns the body between the map's first two key frames as vision does)
 //! ([`INIT_MIN_KEYFRAMES_AT_REST`]). The IMU is pre-integrated from the reference frame, so the
 //! map's first two key frames join the inertial window, as ORB-SLAM3's do. A single camera's
 //! initialisation also finds the map's scale: the tracker's
@@ -63,6 +66,7 @@ use crate::imu::track::optimize_inertial_pose;
 use crate::imu::{Bias, Preintegrated};
 
 mod keyframes;
+mod rest;
 
 /// ORB-SLAM3's `NeedNewKeyFrame` before the IMU is initialised: a key frame every 0.25 s.
 pub const INIT_KEYFRAME_INTERVAL: f64 = 0.25;
@@ -83,6 +87,11 @@ pub const IMU_ONLY_LIMIT: f64 = 5.0;
 /// The chi-square 99 % bound of a 9-degree-of-freedom residual: an inertial residual beyond
 /// it after visual-inertial tracking means the IMU and the frame's observations disagree.
 pub const INERTIAL_CHI2_9DOF_99: f64 = 21.666;
+/// The image motion, in pixels, below which vision agrees that the device rested (OpenVINS's
+/// stationary test, `init_max_disparity`, default 10 px). The IMU alone cannot tell a rest from
+/// a turn at a constant rate (its gyroscope's mean is then the rate, not a bias): a static
+/// initialisation needs vision's word too.
+pub const REST_MAX_DISPARITY_PX: f64 = 10.0;
 /// ORB-SLAM3's inertial window (`LocalInertialBA`'s 10 key frames).
 pub const INERTIAL_WINDOW: usize = 10;
 /// Seconds after the IMU's initialisation during which a single camera's map scale is refined
@@ -517,67 +526,5 @@ impl Tracker {
         self.last = Some(pose);
         self.velocity = Isometry3::identity();
         Some(self.untracked(Some(pose), TrackState::Inertial, features))
-    }
-
-    /// After each frame, a single camera before its map: the initialisation's reference frame
-    /// (ORB-SLAM3 pre-integrates from it), followed as the tracker replaces it.
-    pub(super) fn imu_reference(&mut self, stamp: f64) {
-        let reference = self.init_ref.as_ref().map(|r| r.0);
-        let Some(imu) = self.imu.as_mut().filter(|i| i.monocular) else { return };
-        match reference {
-            Some(t) if imu.reference.as_ref().is_some_and(|r| r.stamp == t) => {}
-            Some(t) if t == stamp => {
-                imu.reference = Some(Reference {
-                    stamp,
-                    gravity_from_body: imu.attitude.map(|a| a.0),
-                    from: Preintegrated::new(imu.bias(), &imu.calibration),
-                });
-            }
-            _ => imu.reference = None,
-        }
-    }
-
-    /// A single camera's map started from the reference frame (`k0` at `t0`) and this one
-    /// (`k1`): both join the inertial window, with the IMU pre-integrated between them, and
-    /// the map's gravity is known where the reference frame's attitude was.
-    pub(super) fn imu_monocular_map(&mut self, (k0, t0): (u64, f64), (k1, t1): (u64, f64)) {
-        let Some(imu) = self.imu.as_mut() else { return };
-        let Some(reference) = imu.reference.take().filter(|r| r.stamp == t0) else { return };
-        let body_from_cam = imu.calibration.body_from_cam;
-        imu.map_gravity = match (reference.gravity_from_body, self.keyframe_poses.get(&k0)) {
-            (Some(gravity_from_body), Some(world_from_cam)) => {
-                Some((world_from_cam * body_from_cam.inverse()).rotation * gravity_from_body.inverse())
-            }
-            _ => None,
-        };
-        self.imu_keyframe(k0, t0);
-        if let Some(imu) = self.imu.as_mut() {
-            imu.from_kf = Some((k0, reference.from));
-        }
-        self.imu_keyframe(k1, t1);
-    }
-
-    /// After a frame vision tracked: a static initialisation, once, when the samples from
-    /// the start are enough ([`REST_MIN_SAMPLES`]) and the map has begun; refused (the device
-    /// moves) it is not tried again, and the MAP initialisation follows.
-    pub(super) fn imu_try_static(&mut self, stamp: f64) {
-        // (A single camera's map has no scale for the rest to fix: its initialisation waits for
-        // motion.)
-        let (Some(last), true, false) = (self.last, self.initialised, self.config.sensor == Sensor::Monocular) else {
-            return;
-        };
-        let Some(imu) = self.imu.as_mut() else { return };
-        if imu.nav.is_some() || imu.rest.as_ref().is_none_or(|r| r.len() < REST_MIN_SAMPLES) || imu.window.is_empty() {
-            return;
-        }
-        let samples = imu.rest.take().unwrap_or_default();
-        let Ok(s) = static_initialise(&samples, &imu.calibration) else { return };
-        let world_from_body = last * imu.calibration.body_from_cam.inverse();
-        let world_from_gravity = world_from_body.rotation * s.gravity_from_body.inverse();
-        let bias = Bias { gyro: s.gyro_bias, accel: Vector3::zeros() };
-        let frame = NavState { world_from_body, velocity: Vector3::zeros(), bias };
-        let velocities = imu.window.iter().map(|w| (w.0, Vector3::zeros())).collect();
-        let keyframes = imu.window.len();
-        imu.begin(world_from_gravity, frame, velocities, stamp, InitMethod::Static, keyframes);
     }
 }

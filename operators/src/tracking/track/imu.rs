@@ -53,6 +53,7 @@ impl Track {
             init_keyframes: init.map(|i| i.keyframes),
             gyro_bias: estimate.map(|e| e.bias.gyro.into()),
             accel_bias: estimate.map(|e| e.bias.accel.into()),
+            gravity: estimate.map(|e| e.gravity_w.into()),
             init_failure: if init.is_none() { tracker.inertial_init_failure().map(str::to_owned) } else { None },
             windows: tracker.inertial_windows(),
             inconsistent: tracker.inertial_inconsistent(),
