@@ -50,7 +50,7 @@ use std::sync::Arc;
 
 use dynaflow_vision::camera::Pinhole;
 use dynaflow_vision::geometry::{Estimator, PoseObservation, RansacConfig, Sampler, SplitMix64, optimize_pose, ransac};
-use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Unit, UnitQuaternion, Vector3};
 
 use crate::ba::{BaObservation, BaPose, BaReport, bundle_adjust};
 use crate::bow::{BowVector, Vocabulary, score};
@@ -58,7 +58,7 @@ use crate::eval::umeyama;
 use crate::keyframe_db::LoopConsistency;
 use crate::keyframe_map::KeyFrameMap;
 use crate::map::{MapKeyFrame, MapKeypoint, MapObservation, SparseMap, sigma};
-use crate::pose_graph::{Edge, PoseEdge, optimise, optimise_sim3};
+use crate::pose_graph::{Edge, PoseEdge, optimise, optimise_4dof, optimise_sim3};
 use crate::sim3::Sim3;
 
 /// Loop-closing settings (ORB-SLAM2's values).
@@ -176,12 +176,15 @@ pub struct LoopCloser {
     fused_removed: Vec<u64>,
     loops: Vec<LoopClosure>,
     /// Candidates accepted by the consistency check whose geometry failed, by [`Rejection`].
-    rejected: [usize; 4],
+    rejected: [usize; 5],
     /// Older maps (tracking lost for good), oldest first, until a merge takes them in.
     atlas: Vec<KeyFrameMap>,
     /// Whether to look for the current map's places in the older ones.
     merge: bool,
     merge_consistency: LoopConsistency,
+    /// The world's up axis where the map's gravity is known (a visual-inertial map): loops
+    /// then correct yaw and position only ([`LoopCloser::set_up`]).
+    up: Option<Unit<Vector3<f64>>>,
 }
 
 /// Why a consistent candidate's geometry was refused.
@@ -195,11 +198,19 @@ pub enum Rejection {
     ProjectionMatches,
     /// Fewer than 40 inliers after refining the pose on them.
     RefinedMatches,
+    /// A visual-inertial map's loop would turn gravity ([`LOOP_MAX_TILT`]).
+    Tilt,
 }
+
+/// The largest turn of gravity's direction (roll and pitch, radians) a visual-inertial map's
+/// loop correction may carry: ORB-SLAM3's `LoopClosing` refuses a loop whose correction has
+/// 0.008 rad or more about either horizontal axis ("BAD LOOP"); here on the two together.
+pub const LOOP_MAX_TILT: f64 = 0.008;
 
 impl Rejection {
     /// Names, in order, for reports.
-    pub const NAMES: [&'static str; 4] = ["bow_matches", "ransac_inliers", "projection_matches", "refined_matches"];
+    pub const NAMES: [&'static str; 5] =
+        ["bow_matches", "ransac_inliers", "projection_matches", "refined_matches", "tilt"];
 }
 
 impl LoopCloser {
@@ -214,11 +225,21 @@ impl LoopCloser {
             fused_observations: Vec::new(),
             fused_removed: Vec::new(),
             loops: Vec::new(),
-            rejected: [0; 4],
+            rejected: [0; 5],
             atlas: Vec::new(),
             merge: true,
             merge_consistency: LoopConsistency::new(),
+            up: None,
         }
+    }
+
+    /// The world's up axis of a visual-inertial map (against gravity, in the first key frame's
+    /// frame), once its IMU is initialised: its roll and pitch are observable, so a loop then
+    /// corrects yaw and position only (ORB-SLAM3, VINS-Fusion): the correction's tilt is taken
+    /// out (a loop with more than [`LOOP_MAX_TILT`] is refused) and the essential graph is
+    /// [`optimise_4dof`]. `None`: a visual map (SE(3), or Sim(3) for a single camera).
+    pub fn set_up(&mut self, up: Option<Unit<Vector3<f64>>>) {
+        self.up = up;
     }
 
     /// Whether a new map's places are looked for in the older maps and merged (default on;
@@ -255,7 +276,7 @@ impl LoopCloser {
     }
 
     /// Consistent candidates whose geometric check failed, by [`Rejection`] (in its order).
-    pub fn rejected(&self) -> [usize; 4] {
+    pub fn rejected(&self) -> [usize; 5] {
         self.rejected
     }
 
@@ -310,7 +331,7 @@ impl LoopCloser {
             .collect();
         let accepted = self.consistency.update(&groups);
         for candidate in accepted {
-            match self.compute_se3(kf, candidate, None) {
+            match self.compute_se3(kf, candidate, None).and_then(|found| self.upright(kf, found)) {
                 Ok(found) => return Some(self.correct(kf, candidate, &found)),
                 Err(why) => self.rejected[why as usize] += 1,
             }
@@ -465,7 +486,27 @@ impl LoopCloser {
             inliers: count,
             matches: good,
             group,
+            upright: false,
         })
+    }
+
+    /// A visual-inertial map's loop (the up axis known, depth giving scale): the correction of
+    /// the current key frame's pose without its tilt, so that gravity stays where the IMU put it
+    /// (ORB-SLAM3 zeroes the correction's roll and pitch); refused beyond [`LOOP_MAX_TILT`].
+    fn upright(&self, current: u64, mut found: Found) -> Result<Found, Rejection> {
+        let (Some(up), Some(kf)) = (self.up, self.map.kfs.get(&current)) else { return Ok(found) };
+        if self.monocular(kf) {
+            return Ok(found);
+        }
+        let old = kf.info.world_from_cam.rotation;
+        let phi = (found.world_from_cur.rotation * old.inverse()).scaled_axis();
+        let yaw = phi.dot(&up);
+        if (phi - up.into_inner() * yaw).norm() > LOOP_MAX_TILT {
+            return Err(Rejection::Tilt);
+        }
+        found.world_from_cur.rotation = UnitQuaternion::from_axis_angle(&up, yaw) * old;
+        found.upright = true;
+        Ok(found)
     }
 
     /// A single camera's key frame: none of its keypoints has a depth.
@@ -561,13 +602,18 @@ impl LoopCloser {
         }
         // A single camera's scale drifts: the essential graph in Sim(3) corrects it along the
         // loop; with depth the scale is known and the graph is SE(3) (ORB-SLAM2 fixes the scale).
+        // With gravity known (a visual-inertial map), in yaw and position only.
         let report = if monocular {
             optimise_sim3(&mut poses, &fixed, &edges, self.config.pose_graph_iterations)
         } else {
             let mut rigid: Vec<Isometry3<f64>> = poses.iter().map(Sim3::rigid).collect();
             let rigid_edges: Vec<PoseEdge> =
                 edges.iter().map(|e| PoseEdge { a: e.a, b: e.b, a_from_b: e.a_from_b.rigid() }).collect();
-            let report = optimise(&mut rigid, &fixed, &rigid_edges, self.config.pose_graph_iterations);
+            let iterations = self.config.pose_graph_iterations;
+            let report = match (&self.up, found.upright) {
+                (Some(up), true) => optimise_4dof(&mut rigid, up, &fixed, &rigid_edges, iterations),
+                _ => optimise(&mut rigid, &fixed, &rigid_edges, iterations),
+            };
             poses = rigid.iter().map(Sim3::from_isometry).collect();
             report
         };
@@ -774,6 +820,9 @@ struct Found {
     inliers: usize,
     matches: Vec<(usize, u64)>,
     group: Vec<u64>,
+    /// The correction's tilt was taken out ([`LoopCloser::upright`]): the essential graph
+    /// moves yaw and position only.
+    upright: bool,
 }
 
 /// Sim(3) from 3-D point pairs as a RANSAC estimator: 3-point samples solved by Umeyama's

@@ -1,6 +1,8 @@
 //! Pose-graph optimisation: ORB-SLAM2's essential-graph step of loop closing
-//! (`Optimizer::OptimizeEssentialGraph`), in SE(3) for rigid maps (RGB-D, stereo) and in
-//! Sim(3) for a single camera's, whose scale drifts ([`optimise_sim3`]).
+//! (`Optimizer::OptimizeEssentialGraph`), in SE(3) for rigid maps (RGB-D, stereo), in Sim(3)
+//! for a single camera's, whose scale drifts ([`optimise_sim3`]), and in 4 degrees of freedom
+//! (yaw about gravity and position) for a visual-inertial map, whose roll and pitch gravity
+//! fixes ([`optimise_4dof`]: ORB-SLAM3's `OptimizeEssentialGraph4DoF`, VINS-Fusion's pose graph).
 //!
 //! Nodes are key-frame poses (`world_from_cam`); each edge holds a measured relative pose
 //! `a_from_b` between two of them. The residual of an edge is the vector (translation,
@@ -12,7 +14,7 @@
 //! not a dense factorisation.
 
 use dynaflow_vision::geometry::exp_se3;
-use nalgebra::{Isometry3, SMatrix, SVector, Vector6};
+use nalgebra::{Isometry3, SMatrix, SVector, Translation3, Unit, UnitQuaternion, Vector3, Vector4, Vector6};
 
 use crate::sim3::Sim3;
 
@@ -73,6 +75,33 @@ impl Node<7> for Sim3 {
     }
 }
 
+/// A pose of a visual-inertial map: it moves in yaw about the world's `up` axis and in
+/// position; its roll and pitch (gravity's direction in the camera) are held.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Upright {
+    pose: Isometry3<f64>,
+    up: Unit<Vector3<f64>>,
+}
+
+impl Node<4> for Upright {
+    /// The relative pose error's translation and its rotation about `up` (as seen in `b`'s
+    /// frame): VINS-Fusion's four residuals. Its roll and pitch no node can change.
+    fn residual(measured: &Self, a: &Self, b: &Self) -> Vector4<f64> {
+        let e = measured.pose.inverse() * (a.pose.inverse() * b.pose);
+        let (t, r) = (e.translation.vector, e.rotation.scaled_axis());
+        let up_b = b.pose.rotation.inverse() * b.up.into_inner();
+        Vector4::new(t.x, t.y, t.z, r.dot(&up_b))
+    }
+    /// `d`: the position's step in the world (3) and a turn about `up` (1).
+    fn retract(&self, d: &Vector4<f64>) -> Self {
+        let turn = UnitQuaternion::from_axis_angle(&self.up, d[3]);
+        let mut rotation = turn * self.pose.rotation;
+        rotation.renormalize();
+        let t = self.pose.translation.vector + Vector3::new(d[0], d[1], d[2]);
+        Self { pose: Isometry3::from_parts(Translation3::from(t), rotation), up: self.up }
+    }
+}
+
 fn cost<P: Node<D>, const D: usize>(poses: &[P], edges: &[Edge<P>]) -> f64 {
     edges.iter().map(|e| P::residual(&e.a_from_b, &poses[e.a], &poses[e.b]).norm_squared()).sum()
 }
@@ -93,6 +122,27 @@ pub fn optimise(
 /// also corrects the scale drift accumulated along it (ORB-SLAM2's `OptimizeEssentialGraph`).
 pub fn optimise_sim3(poses: &mut [Sim3], fixed: &[bool], edges: &[Sim3Edge], iterations: usize) -> PoseGraphReport {
     optimise_graph(poses, fixed, edges, iterations)
+}
+
+/// [`optimise`] in 4 degrees of freedom, for a map whose gravity is known: `up` is the world's
+/// up axis (against gravity); each pose moves in yaw about it and in position, and keeps its
+/// roll and pitch (ORB-SLAM3's `OptimizeEssentialGraph4DoF`; VINS-Fusion's 4-DoF pose graph).
+/// The edges' roll and pitch disagreements stay as they are: no node can take them up.
+pub fn optimise_4dof(
+    poses: &mut [Isometry3<f64>],
+    up: &Unit<Vector3<f64>>,
+    fixed: &[bool],
+    edges: &[PoseEdge],
+    iterations: usize,
+) -> PoseGraphReport {
+    let mut nodes: Vec<Upright> = poses.iter().map(|&pose| Upright { pose, up: *up }).collect();
+    let edges: Vec<Edge<Upright>> =
+        edges.iter().map(|e| Edge { a: e.a, b: e.b, a_from_b: Upright { pose: e.a_from_b, up: *up } }).collect();
+    let report = optimise_graph(&mut nodes, fixed, &edges, iterations);
+    for (p, n) in poses.iter_mut().zip(&nodes) {
+        *p = n.pose;
+    }
+    report
 }
 
 fn optimise_graph<P: Node<D>, const D: usize>(
@@ -348,5 +398,75 @@ mod tests {
             .map(|(a, b)| (a.translation.vector - b.translation.vector).norm())
             .fold(0.0, f64::max);
         assert!(after < 0.5 * se3_err, "Sim(3) {after:.3} m against SE(3) {se3_err:.3} m");
+    }
+    /// A path that drifts in yaw and position only (as a visual-inertial map does: gravity
+    /// holds roll and pitch) with a loop edge that also carries a small roll error: the 4-DoF
+    /// graph takes the drift down as far as the SE(3) graph does and leaves every pose's roll and
+    /// pitch exactly as they were, where the SE(3) graph spreads the loop's roll error over the
+    /// path.
+    #[test]
+    fn a_4dof_graph_removes_yaw_drift_and_keeps_gravity() {
+        let up = Vector3::z_axis();
+        let tilt = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.3);
+        let truth: Vec<Isometry3<f64>> = (0..20)
+            .map(|i| {
+                let a = f64::from(i) / 20.0 * std::f64::consts::TAU;
+                Isometry3::from_parts(
+                    Translation3::new(2.0 * a.cos(), 2.0 * a.sin(), 0.1 * a.sin()),
+                    UnitQuaternion::from_axis_angle(&up, a) * tilt,
+                )
+            })
+            .collect();
+        // Odometry drifting 0.6 degrees of yaw (about the world's up) and 1 cm a step.
+        let mut drifted = vec![truth[0]];
+        let mut edges = Vec::new();
+        for i in 1..truth.len() {
+            let yaw = UnitQuaternion::from_axis_angle(&up, 0.6f64.to_radians() * f64::from(i as u32));
+            let p = Isometry3::from_parts(
+                Translation3::from(
+                    yaw * truth[i].translation.vector + Vector3::new(0.01, 0.0, 0.0) * f64::from(i as u32),
+                ),
+                yaw * truth[i].rotation,
+            );
+            edges.push(PoseEdge { a: i - 1, b: i, a_from_b: drifted[i - 1].inverse() * p });
+            drifted.push(p);
+        }
+        let last = truth.len() - 1;
+        // The loop edge measured with a 1-degree roll error.
+        let roll = Isometry3::from_parts(
+            Translation3::identity(),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 1f64.to_radians()),
+        );
+        edges.push(PoseEdge { a: 0, b: last, a_from_b: truth[0].inverse() * truth[last] * roll });
+        let mut fixed = vec![false; truth.len()];
+        fixed[0] = true;
+        let err = |p: &[Isometry3<f64>]| {
+            p.iter().zip(&truth).map(|(a, b)| (a.translation.vector - b.translation.vector).norm()).fold(0.0, f64::max)
+        };
+        // Gravity's direction in each camera: the angle between before and after.
+        let gravity_change = |p: &[Isometry3<f64>]| {
+            p.iter()
+                .zip(&drifted)
+                .map(|(a, b)| (a.rotation.inverse() * up.into_inner()).angle(&(b.rotation.inverse() * up.into_inner())))
+                .fold(0.0, f64::max)
+        };
+        let before = err(&drifted);
+        let mut poses = drifted.clone();
+        let report = optimise_4dof(&mut poses, &up, &fixed, &edges, 20);
+        let after = err(&poses);
+        assert!(before > 0.3, "the odometry drifts: {before}");
+        assert!(report.final_cost < 0.05 * report.initial_cost, "{report:?}");
+        assert!(gravity_change(&poses) < 1e-9, "roll/pitch moved by {} rad", gravity_change(&poses));
+        let mut rigid = drifted.clone();
+        optimise(&mut rigid, &fixed, &edges, 20);
+        let moved = gravity_change(&rigid);
+        assert!(moved > 1e-3, "the SE(3) graph tilts the path by the loop's roll error: {moved} rad");
+        // The drift goes as far as the SE(3) graph takes it (which spreads it over every edge).
+        let rigid_after = err(&rigid);
+        println!("max error {before:.3} m -> 4 DoF {after:.3} m, SE(3) {rigid_after:.3} m");
+        assert!(
+            after < 0.5 * before && after <= 1.05 * rigid_after,
+            "{before:.3} -> {after:.3} m (SE(3): {rigid_after:.3})"
+        );
     }
 }

@@ -33,6 +33,10 @@ const GT_POSE: In<Pose> = In::optional(
     "ground truth: each loop is checked against it (do the two key frames' views overlap?) for the summary's `false_loops`; never used to decide",
 )
 .with_role(InputRole::Evaluation);
+const INERTIAL: In<Scalars> = In::optional(
+    "inertial",
+    "the visual-inertial tracker's `stats`: once its IMU is initialised they carry `gravity_x/y/z`, and loops correct yaw and position only (4 DoF: gravity fixes roll and pitch; ORB-SLAM3, VINS-Fusion), a loop whose correction would tilt gravity by more than 0.008 rad refused",
+);
 const CORRECTION: Out<SparseMap> = Out::new(
     "correction",
     "after a loop: the whole corrected map (every key frame's pose, every point, fusion's observations and removed points), for `pnp_track` and `local_map` (`delay: 1`, `join: latest`)",
@@ -66,7 +70,7 @@ pub const LOOP_CLOSE: OpSpec = OpSpec::transform(
         })))
     },
 )
-.inputs(&[MAP.spec, CAMERA_INFO.spec, STEREO.spec, GT_POSE.spec])
+.inputs(&[MAP.spec, CAMERA_INFO.spec, STEREO.spec, GT_POSE.spec, INERTIAL.spec])
 .outputs(&[CORRECTION.spec, KEYFRAMES.spec, LOOP_EDGE.spec, STATS.spec])
 .params(Config::PARAMS)
 .cpu_heavy();
@@ -112,6 +116,13 @@ impl Operator for LoopClose {
             )
             .with_merging(self.config.merge)
         });
+        // The map's up axis, once the tracker's IMU knows gravity.
+        if let Some(stats) = INERTIAL.get(inputs)? {
+            let value = |name: &str| stats.values.iter().find(|(n, _)| &**n == name).map(|v| v.1);
+            if let (Some(x), Some(y), Some(z)) = (value("gravity_x"), value("gravity_y"), value("gravity_z")) {
+                closer.set_up(nalgebra::Unit::try_new(-nalgebra::Vector3::new(x, y, z), 1e-9));
+            }
+        }
         if let Some(gt) = GT_POSE.get(inputs)? {
             self.ground_truth.push((msg.header.stamp, gt.world_from_cam));
         }
