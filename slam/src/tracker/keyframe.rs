@@ -45,6 +45,24 @@ impl Tracker {
             .collect()
     }
 
+    /// The whole map (relocalisation, the inertial window) takes a batch: its points and
+    /// observations, then each key frame with its keypoints (`None`: the batch's own), whose
+    /// words go into the key-frame database.
+    pub(super) fn remember<const N: usize>(&mut self, batch: &SparseMap, keypoints: [Option<Vec<MapKeypoint>>; N]) {
+        let Some(places) = &mut self.places else { return };
+        places.switch_map(self.map_id);
+        places.apply_refinements(batch);
+        for keypoints in keypoints {
+            let added = match keypoints {
+                None => places.add_keyframe(batch),
+                Some(keypoints) => places.add_keyframe(&SparseMap { keypoints, ..batch.clone() }),
+            };
+            if let Some((kf, bow)) = added {
+                places.db.add(kf, bow);
+            }
+        }
+    }
+
     /// A key frame: observations of the matched points, new points from depth.
     pub(super) fn make_keyframe(&mut self, stamp: f64, features: &[Feature], fit: &Fit) -> SparseMap {
         let id = self.next_keyframe;
@@ -131,13 +149,7 @@ impl Tracker {
             keypoints,
             culled: Vec::new(),
         };
-        if let Some(places) = &mut self.places {
-            places.switch_map(self.map_id);
-            places.apply_refinements(&batch);
-            if let Some((kf, bow)) = places.add_keyframe(&batch) {
-                places.db.add(kf, bow);
-            }
-        }
+        self.remember(&batch, [None]);
         self.imu_keyframe(id, stamp);
         // A monocular map just made metric goes to local mapping whole.
         self.imu_rescale().unwrap_or(batch)

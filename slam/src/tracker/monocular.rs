@@ -162,15 +162,12 @@ impl Tracker {
         };
         // The whole map keeps both key frames (relocalisation, the inertial window), as
         // ORB-SLAM2's key-frame database does.
-        let keypoints = [self.map_keypoints(k0, &reference, &matched0), self.map_keypoints(k1, features, &matched1)];
-        if let Some(places) = &mut self.places {
-            places.switch_map(self.map_id);
-            places.apply_refinements(&batch);
-            for keypoints in keypoints {
-                if let Some((kf, bow)) = places.add_keyframe(&SparseMap { keypoints, ..batch.clone() }) {
-                    places.db.add(kf, bow);
-                }
-            }
+        if self.places.is_some() {
+            let keypoints = [
+                Some(self.map_keypoints(k0, &reference, &matched0)),
+                Some(self.map_keypoints(k1, features, &matched1)),
+            ];
+            self.remember(&batch, keypoints);
         }
         // (Two key frames are too few for the IMU's initialisation: no rescaling here.)
         self.imu_monocular_map((k0, ref_stamp), (k1, stamp));
