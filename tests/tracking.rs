@@ -167,6 +167,7 @@ fn relative_poses_on_the_slambook2_frames_match_the_given_ones() {
                     Feature {
                         uv: [f64::from(p.x), f64::from(p.y)],
                         octave: p.octave,
+                        angle: p.angle,
                         depth: (raw > 0).then(|| f64::from(raw) / 5000.0),
                         descriptor: *d,
                         dynamic: false,

@@ -11,6 +11,9 @@ pub struct Feature {
     pub uv: [f64; 2],
     /// Pyramid level it was detected on (sets its sigma: `scale^octave`).
     pub octave: u8,
+    /// Orientation in degrees, `[0, 360)`; negative if not computed (ORB's intensity centroid:
+    /// the motion model's search checks that matches turn alike).
+    pub angle: f32,
     /// Measured depth in metres, `None` without a valid measurement.
     pub depth: Option<f64>,
     /// 256-bit ORB descriptor.

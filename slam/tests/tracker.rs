@@ -52,6 +52,7 @@ impl World {
             out.push(Feature {
                 uv: [uv[0] + 0.6 * (rng.uniform() - 0.5), uv[1] + 0.6 * (rng.uniform() - 0.5)],
                 octave: 0,
+                angle: -1.0,
                 depth: with_depth.then(|| pc.z * (1.0 + 0.004 * (rng.uniform() - 0.5))),
                 descriptor,
                 dynamic: false,

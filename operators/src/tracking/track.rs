@@ -58,8 +58,8 @@ params! {
     struct Common {
         /// fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30)
         min_inliers: u64 [6, 100_000] = 30,
-        /// projection search radius, pixels (ORB-SLAM2's motion-model search: 15; widened 3x once)
-        search_radius: f64 [1.0, 200.0] = 15.0,
+        /// the motion model's search of the previous frame's points, pixels at the keypoint's pyramid level (ORB-SLAM2's `TrackWithMotionModel`: doubled once); 0: ORB-SLAM2's for the sensor, 15 (stereo 7)
+        search_radius: f64 [0.0, 200.0] = 0.0,
         /// P3P RANSAC reprojection threshold, pixels
         ransac_threshold: f64 [0.1, 100.0] = 3.0,
         /// lost frames in a row before a new map starts
@@ -322,7 +322,9 @@ impl Track {
                 ..TrackerConfig::rgbd(k.fx)
             },
         };
-        tc.search_radius = self.config.search_radius;
+        if self.config.search_radius > 0.0 {
+            tc.search_radius = self.config.search_radius;
+        }
         tc.min_inliers = self.config.min_inliers as usize;
         tc.ransac_threshold = self.config.ransac_threshold;
         tc.reset_after = self.config.reset_after as u32;
@@ -419,6 +421,7 @@ impl Operator for Track {
                 Feature {
                     uv: [f64::from(p.x), f64::from(p.y)],
                     octave: p.octave,
+                    angle: p.angle,
                     depth: (z > 0.0 && z.is_finite()).then_some(z),
                     descriptor,
                     dynamic,

@@ -106,7 +106,8 @@ impl Tracker {
             let position = fit.world_from_cam * pc;
             let pid = self.next_point;
             self.next_point += 1;
-            self.points.insert(pid, TPoint { position, descriptor: f.descriptor, first_keyframe: id });
+            let max_distance = pc.coords.norm() * sigma(self.config.scale_factor, f.octave);
+            self.points.insert(pid, TPoint { position, descriptor: f.descriptor, first_keyframe: id, max_distance });
             points.push(MapPoint { id: pid, position, descriptor: f.descriptor, observations: 1, first_keyframe: id });
             observations.push(MapObservation {
                 keyframe: id,

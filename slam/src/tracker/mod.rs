@@ -1,10 +1,14 @@
 //! ORB-SLAM2's tracking of RGB-D, stereo and monocular frames against a local map.
 //!
-//! Per frame ([`tracking`]): predict the pose with a constant-velocity model; project the
-//! local map points and match each to the best keypoint within a search radius (Hamming
-//! distance, ratio test; ORB-SLAM's `SearchByProjection`), widening the radius once when too
-//! few survive; refine by motion-only BA (pixels plus depth as ORB-SLAM2's virtual right
-//! coordinate, Huber, four re-classification rounds). When that still fails ([`relocalise`]),
+//! Per frame ([`tracking`]), ORB-SLAM2's two searches: predict the pose with a
+//! constant-velocity model (or the IMU); project the previous frame's points and match each to
+//! the nearest keypoint within 15 px (stereo 7) times its level's scale, on neighbouring
+//! levels, orientations consistent (`TrackWithMotionModel`); refine by motion-only BA (pixels
+//! plus depth as ORB-SLAM2's virtual right coordinate, Huber, four re-classification rounds);
+//! then project the rest of the local map at that pose and match within 2.5-4 px (a depth
+//! camera 3x that) at the level each point's distance predicts, ratio test between two of one
+//! level (`TrackLocalMap`), and BA on all. When the previous frame's points do not carry the
+//! pose, the whole local map is searched around the prediction (15 px, then 45). When that still fails ([`relocalise`]),
 //! with a vocabulary, ORB-SLAM2's `Relocalization`: every key frame of the map by bag of words,
 //! then P3P RANSAC on the BoW matches of the likeliest; without one, descriptor matches against
 //! the whole local map (the recent key frames) and P3P. A relocalised pose, and every pose in
@@ -74,8 +78,14 @@ pub struct TrackerConfig {
     pub max_depth: f64,
     /// ORB pyramid scale factor.
     pub scale_factor: f64,
-    /// Projection search radius, pixels at level 0 (ORB-SLAM2's motion-model search: 15).
+    /// The motion model's search of the previous frame's points, pixels at the pyramid level
+    /// of the keypoint that saw each (ORB-SLAM2's `TrackWithMotionModel`: 15; stereo 7;
+    /// doubled once when fewer than 20 match).
     pub search_radius: f64,
+    /// The local map's search at the refined pose, as ORB-SLAM2's `SearchLocalPoints` scales
+    /// its radius of 2.5 px (4 where the view is oblique) at a keypoint's pyramid level: 1; a
+    /// depth camera 3; 5 just after a relocalisation.
+    pub local_search: f64,
     /// Largest Hamming distance of a match (ORB-SLAM `TH_HIGH`).
     pub max_distance: u32,
     /// Ratio of best to second-best distance in the projection search.
@@ -117,6 +127,7 @@ impl TrackerConfig {
             max_depth: 6.0,
             scale_factor: 1.2,
             search_radius: 15.0,
+            local_search: 3.0,
             max_distance: 100,
             ratio: 0.8,
             min_inliers: 30,
@@ -135,6 +146,8 @@ impl TrackerConfig {
             bf: fx * baseline,
             th_depth: CLOSE_BASELINES * baseline,
             max_depth: f64::INFINITY,
+            search_radius: 7.0,
+            local_search: 1.0,
             sensor: Sensor::Stereo,
             ..Self::rgbd(fx)
         }
@@ -144,7 +157,7 @@ impl TrackerConfig {
     /// two views with at least 100 matches (its `Tracking::MonocularInitialization`), key
     /// frames when tracked points fall below 90 % of the reference key frame's.
     pub fn monocular(fx: f64) -> Self {
-        Self { bf: 0.0, th_depth: 0.0, max_depth: 0.0, sensor: Sensor::Monocular, ..Self::rgbd(fx) }
+        Self { bf: 0.0, th_depth: 0.0, max_depth: 0.0, local_search: 1.0, sensor: Sensor::Monocular, ..Self::rgbd(fx) }
     }
 }
 
@@ -219,11 +232,23 @@ pub struct TrackingResult {
     pub matched: Vec<Option<u64>>,
 }
 
+/// A point the previous frame saw, with its keypoint's level and orientation.
+#[derive(Clone, Copy, Debug)]
+struct LastMatch {
+    point: u64,
+    octave: u8,
+    angle: f32,
+}
+
 #[derive(Clone, Copy, Debug)]
 struct TPoint {
     position: Point3<f64>,
     descriptor: [u8; 32],
     first_keyframe: u64,
+    /// The distance at which it would be seen on level 0 (ORB-SLAM2's `mfMaxDistance`: the
+    /// distance it was made at, times the scale of the keypoint's level); 0 where the tracker
+    /// did not make it (local mapping's triangulated points).
+    max_distance: f64,
 }
 
 /// The tracker's random streams, one per call site ([`SplitMix64::named`]).
@@ -288,6 +313,12 @@ pub struct Tracker {
     anchors: Vec<(f64, u64, Isometry3<f64>)>,
     /// The newest key frame (or the one relocalisation found).
     reference: Option<u64>,
+    /// The previous frame's map points with the pyramid level of the keypoint that saw each
+    /// (ORB-SLAM2's last frame, searched first by the motion model; a key frame's new points
+    /// included).
+    last_matched: Vec<LastMatch>,
+    /// The previous frame was relocalised: the local map is searched wider (ORB-SLAM2).
+    last_relocalised: bool,
     /// With a vocabulary: every key frame and point, for relocalisation in the whole map.
     places: Option<KeyFrameMap>,
     relocalisations: usize,
@@ -306,7 +337,15 @@ fn local_points(places: &KeyFrameMap, kfs: &[u64]) -> BTreeMap<u64, TPoint> {
         .into_iter()
         .filter_map(|id| {
             let p = places.points.get(&id)?;
-            Some((id, TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe }))
+            Some((
+                id,
+                TPoint {
+                    position: p.position,
+                    descriptor: p.descriptor,
+                    first_keyframe: p.first_keyframe,
+                    max_distance: 0.0,
+                },
+            ))
         })
         .collect()
 }
@@ -342,6 +381,8 @@ impl Tracker {
             keyframe_poses: BTreeMap::new(),
             anchors: Vec::new(),
             reference: None,
+            last_matched: Vec::new(),
+            last_relocalised: false,
             places: None,
             relocalisations: 0,
             mapping: true,
@@ -451,9 +492,15 @@ impl Tracker {
         self.cull_keyframes(update);
         let incoming: BTreeSet<u64> = update.points.iter().map(|p| p.id).collect();
         for p in &update.points {
+            let max_distance = self.points.get(&p.id).map_or(0.0, |t| t.max_distance);
             self.points.insert(
                 p.id,
-                TPoint { position: p.position, descriptor: p.descriptor, first_keyframe: p.first_keyframe },
+                TPoint {
+                    position: p.position,
+                    descriptor: p.descriptor,
+                    first_keyframe: p.first_keyframe,
+                    max_distance,
+                },
             );
         }
         // Keep what local mapping holds in its window, and what it has not seen yet.
@@ -501,6 +548,7 @@ impl Tracker {
             self.imu_try_static(stamp);
         }
         self.imu_reference(stamp);
+        self.remember_last_frame(features, &r);
         // Lost frames (a dead-reckoned guess) stay out of the trajectory, as in ORB-SLAM2.
         if let (Some(pose), Some(k), false) = (r.world_from_cam, self.reference, r.state == TrackState::Lost)
             && let Some(kp) = self.keyframe_poses.get(&k)

@@ -134,7 +134,9 @@ impl Tracker {
             let pid = self.next_point;
             self.next_point += 1;
             let (fr, fc) = (&reference[r], &features[c]);
-            self.points.insert(pid, TPoint { position, descriptor: fc.descriptor, first_keyframe: k0 });
+            let max_distance = (position - world_from_c2.translation.vector).coords.norm()
+                * sigma(self.config.scale_factor, fc.octave);
+            self.points.insert(pid, TPoint { position, descriptor: fc.descriptor, first_keyframe: k0, max_distance });
             points.push(MapPoint { id: pid, position, descriptor: fc.descriptor, observations: 2, first_keyframe: k0 });
             observations.push(MapObservation { keyframe: k0, point: pid, uv: fr.uv, depth: None, octave: fr.octave });
             observations.push(MapObservation { keyframe: k1, point: pid, uv: fc.uv, depth: None, octave: fc.octave });
