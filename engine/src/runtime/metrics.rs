@@ -12,6 +12,9 @@ pub(crate) struct NodeMetrics {
     pub busy: Duration,
     /// Per fired frame: time from inputs complete to outputs handed on.
     pub latency: Histogram,
+    /// The same for the first and the last [`ENDS_FRAMES`] frames: does a node slow down as
+    /// the run goes on (a map that grows)?
+    pub ends: LatencyEnds,
     /// Per fired frame: time since the source emitted the frame.
     pub age: Histogram,
     /// The operator's own contribution to the summary.
@@ -55,6 +58,53 @@ pub struct ParameterChange {
     pub old: serde_json::Value,
     /// And after.
     pub new: serde_json::Value,
+}
+
+/// Frames at each end of a run whose latencies the summary reports apart
+/// ([`NodeReport::latency_ends`]).
+pub const ENDS_FRAMES: usize = 1000;
+
+/// The latencies of a node's first and last [`ENDS_FRAMES`] frames (a ring of the last ones:
+/// 4 KiB a node, however long the run).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct LatencyEnds {
+    first: Histogram,
+    last: std::collections::VecDeque<f32>,
+}
+
+impl LatencyEnds {
+    pub fn record(&mut self, d: Duration) {
+        if self.first.n < ENDS_FRAMES as u64 {
+            self.first.record(d);
+        }
+        if self.last.len() == ENDS_FRAMES {
+            self.last.pop_front();
+        }
+        self.last.push_back(d.as_secs_f32());
+    }
+
+    /// Both ends, once the run has had two windows' worth of frames (so they do not overlap).
+    pub fn report(&self, frames: u64) -> Option<EndsStats> {
+        if frames < 2 * ENDS_FRAMES as u64 {
+            return None;
+        }
+        let mut last = Histogram::default();
+        for &s in &self.last {
+            last.record(Duration::from_secs_f32(s));
+        }
+        Some(EndsStats { frames: ENDS_FRAMES, first: self.first.stats(), last: last.stats() })
+    }
+}
+
+/// A node's latency over the first and over the last frames of a run.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct EndsStats {
+    /// Frames in each window.
+    pub frames: usize,
+    /// The first `frames` frames.
+    pub first: LatencyStats,
+    /// The last `frames` frames.
+    pub last: LatencyStats,
 }
 
 /// Relative width of a histogram bucket: quantiles are exact to within 1 %.
@@ -169,6 +219,10 @@ pub struct NodeReport {
     pub rate_hz: f64,
     /// Processing latency per frame.
     pub latency: LatencyStats,
+    /// Processing latency over the first and over the last [`ENDS_FRAMES`] frames (runs of at
+    /// least twice that).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub latency_ends: Option<EndsStats>,
     /// Time since the source emitted the frame, when this node finished it.
     pub age: LatencyStats,
     /// Total time inside the operator, seconds.
@@ -306,6 +360,28 @@ mod tests {
         assert!((stats.max_ms - exact[exact.len() - 1] * 1e3).abs() < 1e-9);
         let mean = exact.iter().sum::<f64>() / exact.len() as f64;
         assert!((stats.mean_ms - mean * 1e3).abs() < 1e-9 * mean * 1e3 + 1e-12);
+    }
+
+    #[test]
+    fn latency_ends_are_the_first_and_last_windows() {
+        let mut e = LatencyEnds::default();
+        let n = 2 * ENDS_FRAMES + 500;
+        for i in 0..n {
+            // 1 ms for the first window, 2 ms after, 5 ms for the last window.
+            let ms = if i < ENDS_FRAMES {
+                1.0
+            } else if i + ENDS_FRAMES < n {
+                2.0
+            } else {
+                5.0
+            };
+            e.record(Duration::from_secs_f64(ms * 1e-3));
+        }
+        let r = e.report(n as u64).unwrap();
+        assert!((r.first.p95_ms - 1.0).abs() < 0.011 && (r.first.max_ms - 1.0).abs() < 1e-6, "{r:?}");
+        assert!((r.last.p50_ms - 5.0).abs() < 0.051 && (r.last.mean_ms - 5.0).abs() < 1e-3, "{r:?}");
+        assert!(LatencyEnds::default().report(2 * ENDS_FRAMES as u64 - 1).is_none());
+        assert_eq!(e.last.len(), ENDS_FRAMES);
     }
 
     #[test]

@@ -388,6 +388,7 @@ pub async fn run(graph: &ResolvedGraph, options: RunOptions, sinks: Vec<Box<dyn 
                 frames: m.frames,
                 skipped: m.skipped,
                 latency: m.latency.stats(),
+                latency_ends: m.ends.report(m.frames),
                 age: m.age.stats(),
                 busy_s: m.busy.as_secs_f64(),
                 rate_hz: m.rate_hz(),

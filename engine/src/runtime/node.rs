@@ -215,6 +215,7 @@ impl NodeTask {
                 }
                 metrics.busy += busy;
                 metrics.latency.record(busy);
+                metrics.ends.record(busy);
                 metrics.age.record(Duration::ZERO);
                 metrics.handled(seq);
             }
@@ -386,7 +387,9 @@ impl NodeTask {
             if fired {
                 metrics.frames += 1;
                 metrics.busy += busy;
-                metrics.latency.record(t0.elapsed());
+                let took = t0.elapsed();
+                metrics.latency.record(took);
+                metrics.ends.record(took);
                 metrics.age.record(born.elapsed());
             }
             metrics.handled(k);

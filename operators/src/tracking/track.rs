@@ -58,7 +58,7 @@ params! {
     struct Common {
         /// fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30)
         min_inliers: u64 [6, 100_000] = 30,
-        /// the motion model's search of the previous frame's points, pixels at the keypoint's pyramid level (ORB-SLAM2's `TrackWithMotionModel`: doubled once); 0: ORB-SLAM2's for the sensor, 15 (stereo 7)
+        /// projection search radius, pixels: a stereo camera's search of the previous frame's points at each keypoint's pyramid level (ORB-SLAM2's two searches, `TrackWithMotionModel` then `TrackLocalMap`), a depth or single camera's search of the whole local map (widened 3x once); 0: ORB-SLAM2's for the sensor, 15 (stereo 7)
         search_radius: f64 [0.0, 200.0] = 0.0,
         /// P3P RANSAC reprojection threshold, pixels
         ransac_threshold: f64 [0.1, 100.0] = 3.0,

@@ -70,6 +70,9 @@ mod rest;
 
 /// ORB-SLAM3's `NeedNewKeyFrame` before the IMU is initialised: a key frame every 0.25 s.
 pub const INIT_KEYFRAME_INTERVAL: f64 = 0.25;
+/// ORB-SLAM3's second full inertial BA, seconds after the initialisation (`LocalMapping::Run`:
+/// `mTinit > 15`), after which tracking searches the local map more tightly.
+const INERTIAL_BA2_AFTER_S: f64 = 15.0;
 /// ORB-SLAM3's temporal key-frame condition once initialised: at least every 0.5 s.
 pub const INERTIAL_KEYFRAME_INTERVAL: f64 = 0.5;
 /// ORB-SLAM3's `InitializeIMU`: key frames needed.
@@ -429,6 +432,18 @@ impl Tracker {
         let (nav, pre) = (imu.nav.as_ref()?, imu.from_frame.as_ref()?);
         let state = nav.frame.predict(pre, &nav.gravity_w);
         Some(renormalised(&(state.world_from_body * imu.calibration.body_from_cam)))
+    }
+
+    /// ORB-SLAM3's local-map search with an IMU (`Tracking::SearchLocalPoints`'s `th`): 10
+    /// before the IMU is initialised, 6 until its second full inertial BA (15 s after), 2 after;
+    /// `None` without one.
+    pub(super) fn inertial_local_search(&self, stamp: f64) -> Option<f64> {
+        let imu = self.imu.as_ref()?;
+        Some(match &imu.init {
+            None => 10.0,
+            Some(i) if stamp - i.stamp < INERTIAL_BA2_AFTER_S => 6.0,
+            Some(_) => 2.0,
+        })
     }
 
     /// ORB-SLAM3's key-frame rule with an IMU: `None` without one (ORB-SLAM2's rules decide);

@@ -1,14 +1,16 @@
 //! ORB-SLAM2's tracking of RGB-D, stereo and monocular frames against a local map.
 //!
-//! Per frame ([`tracking`]), ORB-SLAM2's two searches: predict the pose with a
-//! constant-velocity model (or the IMU); project the previous frame's points and match each to
-//! the nearest keypoint within 15 px (stereo 7) times its level's scale, on neighbouring
-//! levels, orientations consistent (`TrackWithMotionModel`); refine by motion-only BA (pixels
-//! plus depth as ORB-SLAM2's virtual right coordinate, Huber, four re-classification rounds);
-//! then project the rest of the local map at that pose and match within 2.5-4 px (a depth
-//! camera 3x that) at the level each point's distance predicts, ratio test between two of one
-//! level (`TrackLocalMap`), and BA on all. When the previous frame's points do not carry the
-//! pose, the whole local map is searched around the prediction (15 px, then 45). When that still fails ([`relocalise`]),
+//! Per frame ([`tracking`]): predict the pose with a constant-velocity model (or the IMU).
+//! A stereo camera then searches as ORB-SLAM2 does, twice ([`TrackerConfig::two_stage`]):
+//! the previous frame's points projected and matched to the nearest keypoint within 7 px
+//! times its level's scale, on neighbouring levels, orientations consistent
+//! (`TrackWithMotionModel`), motion-only BA (pixels plus depth as ORB-SLAM2's virtual right
+//! coordinate, Huber, four re-classification rounds); then the rest of the local map at that
+//! pose within 2.5-4 px at the level each point's distance predicts, ratio test between two of
+//! one level (`TrackLocalMap`), and BA on all. A depth camera and a single camera (and a stereo
+//! camera whose previous frame does not carry the pose) search the whole local map once around
+//! the prediction: the best keypoint within 15 px (Hamming distance, ratio test), widened 3x
+//! when too few survive, then motion-only BA. When that still fails ([`relocalise`]),
 //! with a vocabulary, ORB-SLAM2's `Relocalization`: every key frame of the map by bag of words,
 //! then P3P RANSAC on the BoW matches of the likeliest; without one, descriptor matches against
 //! the whole local map (the recent key frames) and P3P. A relocalised pose, and every pose in
@@ -78,10 +80,16 @@ pub struct TrackerConfig {
     pub max_depth: f64,
     /// ORB pyramid scale factor.
     pub scale_factor: f64,
-    /// The motion model's search of the previous frame's points, pixels at the pyramid level
-    /// of the keypoint that saw each (ORB-SLAM2's `TrackWithMotionModel`: 15; stereo 7;
-    /// doubled once when fewer than 20 match).
+    /// Projection search radius, pixels: with [`two_stage`](Self::two_stage) the previous
+    /// frame's points', at the pyramid level of the keypoint that saw each (ORB-SLAM2's
+    /// `TrackWithMotionModel`: stereo 7; doubled once when fewer than 20 match); otherwise the
+    /// whole local map's (ORB-SLAM2's motion-model 15; widened 3x once).
     pub search_radius: f64,
+    /// ORB-SLAM2's two searches (the previous frame's points, then the local map; see
+    /// [`tracking`]): a stereo camera's default. False: one search of the local map at
+    /// `search_radius`, widened 3x once (a depth camera's and a single camera's default: on the
+    /// room's loop walk the two searches drifted more with them, docs/benchmarks.md).
+    pub two_stage: bool,
     /// The local map's search at the refined pose, as ORB-SLAM2's `SearchLocalPoints` scales
     /// its radius of 2.5 px (4 where the view is oblique) at a keypoint's pyramid level: 1; a
     /// depth camera 3; 5 just after a relocalisation.
@@ -127,6 +135,7 @@ impl TrackerConfig {
             max_depth: 6.0,
             scale_factor: 1.2,
             search_radius: 15.0,
+            two_stage: false,
             local_search: 3.0,
             max_distance: 100,
             ratio: 0.8,
@@ -147,6 +156,7 @@ impl TrackerConfig {
             th_depth: CLOSE_BASELINES * baseline,
             max_depth: f64::INFINITY,
             search_radius: 7.0,
+            two_stage: true,
             local_search: 1.0,
             sensor: Sensor::Stereo,
             ..Self::rgbd(fx)

@@ -118,19 +118,30 @@ impl Tracker {
             return self.start_map(stamp, features, origin, TrackState::NewMap);
         }
         let predicted = predicted.unwrap_or_else(Isometry3::identity);
-        let mut fit = self.track_motion_model(features, &predicted);
-        // When the previous frame's points do not carry the pose: the whole local map around the
-        // prediction, then three times as wide (ORB-SLAM2 falls back on its reference key
-        // frame's bag of words here).
-        for radius in [1.0, 3.0].map(|k| k * self.config.search_radius) {
-            if fit.as_ref().is_some_and(|f| f.inliers >= self.config.min_inliers) {
-                break;
+        let mut fit = if self.config.two_stage {
+            let mut fit = self.track_motion_model(stamp, features, &predicted);
+            // When the previous frame's points do not carry the pose: the whole local map
+            // around the prediction, then three times as wide (ORB-SLAM2 falls back on its
+            // reference key frame's bag of words here).
+            for radius in [1.0, 3.0].map(|k| k * self.config.search_radius) {
+                if fit.as_ref().is_some_and(|f| f.inliers >= self.config.min_inliers) {
+                    break;
+                }
+                let wide = self.track_projection(features, &predicted, radius);
+                if wide.as_ref().is_some_and(|w| fit.as_ref().is_none_or(|f| w.inliers > f.inliers)) {
+                    fit = wide;
+                }
             }
-            let wide = self.track_projection(features, &predicted, radius);
-            if wide.as_ref().is_some_and(|w| fit.as_ref().is_none_or(|f| w.inliers > f.inliers)) {
-                fit = wide;
+            fit
+        } else {
+            // One search of the whole local map around the prediction, widened once.
+            let fit = self.track_projection(features, &predicted, self.config.search_radius);
+            if fit.as_ref().is_none_or(|f| f.inliers < self.config.min_inliers) {
+                self.track_projection(features, &predicted, 3.0 * self.config.search_radius)
+            } else {
+                fit
             }
-        }
+        };
         let mut state = TrackState::Tracked;
         // Within a second of a relocalisation a pose needs more support (ORB-SLAM2).
         let probation = self.relocalised_at.is_some_and(|t| stamp - t < RELOCALISATION_PROBATION_S);
@@ -221,7 +232,12 @@ impl Tracker {
     /// ORB-SLAM2's `TrackWithMotionModel` then `TrackLocalMap`: the previous frame's points
     /// searched around the predicted pose, motion-only BA; then the local map's other points
     /// searched tightly around that pose, and BA on all the matches.
-    pub(super) fn track_motion_model(&self, features: &[Feature], predicted: &Isometry3<f64>) -> Option<Fit> {
+    pub(super) fn track_motion_model(
+        &self,
+        stamp: f64,
+        features: &[Feature],
+        predicted: &Isometry3<f64>,
+    ) -> Option<Fit> {
         if self.last_matched.is_empty() {
             return None;
         }
@@ -240,7 +256,11 @@ impl Tracker {
         }
         let mut pairs: Vec<(usize, u64)> =
             first.matched.iter().enumerate().filter_map(|(i, m)| m.map(|id| (i, id))).collect();
-        let th = if self.last_relocalised { RELOCALISED_LOCAL_SEARCH } else { self.config.local_search };
+        let th = if self.last_relocalised {
+            RELOCALISED_LOCAL_SEARCH
+        } else {
+            self.inertial_local_search(stamp).unwrap_or(self.config.local_search)
+        };
         let more = self.search_local_points(features, &index, &first.world_from_cam, &pairs, th);
         pairs.extend(more);
         Some(self.optimise(features, &pairs, &first.world_from_cam.inverse(), None))
