@@ -58,7 +58,7 @@ params! {
     struct Common {
         /// fewer inliers than this after motion-only BA: the frame is not tracked (ORB-SLAM: 30)
         min_inliers: u64 [6, 100_000] = 30,
-        /// projection search radius, pixels: a stereo camera's search of the previous frame's points at each keypoint's pyramid level (ORB-SLAM2's two searches, `TrackWithMotionModel` then `TrackLocalMap`), a depth or single camera's search of the whole local map (widened 3x once); 0: ORB-SLAM2's for the sensor, 15 (stereo 7)
+        /// projection search radius, pixels: the search of the whole local map (widened 3x once), or with `two_stage` of the previous frame's points at each keypoint's pyramid level (ORB-SLAM2's `TrackWithMotionModel`, doubled once); 0: ORB-SLAM2's for the sensor: 15, with `two_stage` a stereo camera's 7
         search_radius: f64 [0.0, 200.0] = 0.0,
         /// P3P RANSAC reprojection threshold, pixels
         ransac_threshold: f64 [0.1, 100.0] = 3.0,
@@ -74,6 +74,8 @@ params! {
         mapping: bool = true,
         /// a keypoint takes the culling label of the nearest labelled track within this many pixels (dynamic: left out); 10 = `lk_flow`'s `min_distance`, the spacing of the tracked corners, so a label speaks for its neighbourhood as a segment would; 0: only keypoints on a track
         label_radius: f64 [0.0, 100.0] = 10.0,
+        /// ORB-SLAM2's two searches: the previous frame's points at each keypoint's level within `search_radius` (ORB-SLAM2's 15, stereo 7), then the local map within 2.5-4 px at the refined pose (`TrackWithMotionModel`, `TrackLocalMap`); what keeps a stereo camera on the street scene's `drive` (docs/benchmarks.md); off: one search of the local map (on the rooms the two searches drift more, not the default yet)
+        two_stage: bool = false,
     }
 }
 
@@ -322,8 +324,12 @@ impl Track {
                 ..TrackerConfig::rgbd(k.fx)
             },
         };
+        tc.two_stage = self.config.two_stage;
         if self.config.search_radius > 0.0 {
             tc.search_radius = self.config.search_radius;
+        } else if !tc.two_stage {
+            // ORB-SLAM2's 7 px is its stereo motion-model search's, not a whole-map search's.
+            tc.search_radius = TrackerConfig::rgbd(k.fx).search_radius;
         }
         tc.min_inliers = self.config.min_inliers as usize;
         tc.ransac_threshold = self.config.ransac_threshold;

@@ -1,14 +1,15 @@
 //! ORB-SLAM2's tracking of RGB-D, stereo and monocular frames against a local map.
 //!
 //! Per frame ([`tracking`]): predict the pose with a constant-velocity model (or the IMU).
-//! A stereo camera then searches as ORB-SLAM2 does, twice ([`TrackerConfig::two_stage`]):
+//! With [`TrackerConfig::two_stage`] (ORB-SLAM2's stereo settings; the tracking operators'
+//! `two_stage`, off by default) it then searches as ORB-SLAM2 does, twice:
 //! the previous frame's points projected and matched to the nearest keypoint within 7 px
 //! times its level's scale, on neighbouring levels, orientations consistent
 //! (`TrackWithMotionModel`), motion-only BA (pixels plus depth as ORB-SLAM2's virtual right
 //! coordinate, Huber, four re-classification rounds); then the rest of the local map at that
 //! pose within 2.5-4 px at the level each point's distance predicts, ratio test between two of
-//! one level (`TrackLocalMap`), and BA on all. A depth camera and a single camera (and a stereo
-//! camera whose previous frame does not carry the pose) search the whole local map once around
+//! one level (`TrackLocalMap`), and BA on all. Otherwise (and when the previous frame's points
+//! do not carry the pose) the whole local map is searched once around
 //! the prediction: the best keypoint within 15 px (Hamming distance, ratio test), widened 3x
 //! when too few survive, then motion-only BA. When that still fails ([`relocalise`]),
 //! with a vocabulary, ORB-SLAM2's `Relocalization`: every key frame of the map by bag of words,
@@ -86,9 +87,10 @@ pub struct TrackerConfig {
     /// whole local map's (ORB-SLAM2's motion-model 15; widened 3x once).
     pub search_radius: f64,
     /// ORB-SLAM2's two searches (the previous frame's points, then the local map; see
-    /// [`tracking`]): a stereo camera's default. False: one search of the local map at
-    /// `search_radius`, widened 3x once (a depth camera's and a single camera's default: on the
-    /// room's loop walk the two searches drifted more with them, docs/benchmarks.md).
+    /// [`tracking`]; [`TrackerConfig::stereo`] sets it). False: one search of the local map at
+    /// `search_radius`, widened 3x once (what the tracking operators do unless asked: on the
+    /// rooms the two searches drift more, on the street scene only they keep tracking;
+    /// docs/benchmarks.md).
     pub two_stage: bool,
     /// The local map's search at the refined pose, as ORB-SLAM2's `SearchLocalPoints` scales
     /// its radius of 2.5 px (4 where the view is oblique) at a keypoint's pyramid level: 1; a
