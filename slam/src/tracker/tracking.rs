@@ -431,6 +431,10 @@ impl Tracker {
     /// keypoints with their points (its new ones included), else the tracked matches.
     pub(super) fn remember_last_frame(&mut self, features: &[Feature], r: &TrackingResult) {
         self.last_relocalised = r.state == TrackState::Relocalised;
+        if !self.config.two_stage {
+            // Only the two searches read it.
+            return;
+        }
         let last = |f: &Feature, p: u64| LastMatch { point: p, octave: f.octave, angle: f.angle };
         let newest = r.keyframe.as_ref().and_then(|k| k.keyframes.iter().map(|k| k.id).max());
         let kept: Vec<&MapKeypoint> = match (&r.keyframe, newest) {
@@ -454,20 +458,13 @@ impl Tracker {
         radius: f64,
     ) -> Option<Fit> {
         let cam_from_world = predicted.inverse();
-        let static_idx: Vec<usize> = (0..features.len()).filter(|&i| !features[i].dynamic).collect();
-        let pts: Vec<[f32; 2]> =
-            static_idx.iter().map(|&i| [features[i].uv[0] as f32, features[i].uv[1] as f32]).collect();
-        let grid = GridIndex::new(&pts, self.width.ceil() as usize, self.height.ceil() as usize, 32.0);
+        let index = FrameIndex::new(features, self.width, self.height);
         // Best map point per feature: (point id, distance).
         let mut best: Vec<Option<(u64, u32)>> = vec![None; features.len()];
         for (&id, p) in &self.points {
-            let pc = cam_from_world * p.position;
-            let Some(uv) = self.cam.project(&pc) else { continue };
-            if !(uv[0] >= 0.0 && uv[0] < self.width && uv[1] >= 0.0 && uv[1] < self.height) {
-                continue;
-            }
-            let near = grid.within([uv[0] as f32, uv[1] as f32], radius as f32);
-            let candidates = near.iter().map(|&c| static_idx[c as usize]).map(|i| (i, &features[i].descriptor));
+            let Some(uv) = self.in_image(&(cam_from_world * p.position)) else { continue };
+            let near = index.grid.within([uv[0] as f32, uv[1] as f32], radius as f32);
+            let candidates = near.iter().map(|&c| index.static_idx[c as usize]).map(|i| (i, &features[i].descriptor));
             let Some((i1, d1, d2)) = nearest_two(&p.descriptor, candidates) else { continue };
             if d1 > self.config.max_distance {
                 continue;
